@@ -1,0 +1,189 @@
+//! Rays, hits, bounding boxes, shading frames and the self-intersection offset.
+
+use glam::Vec3;
+
+/// A ray in the prepared frame's camera-relative world space (or in an object's space).
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    /// Origin.
+    pub origin: Vec3,
+    /// Direction; not necessarily normalised (object-space rays keep the instance's scale).
+    pub dir: Vec3,
+    /// Time in frames, within the shutter; unused by static scenes.
+    pub time: f32,
+}
+
+impl Ray {
+    /// A ray at time 0.
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Self { origin, dir, time: 0.0 }
+    }
+
+    /// The point at parameter `t`.
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+}
+
+/// The closest intersection found along a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit.
+    pub t: f32,
+    /// Index of the instance in the prepared frame.
+    pub instance: u32,
+    /// Triangle index within the instance's mesh (over all its primitives).
+    pub triangle: u32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub b1: f32,
+    /// Barycentric weight of the triangle's third vertex.
+    pub b2: f32,
+}
+
+/// An axis-aligned bounding box. The empty box has `min > max`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Lower corner.
+    pub min: Vec3,
+    /// Upper corner.
+    pub max: Vec3,
+}
+
+impl Default for Aabb {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
+impl Aabb {
+    /// The box that contains nothing; growing it by a point gives that point.
+    pub const EMPTY: Aabb = Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY };
+
+    /// The smallest box holding both points.
+    pub fn from_points(a: Vec3, b: Vec3) -> Self {
+        Self { min: a.min(b), max: a.max(b) }
+    }
+
+    /// Whether the box contains no point.
+    pub fn is_empty(&self) -> bool {
+        self.min.x > self.max.x || self.min.y > self.max.y || self.min.z > self.max.z
+    }
+
+    /// Grows the box to hold `p`.
+    pub fn grow(&mut self, p: Vec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    /// The union of two boxes.
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
+    }
+
+    /// Size along each axis (negative for the empty box).
+    pub fn extent(&self) -> Vec3 {
+        self.max - self.min
+    }
+
+    /// Centre point.
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// Surface area, 0 for the empty box.
+    pub fn area(&self) -> f32 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let e = self.extent();
+        2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
+    }
+
+    /// The eight corners.
+    pub fn corners(&self) -> [Vec3; 8] {
+        let (a, b) = (self.min, self.max);
+        [
+            Vec3::new(a.x, a.y, a.z),
+            Vec3::new(b.x, a.y, a.z),
+            Vec3::new(a.x, b.y, a.z),
+            Vec3::new(b.x, b.y, a.z),
+            Vec3::new(a.x, a.y, b.z),
+            Vec3::new(b.x, a.y, b.z),
+            Vec3::new(a.x, b.y, b.z),
+            Vec3::new(b.x, b.y, b.z),
+        ]
+    }
+}
+
+/// An orthonormal basis whose `z` axis is a surface normal: BSDFs work in this frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    /// First tangent.
+    pub x: Vec3,
+    /// Second tangent.
+    pub y: Vec3,
+    /// Normal.
+    pub z: Vec3,
+}
+
+impl Frame {
+    /// A frame around unit normal `n` with an arbitrary but continuous tangent
+    /// (Duff et al. 2017, "Building an Orthonormal Basis, Revisited").
+    pub fn from_normal(n: Vec3) -> Self {
+        let sign = 1.0f32.copysign(n.z);
+        let a = -1.0 / (sign + n.z);
+        let b = n.x * n.y * a;
+        let x = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+        let y = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+        Self { x, y, z: n }
+    }
+
+    /// A frame around unit normal `n` whose first axis follows `tangent` as closely as
+    /// possible (Gram-Schmidt); falls back to [`Frame::from_normal`] for a degenerate tangent.
+    pub fn from_normal_tangent(n: Vec3, tangent: Vec3) -> Self {
+        let t = tangent - n * n.dot(tangent);
+        let len2 = t.length_squared();
+        if !(len2 > 1e-12) || !len2.is_finite() {
+            return Self::from_normal(n);
+        }
+        let x = t / len2.sqrt();
+        Self { x, y: n.cross(x), z: n }
+    }
+
+    /// World direction to local coordinates.
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.x), v.dot(self.y), v.dot(self.z))
+    }
+
+    /// Local coordinates to a world direction.
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.x * v.x + self.y * v.y + self.z * v.z
+    }
+}
+
+/// Moves a surface point off its surface along the geometric normal by an amount that
+/// scales with the point's magnitude, so that a ray leaving the surface never hits it
+/// again at any scene scale. Wächter & Binder, "A Fast and Robust Method for Avoiding
+/// Self-Intersection", Ray Tracing Gems ch. 6: the offset is done in integer ulps, so it
+/// is relative to the coordinate's size, with a small absolute floor near the origin.
+pub fn offset_ray_origin(p: Vec3, ng: Vec3) -> Vec3 {
+    const ORIGIN: f32 = 1.0 / 32.0;
+    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+    const INT_SCALE: f32 = 256.0;
+    let of_i = (ng * INT_SCALE).as_ivec3();
+    let step = |p: f32, o: i32| {
+        let bits = p.to_bits() as i32;
+        f32::from_bits((bits + if p < 0.0 { -o } else { o }) as u32)
+    };
+    let p_i = Vec3::new(step(p.x, of_i.x), step(p.y, of_i.y), step(p.z, of_i.z));
+    let pick = |p: f32, p_i: f32, n: f32| if p.abs() < ORIGIN { p + FLOAT_SCALE * n } else { p_i };
+    Vec3::new(pick(p.x, p_i.x, ng.x), pick(p.y, p_i.y, ng.y), pick(p.z, p_i.z, ng.z))
+}
+
+/// Interpolates three per-vertex values with barycentric weights (b1, b2).
+pub fn barycentric<T>(a: T, b: T, c: T, b1: f32, b2: f32) -> T
+where
+    T: core::ops::Mul<f32, Output = T> + core::ops::Add<Output = T>,
+{
+    a * (1.0 - b1 - b2) + b * b1 + c * b2
+}

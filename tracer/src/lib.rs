@@ -1,0 +1,44 @@
+//! Tessera's path tracer core: no network, no async, no database.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`scene`] | the loaded scene: nodes, meshes, materials, cameras, lights |
+//! | [`loader`] | glTF 2.0 (.gltf/.glb) into a [`scene::Scene`], with errors naming the element |
+//! | [`demo`] | the built-in demo scene, authored in code |
+//! | [`geometry`] | rays, hits, boxes, shading frames, the self-intersection offset |
+//! | [`triangle`] | the watertight ray/triangle test |
+//! | [`bvh`] | SAH BVH per mesh and the top-level BVH over instances |
+//! | [`camera`] | perspective and orthographic cameras |
+//! | [`texture`] | images, samplers, KHR_texture_transform, sRGB |
+//! | [`material`] | glTF materials and their evaluation at a hit |
+//! | [`bsdf`] | the glTF metallic-roughness BSDF, GGX with visible-normal sampling |
+//! | [`light`] | punctual, emissive-triangle and environment lights; the light sampler |
+//! | [`sampler`] | random numbers as a pure function of (pixel, sample, dimension, frame, seed) |
+//! | [`integrator`] | unidirectional path tracing with NEE and MIS |
+//! | [`film`] | tile buffers: beauty, albedo, normal, depth |
+//! | [`render`] | `prepare_frame` and the one entry point, [`render::render_tile`] |
+//! | [`output`] | multi-layer EXR files and ACES-tone-mapped PNG previews |
+//!
+//! Units follow the glTF specs: emission in nits (cd/m²) is radiance, point and spot
+//! lights are in candela (radiant intensity), directional lights in lux (irradiance). The
+//! tracer treats these photometric numbers directly as its radiometric units, so a white
+//! Lambertian plane under a 1 lux directional light at normal incidence reflects radiance
+//! 1/π.
+#![warn(missing_docs)]
+
+pub mod bsdf;
+pub mod bvh;
+pub mod camera;
+pub mod demo;
+pub mod film;
+pub mod geometry;
+pub mod integrator;
+pub mod light;
+pub mod loader;
+pub mod material;
+pub mod output;
+pub mod render;
+pub mod sampler;
+pub mod scene;
+pub mod texture;
+pub mod triangle;
