@@ -1,1 +1,30 @@
-fn main() {}
+//! The `tessera` binary: thin command-line glue over the tracer, server and worker crates.
+
+mod bench;
+mod args;
+mod render;
+
+use clap::{Parser, Subcommand};
+
+/// Tessera: a render farm with its own path tracer.
+#[derive(Parser)]
+#[command(name = "tessera", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render one frame of a glTF scene (or the built-in demo) to a multi-layer EXR.
+    Render(render::RenderArgs),
+    /// Measure the tracer: rays per second, and time and error against samples per pixel.
+    Bench(bench::BenchArgs),
+}
+
+fn main() -> anyhow::Result<()> {
+    match Cli::parse().command {
+        Command::Render(args) => render::run(args),
+        Command::Bench(args) => bench::run(args),
+    }
+}

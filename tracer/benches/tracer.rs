@@ -1,1 +1,74 @@
-fn main() {}
+//! Criterion benchmarks of the tracer's hot kernels: BVH build, closest-hit camera rays,
+//! and whole paths through the demo scene. Run with `cargo bench -p tracer`.
+
+use std::sync::Arc;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use glam::{Vec2, Vec3};
+
+use tracer::bvh::MeshBvh;
+use tracer::film::{SampleRange, TileRect};
+use tracer::render::{prepare_frame, render_tile, FrameOptions, PreparedFrame, RenderSettings};
+
+/// A bumpy grid of `n`×`n` quads: a mesh whose size we control.
+fn grid(n: usize) -> Vec<[Vec3; 3]> {
+    let p = |i: usize, j: usize| {
+        let (x, z) = (i as f32 / n as f32, j as f32 / n as f32);
+        Vec3::new(x, 0.05 * (13.0 * x).sin() * (11.0 * z).cos(), z)
+    };
+    let mut tris = Vec::with_capacity(2 * n * n);
+    for i in 0..n {
+        for j in 0..n {
+            tris.push([p(i, j), p(i + 1, j), p(i + 1, j + 1)]);
+            tris.push([p(i, j), p(i + 1, j + 1), p(i, j + 1)]);
+        }
+    }
+    tris
+}
+
+fn demo_frame(size: u32) -> PreparedFrame {
+    let options = FrameOptions { width: size, height: size, ..Default::default() };
+    prepare_frame(Arc::new(tracer::demo::demo_scene()), &options).expect("demo prepares")
+}
+
+fn bvh_build(c: &mut Criterion) {
+    let mut g = c.benchmark_group("bvh_build");
+    g.sample_size(10);
+    for n in [64, 256] {
+        let tris = grid(n);
+        g.throughput(Throughput::Elements(tris.len() as u64));
+        g.bench_with_input(BenchmarkId::from_parameter(tris.len()), &tris, |b, t| {
+            b.iter(|| MeshBvh::build(t))
+        });
+    }
+    g.finish();
+}
+
+fn camera_rays(c: &mut Criterion) {
+    let frame = demo_frame(64);
+    let rays: Vec<_> = (0..64 * 64)
+        .map(|i| frame.camera.generate_ray(Vec2::new((i % 64) as f32 / 64.0, (i / 64) as f32 / 64.0)))
+        .collect();
+    let mut g = c.benchmark_group("camera_rays");
+    g.throughput(Throughput::Elements(rays.len() as u64));
+    g.bench_function("demo_closest_hit", |b| {
+        b.iter(|| rays.iter().filter(|r| frame.intersect(r, f32::INFINITY).is_some()).count())
+    });
+    g.finish();
+}
+
+fn paths(c: &mut Criterion) {
+    let frame = demo_frame(64);
+    let settings = RenderSettings::default();
+    let rect = TileRect::new(16, 16, 16, 16);
+    let mut g = c.benchmark_group("paths");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(rect.area() as u64 * 4));
+    g.bench_function("demo_tile_16x16_4spp", |b| {
+        b.iter(|| render_tile(&frame, &settings, rect, SampleRange::new(0, 4)))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bvh_build, camera_rays, paths);
+criterion_main!(benches);

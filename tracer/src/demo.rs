@@ -1,1 +1,125 @@
-//! (being written)
+//! The built-in demo scene, authored in code: a Cornell box (after the published Cornell
+//! measurements, scaled to a 2 m box) with an area light, a diffuse box, a metal sphere and
+//! a glass sphere.
+
+use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
+
+use crate::camera::Projection;
+use crate::material::Material;
+use crate::scene::{CameraDef, Scene, SceneBuilder};
+use crate::shapes::{cube, quad, uv_sphere};
+
+/// Cornell box wall reflectances (approximations of the measured spectra).
+const WHITE: Vec3 = Vec3::new(0.73, 0.73, 0.73);
+const RED: Vec3 = Vec3::new(0.63, 0.065, 0.05);
+const GREEN: Vec3 = Vec3::new(0.14, 0.45, 0.091);
+/// The ceiling light's radiance in nits, the classic warm Cornell light.
+const LIGHT: Vec3 = Vec3::new(17.0, 12.0, 4.0);
+
+fn diffuse(name: &str, color: Vec3) -> Material {
+    Material {
+        name: Some(name.into()),
+        base_color: color.extend(1.0),
+        metallic: 0.0,
+        roughness: 1.0,
+        // A path tracer sees walls from inside the box; culling them buys nothing.
+        double_sided: true,
+        specular: 0.0,
+        ..Default::default()
+    }
+}
+
+/// The empty Cornell box: five white, red and green Lambertian walls, the ceiling light
+/// and the camera of the published setup (39.3° vertical field of view). The box spans
+/// x, z in [-1, 1] and y in [0, 2]; the camera looks down -Z from z = 3.75, where a square image just
+/// sees the inside of the box.
+fn cornell_shell(b: &mut SceneBuilder) {
+    let white = b.material(diffuse("white", WHITE));
+    let red = b.material(diffuse("red", RED));
+    let green = b.material(diffuse("green", GREEN));
+    let light = b.material(Material {
+        emissive: LIGHT,
+        ..diffuse("light", Vec3::splat(0.78))
+    });
+    let v = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+    let walls = vec![
+        quad([v(-1., 0., 1.), v(1., 0., 1.), v(1., 0., -1.), v(-1., 0., -1.)], white), // floor
+        quad([v(-1., 2., -1.), v(1., 2., -1.), v(1., 2., 1.), v(-1., 2., 1.)], white), // ceiling
+        quad([v(-1., 0., -1.), v(1., 0., -1.), v(1., 2., -1.), v(-1., 2., -1.)], white), // back
+        quad([v(-1., 0., 1.), v(-1., 0., -1.), v(-1., 2., -1.), v(-1., 2., 1.)], red), // left
+        quad([v(1., 0., -1.), v(1., 0., 1.), v(1., 2., 1.), v(1., 2., -1.)], green), // right
+    ];
+    b.mesh("walls", walls, DMat4::IDENTITY);
+    // The light sits just below the ceiling, facing down; 0.47 × 0.38 m like the original.
+    let (hx, hz, y) = (0.235, 0.19, 1.998);
+    let lamp = quad([v(-hx, y, -hz), v(hx, y, -hz), v(hx, y, hz), v(-hx, y, hz)], light);
+    b.mesh("light", vec![lamp], DMat4::IDENTITY);
+
+    let camera = CameraDef {
+        name: Some("cornell".into()),
+        projection: Projection::Perspective {
+            yfov: 39.3f32.to_radians(),
+            aspect_ratio: Some(1.0),
+            znear: 0.01,
+        },
+    };
+    b.camera(camera, DMat4::from_translation(DVec3::new(0.0, 1.0, 3.75)));
+}
+
+/// The measured Cornell box with its two diffuse blocks: the reference scene for
+/// benchmarks against other renderers.
+pub fn cornell_box() -> Scene {
+    let mut b = SceneBuilder::default();
+    cornell_shell(&mut b);
+    let white = b.material(diffuse("block", WHITE));
+    let tall = DMat4::from_scale_rotation_translation(
+        DVec3::new(0.6, 1.2, 0.6),
+        DQuat::from_rotation_y(0.29),
+        DVec3::new(-0.33, 0.6, -0.3),
+    );
+    let short = DMat4::from_scale_rotation_translation(
+        DVec3::new(0.6, 0.6, 0.6),
+        DQuat::from_rotation_y(-0.3),
+        DVec3::new(0.34, 0.3, 0.25),
+    );
+    b.mesh("tall block", vec![cube(white)], tall);
+    b.mesh("short block", vec![cube(white)], short);
+    b.finish()
+}
+
+/// The demo: the Cornell box with a diffuse box, a polished metal sphere and a glass
+/// sphere.
+pub fn demo_scene() -> Scene {
+    let mut b = SceneBuilder::default();
+    cornell_shell(&mut b);
+    let block = b.material(diffuse("block", Vec3::new(0.75, 0.7, 0.6)));
+    let metal = b.material(Material {
+        name: Some("metal".into()),
+        base_color: Vec4::new(0.95, 0.93, 0.88, 1.0),
+        metallic: 1.0,
+        roughness: 0.15,
+        double_sided: true,
+        ..Default::default()
+    });
+    let glass = b.material(Material {
+        name: Some("glass".into()),
+        base_color: Vec4::ONE,
+        metallic: 0.0,
+        roughness: 0.0,
+        transmission: 1.0,
+        ior: 1.5,
+        ..Default::default()
+    });
+    let boxy = DMat4::from_scale_rotation_translation(
+        DVec3::new(0.55, 1.1, 0.55),
+        DQuat::from_rotation_y(0.35),
+        DVec3::new(-0.4, 0.55, -0.35),
+    );
+    b.mesh("box", vec![cube(block)], boxy);
+    let sphere_at = |r: f64, x: f64, z: f64| {
+        DMat4::from_scale_rotation_translation(DVec3::splat(r), DQuat::IDENTITY, DVec3::new(x, r, z))
+    };
+    b.mesh("metal sphere", vec![uv_sphere(metal, 48, 96)], sphere_at(0.35, 0.45, -0.45));
+    b.mesh("glass sphere", vec![uv_sphere(glass, 48, 96)], sphere_at(0.32, 0.15, 0.45));
+    b.finish()
+}

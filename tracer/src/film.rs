@@ -1,1 +1,330 @@
-//! (being written)
+//! Tile buffers. A tile accumulates per-pixel sums, not averages, so that the buffers of
+//! two sample ranges of the same tile merge by addition and equal the buffer of the whole
+//! range within float rounding.
+
+use glam::{Vec3, Vec4};
+
+/// A rectangle of pixels in a frame; `x`, `y` from the top-left corner.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TileRect {
+    /// Left column.
+    pub x: u32,
+    /// Top row.
+    pub y: u32,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+impl TileRect {
+    /// A rectangle.
+    pub fn new(x: u32, y: u32, width: u32, height: u32) -> Self {
+        Self { x, y, width, height }
+    }
+
+    /// Number of pixels.
+    pub fn area(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// Whether `self` lies inside a `width`×`height` frame.
+    pub fn fits_in(&self, width: u32, height: u32) -> bool {
+        self.x as u64 + self.width as u64 <= width as u64
+            && self.y as u64 + self.height as u64 <= height as u64
+    }
+
+    /// Splits the rectangle into tiles of at most `size`×`size`, row by row.
+    pub fn tiles(&self, size: u32) -> Vec<TileRect> {
+        let size = size.max(1);
+        let mut out = Vec::new();
+        for y in (self.y..self.y + self.height).step_by(size as usize) {
+            for x in (self.x..self.x + self.width).step_by(size as usize) {
+                let w = size.min(self.x + self.width - x);
+                let h = size.min(self.y + self.height - y);
+                out.push(TileRect::new(x, y, w, h));
+            }
+        }
+        out
+    }
+}
+
+/// A half-open range of sample indices `[start, end)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SampleRange {
+    /// First sample index.
+    pub start: u32,
+    /// One past the last sample index.
+    pub end: u32,
+}
+
+impl SampleRange {
+    /// Samples `[start, end)`.
+    pub fn new(start: u32, end: u32) -> Self {
+        Self { start, end }
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> u32 {
+        self.end.saturating_sub(self.start)
+    }
+
+    /// Whether the range holds no sample.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// What one camera sample found.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SampleValue {
+    /// Radiance along the camera ray (linear RGB).
+    pub radiance: Vec3,
+    /// Coverage: 1 where the ray hit geometry, 0 where it saw the environment.
+    pub alpha: f32,
+    /// Albedo of the first non-specular surface seen (denoiser AOV).
+    pub albedo: Vec3,
+    /// World-space shading normal at the first hit (zero on a miss).
+    pub normal: Vec3,
+    /// Distance along the camera's view axis to the first hit; `None` on a miss.
+    pub depth: Option<f32>,
+    /// Rays traced for this sample (camera, bounce and shadow rays).
+    pub rays: u32,
+}
+
+/// Depth written for pixels where no sample hit anything: large and finite, as
+/// compositors expect (Cycles uses the same value), never infinity.
+pub const NO_HIT_DEPTH: f32 = 1.0e10;
+
+/// Per-pixel sums over the samples of one tile, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileBuffer {
+    /// The pixels covered.
+    pub rect: TileRect,
+    /// Sum of RGB radiance and alpha.
+    pub beauty: Vec<Vec4>,
+    /// Sum of albedo.
+    pub albedo: Vec<Vec3>,
+    /// Sum of normals.
+    pub normal: Vec<Vec3>,
+    /// Sum of depths over the samples that hit.
+    pub depth: Vec<f32>,
+    /// Number of samples that hit, per pixel.
+    pub hits: Vec<u32>,
+    /// Number of samples kept, per pixel (samples with NaN or infinity are dropped).
+    pub samples: Vec<u32>,
+    /// Samples dropped because they were NaN or infinite.
+    pub dropped: u64,
+    /// Rays traced, for throughput figures.
+    pub rays: u64,
+}
+
+impl TileBuffer {
+    /// An empty buffer for `rect`.
+    pub fn new(rect: TileRect) -> Self {
+        let n = rect.area();
+        Self {
+            rect,
+            beauty: vec![Vec4::ZERO; n],
+            albedo: vec![Vec3::ZERO; n],
+            normal: vec![Vec3::ZERO; n],
+            depth: vec![0.0; n],
+            hits: vec![0; n],
+            samples: vec![0; n],
+            dropped: 0,
+            rays: 0,
+        }
+    }
+
+    /// Adds one sample to the pixel at `index` (row-major within the tile); a sample with
+    /// any non-finite value is dropped whole and counted.
+    pub fn add(&mut self, index: usize, s: &SampleValue) {
+        self.rays += s.rays as u64;
+        let finite = s.radiance.is_finite()
+            && s.alpha.is_finite()
+            && s.albedo.is_finite()
+            && s.normal.is_finite()
+            && s.depth.is_none_or(f32::is_finite);
+        if !finite {
+            self.dropped += 1;
+            return;
+        }
+        self.beauty[index] += s.radiance.extend(s.alpha);
+        self.albedo[index] += s.albedo;
+        self.normal[index] += s.normal;
+        if let Some(d) = s.depth {
+            self.depth[index] += d;
+            self.hits[index] += 1;
+        }
+        self.samples[index] += 1;
+    }
+
+    /// Adds another buffer of the same rectangle (another sample range).
+    ///
+    /// # Panics
+    /// If the rectangles differ.
+    pub fn merge(&mut self, other: &TileBuffer) {
+        assert_eq!(self.rect, other.rect, "merging tiles of different rectangles");
+        for i in 0..self.beauty.len() {
+            self.beauty[i] += other.beauty[i];
+            self.albedo[i] += other.albedo[i];
+            self.normal[i] += other.normal[i];
+            self.depth[i] += other.depth[i];
+            self.hits[i] += other.hits[i];
+            self.samples[i] += other.samples[i];
+        }
+        self.dropped += other.dropped;
+        self.rays += other.rays;
+    }
+
+    /// Copies a smaller buffer (a tile of this one) into its place.
+    ///
+    /// # Panics
+    /// If `tile` does not lie inside `self`.
+    pub fn paste(&mut self, tile: &TileBuffer) {
+        for (src, dst, w) in row_spans(self.rect, tile.rect) {
+            self.beauty[dst..dst + w].copy_from_slice(&tile.beauty[src..src + w]);
+            self.albedo[dst..dst + w].copy_from_slice(&tile.albedo[src..src + w]);
+            self.normal[dst..dst + w].copy_from_slice(&tile.normal[src..src + w]);
+            self.depth[dst..dst + w].copy_from_slice(&tile.depth[src..src + w]);
+            self.hits[dst..dst + w].copy_from_slice(&tile.hits[src..src + w]);
+            self.samples[dst..dst + w].copy_from_slice(&tile.samples[src..src + w]);
+        }
+        self.dropped += tile.dropped;
+        self.rays += tile.rays;
+    }
+
+    /// Averages the sums into displayable layers.
+    pub fn resolve(&self) -> Layers {
+        let n = self.rect.area();
+        let mut out = Layers::new(self.rect);
+        for i in 0..n {
+            let inv = if self.samples[i] > 0 { 1.0 / self.samples[i] as f32 } else { 0.0 };
+            out.beauty[i] = self.beauty[i] * inv;
+            out.albedo[i] = self.albedo[i] * inv;
+            let nrm = self.normal[i];
+            out.normal[i] = if nrm.length_squared() > 0.0 { nrm.normalize() } else { Vec3::ZERO };
+            out.depth[i] = if self.hits[i] > 0 {
+                self.depth[i] / self.hits[i] as f32
+            } else {
+                NO_HIT_DEPTH
+            };
+        }
+        out
+    }
+}
+
+/// Averaged image layers of a rectangle, ready to write: the content of one EXR data
+/// window.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layers {
+    /// The pixels covered.
+    pub rect: TileRect,
+    /// Linear RGB radiance and alpha.
+    pub beauty: Vec<Vec4>,
+    /// Albedo.
+    pub albedo: Vec<Vec3>,
+    /// Unit world-space shading normal (zero where nothing was hit).
+    pub normal: Vec<Vec3>,
+    /// Depth along the view axis ([`NO_HIT_DEPTH`] where nothing was hit).
+    pub depth: Vec<f32>,
+}
+
+impl Layers {
+    /// Black layers for `rect`, depth at [`NO_HIT_DEPTH`].
+    pub fn new(rect: TileRect) -> Self {
+        let n = rect.area();
+        Self {
+            rect,
+            beauty: vec![Vec4::ZERO; n],
+            albedo: vec![Vec3::ZERO; n],
+            normal: vec![Vec3::ZERO; n],
+            depth: vec![NO_HIT_DEPTH; n],
+        }
+    }
+
+    /// Copies `tile` into its place inside `self` (tiles assemble into frames).
+    ///
+    /// # Panics
+    /// If `tile` does not lie inside `self`.
+    pub fn paste(&mut self, tile: &Layers) {
+        for (src, dst, w) in row_spans(self.rect, tile.rect) {
+            self.beauty[dst..dst + w].copy_from_slice(&tile.beauty[src..src + w]);
+            self.albedo[dst..dst + w].copy_from_slice(&tile.albedo[src..src + w]);
+            self.normal[dst..dst + w].copy_from_slice(&tile.normal[src..src + w]);
+            self.depth[dst..dst + w].copy_from_slice(&tile.depth[src..src + w]);
+        }
+    }
+
+    /// The sub-rectangle `sub` of `self` as its own layers.
+    ///
+    /// # Panics
+    /// If `sub` does not lie inside `self`.
+    pub fn crop(&self, sub: TileRect) -> Layers {
+        let mut out = Layers::new(sub);
+        for (dst, src, w) in row_spans(self.rect, sub) {
+            out.beauty[dst..dst + w].copy_from_slice(&self.beauty[src..src + w]);
+            out.albedo[dst..dst + w].copy_from_slice(&self.albedo[src..src + w]);
+            out.normal[dst..dst + w].copy_from_slice(&self.normal[src..src + w]);
+            out.depth[dst..dst + w].copy_from_slice(&self.depth[src..src + w]);
+        }
+        out
+    }
+}
+
+/// For each row of `inner` (which must lie inside `outer`): the row's start index in
+/// `inner`'s buffer, its start index in `outer`'s buffer, and its width.
+fn row_spans(outer: TileRect, inner: TileRect) -> impl Iterator<Item = (usize, usize, usize)> {
+    assert!(
+        inner.x >= outer.x
+            && inner.y >= outer.y
+            && inner.x + inner.width <= outer.x + outer.width
+            && inner.y + inner.height <= outer.y + outer.height,
+        "rectangle {inner:?} outside {outer:?}"
+    );
+    (0..inner.height as usize).map(move |row| {
+        let in_inner = row * inner.width as usize;
+        let in_outer = ((inner.y - outer.y) as usize + row) * outer.width as usize
+            + (inner.x - outer.x) as usize;
+        (in_inner, in_outer, inner.width as usize)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiles_cover_the_rectangle_exactly_once() {
+        let r = TileRect::new(3, 5, 37, 20);
+        let tiles = r.tiles(16);
+        assert_eq!(tiles.len(), 3 * 2);
+        assert_eq!(tiles.iter().map(|t| t.area()).sum::<usize>(), r.area());
+        assert!(tiles.iter().all(|t| t.x >= 3 && t.x + t.width <= 40 && t.y + t.height <= 25));
+    }
+
+    #[test]
+    fn non_finite_samples_are_dropped_and_counted() {
+        let mut b = TileBuffer::new(TileRect::new(0, 0, 1, 1));
+        b.add(0, &SampleValue { radiance: Vec3::ONE, alpha: 1.0, ..Default::default() });
+        b.add(0, &SampleValue { radiance: Vec3::NAN, ..Default::default() });
+        b.add(0, &SampleValue { depth: Some(f32::INFINITY), ..Default::default() });
+        assert_eq!(b.dropped, 2);
+        assert_eq!(b.resolve().beauty[0], Vec4::ONE);
+        assert_eq!(b.resolve().depth[0], NO_HIT_DEPTH);
+    }
+
+    #[test]
+    fn paste_then_crop_round_trips() {
+        let mut frame = Layers::new(TileRect::new(0, 0, 8, 6));
+        let mut tile = Layers::new(TileRect::new(2, 3, 4, 2));
+        for (i, b) in tile.beauty.iter_mut().enumerate() {
+            *b = Vec4::splat(i as f32);
+        }
+        frame.paste(&tile);
+        assert_eq!(frame.crop(tile.rect), tile);
+        assert_eq!(frame.beauty[3 * 8 + 2], Vec4::splat(0.0));
+        assert_eq!(frame.beauty[3 * 8 + 1], Vec4::ZERO, "outside the tile stays black");
+        assert_eq!(frame.beauty[4 * 8 + 5], Vec4::splat(7.0));
+    }
+}

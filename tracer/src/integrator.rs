@@ -1,1 +1,287 @@
-//! (being written)
+//! Unidirectional path tracing with next-event estimation and multiple importance
+//! sampling (power heuristic), Russian roulette, and no NaN or infinity on the film.
+
+use glam::{Vec2, Vec3, Vec4};
+
+use crate::bsdf::Bsdf;
+use crate::film::SampleValue;
+use crate::geometry::{barycentric, offset_ray_origin, Frame, Hit, Ray};
+use crate::light::Emitter;
+use crate::render::{PreparedFrame, RenderSettings};
+use crate::sampler::PixelSampler;
+
+/// Bounces before Russian roulette may end a path.
+const RR_START_DEPTH: u32 = 3;
+/// Sampler dimensions used by the camera (pixel position), before the first bounce.
+const CAMERA_DIMENSIONS: u32 = 2;
+/// Sampler dimensions consumed by each bounce: light choice, light point, lobe choice,
+/// direction, Russian roulette.
+const BOUNCE_DIMENSIONS: u32 = 5;
+
+/// Everything the integrator needs at a surface point.
+pub(crate) struct SurfacePoint {
+    /// Position (camera-relative world space).
+    pub p: Vec3,
+    /// Geometric normal, unit, on the side of the surface's front face.
+    pub ng: Vec3,
+    /// Shading frame (normal map and interpolated normal applied).
+    pub frame: Frame,
+    /// Whether the ray arrived on the front face.
+    pub front: bool,
+    /// Material values at the point.
+    pub material: crate::material::MaterialSample,
+    /// Whether the material emits only from its front face.
+    pub single_sided: bool,
+}
+
+/// Builds the surface point of `hit` on `ray`.
+pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> SurfacePoint {
+    let scene = &*frame.scene;
+    let inst = &frame.bvh.instances()[hit.instance as usize];
+    let mesh = &scene.meshes[inst.mesh as usize];
+    let (p_index, t) = mesh.locate(hit.triangle);
+    let prim = &mesh.primitives[p_index];
+    let [i0, i1, i2] = prim.triangle(t);
+    let (b1, b2) = (hit.b1, hit.b2);
+
+    // Position from barycentrics in object space, then to world: more precise than o + t d.
+    let [a, b, c] = [i0, i1, i2].map(|i| prim.positions[i]);
+    let p = inst.to_world.transform_point3(barycentric(a, b, c, b1, b2));
+    let ng_raw = front_normal(inst, prim, t);
+    let ng = if ng_raw == Vec3::ZERO { -ray.dir.normalize() } else { ng_raw };
+    let front = ng.dot(ray.dir) < 0.0;
+
+    let (uvs, color) = (prim.uvs_at(t, b1, b2), prim.color_at(t, b1, b2));
+    let material = &scene.materials[prim.material as usize];
+    let sample = material.sample(&scene.textures, uvs, color);
+
+    // Interpolated shading normal; missing or degenerate normals fall back to the face.
+    let mut ns = if prim.normals.is_empty() {
+        ng
+    } else {
+        let n = barycentric(prim.normals[i0], prim.normals[i1], prim.normals[i2], b1, b2);
+        let n = (inst.normal_to_world * n).normalize_or_zero();
+        if n == Vec3::ZERO || !n.is_finite() {
+            ng
+        } else {
+            n
+        }
+    };
+    let mut shading = Frame::from_normal(ns);
+    if let (Some(nm), false) = (sample.normal_map, prim.tangents.is_empty()) {
+        let t4 = barycentric(prim.tangents[i0], prim.tangents[i1], prim.tangents[i2], b1, b2);
+        let tangent = inst.to_world.transform_vector3(t4.truncate());
+        let tf = Frame::from_normal_tangent(ns, tangent);
+        let sign = if t4.w < 0.0 { -1.0 } else { 1.0 };
+        let mapped = tf.x * nm.x + tf.y * (nm.y * sign) + tf.z * nm.z;
+        if let Some(m) = mapped.try_normalize() {
+            ns = m;
+            shading = Frame::from_normal_tangent(ns, tf.x);
+        }
+    } else if sample.normal_map.is_none() && !prim.tangents.is_empty() {
+        let tangent = inst.to_world.transform_vector3(prim.tangents[i0].truncate());
+        shading = Frame::from_normal_tangent(ns, tangent);
+    }
+
+    // Opaque surfaces are shaded from the side the ray came from; transmissive ones keep
+    // their orientation so the BSDF knows inside from outside.
+    let transmissive = sample.surface.transmission > 0.0;
+    let (ng, shading) = if !front && !transmissive {
+        let flipped = Frame { x: shading.x, y: -shading.y, z: -shading.z };
+        (-ng, flipped)
+    } else {
+        (ng, shading)
+    };
+    SurfacePoint {
+        p,
+        ng,
+        frame: shading,
+        front,
+        material: sample,
+        single_sided: !material.double_sided,
+    }
+}
+
+/// The power heuristic with exponent 2 (Veach 1997).
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2.is_infinite() {
+        return 1.0;
+    }
+    if a2 + b2 > 0.0 {
+        a2 / (a2 + b2)
+    } else {
+        0.0
+    }
+}
+
+/// A ray leaving `p` towards `dir`, offset to the side of `ng` the direction is on.
+fn spawn(p: Vec3, ng: Vec3, dir: Vec3, time: f32) -> Ray {
+    let n = if dir.dot(ng) >= 0.0 { ng } else { -ng };
+    Ray { origin: offset_ray_origin(p, n), dir, time }
+}
+
+/// Whether a direction is on the geometric side its shading-frame sign claims: stops
+/// light leaking through surfaces whose shading normal disagrees with the geometry.
+fn consistent_side(sp: &SurfacePoint, wi: Vec3, wi_local: Vec3) -> bool {
+    (wi.dot(sp.ng) > 0.0) == (wi_local.z > 0.0)
+}
+
+/// Traces camera sample `index` of pixel (`x`, `y`).
+pub fn trace_sample(frame: &PreparedFrame, settings: &RenderSettings, x: u32, y: u32, index: u32) -> SampleValue {
+    let mut sampler = PixelSampler::new(x, y, index, frame.frame, settings.seed);
+    let jitter = sampler.next_2d();
+    let film = Vec2::new(
+        (x as f32 + jitter.x) / frame.width as f32,
+        (y as f32 + jitter.y) / frame.height as f32,
+    );
+    let mut ray = frame.camera.generate_ray(film);
+    let view_axis = frame.camera.to_world.transform_vector3(Vec3::NEG_Z).normalize();
+
+    let mut out = SampleValue::default();
+    let mut radiance = Vec3::ZERO;
+    let mut throughput = Vec3::ONE;
+    // pdf of the BSDF sample that produced `ray` (for MIS on emitters it hits), and
+    // whether it came from a delta lobe (no MIS: lights could not have sampled it).
+    let mut prev_pdf = 0.0f32;
+    let mut prev_delta = true;
+    let mut prev_p = ray.origin;
+    let mut albedo_done = false;
+
+    for depth in 0..=settings.max_depth {
+        sampler.start_dimension(CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
+        out.rays += 1;
+        let Some(hit) = frame.intersect(&ray, f32::INFINITY) else {
+            // The environment.
+            let le = frame.lights.environment().radiance(ray.dir);
+            if le != Vec3::ZERO {
+                let w = if prev_delta {
+                    1.0
+                } else {
+                    power_heuristic(prev_pdf, frame.lights.pdf_environment(ray.dir))
+                };
+                radiance += throughput * le * w;
+            }
+            if !albedo_done {
+                out.albedo = le;
+            }
+            break;
+        };
+        let sp = surface_point(frame, &ray, &hit);
+        let wo = -ray.dir.normalize();
+        if depth == 0 {
+            out.alpha = 1.0;
+            out.normal = sp.frame.z;
+            out.depth = Some((sp.p - ray.origin).dot(view_axis).abs());
+        }
+
+        // Light emitted by the surface (glTF emission is one-sided for single-sided
+        // materials, seen from the front only).
+        let le = sp.material.emission;
+        if le != Vec3::ZERO && (sp.front || !sp.single_sided) {
+            let w = if prev_delta {
+                1.0
+            } else {
+                let light_pdf =
+                    frame.lights.pdf_triangle(hit.instance, hit.triangle, prev_p, sp.p, sp.ng);
+                power_heuristic(prev_pdf, light_pdf)
+            };
+            radiance += throughput * le * w;
+        }
+
+        let bsdf = Bsdf::new(sp.material.surface);
+        if !albedo_done && !bsdf.is_delta() {
+            out.albedo = bsdf.albedo();
+            albedo_done = true;
+        }
+        if depth == settings.max_depth {
+            break;
+        }
+        let wo_local = sp.frame.to_local(wo);
+
+        // Next-event estimation.
+        let u_light = sampler.next_1d();
+        let u_point = sampler.next_2d();
+        if !bsdf.is_delta() {
+            if let Some(ls) = frame.lights.sample(sp.p, Some(sp.ng), u_light, u_point) {
+                let wi_local = sp.frame.to_local(ls.wi);
+                let f = bsdf.eval(wo_local, wi_local) * wi_local.z.abs();
+                if ls.pdf > 0.0 && f != Vec3::ZERO && consistent_side(&sp, ls.wi, wi_local) {
+                    let le = match ls.emitter {
+                        Emitter::Radiance(l) => l,
+                        Emitter::Triangle { instance, triangle, b1, b2, .. } => {
+                            emitted_toward(frame, instance, triangle, b1, b2, ls.wi)
+                        }
+                    };
+                    if le != Vec3::ZERO {
+                        let shadow = spawn(sp.p, sp.ng, ls.wi, ray.time);
+                        // Stop just short of the light so it does not occlude itself.
+                        let t_max = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
+                        out.rays += 1;
+                        if !frame.occluded(&shadow, t_max) {
+                            let w = if ls.delta { 1.0 } else { power_heuristic(ls.pdf, bsdf.pdf(wo_local, wi_local)) };
+                            radiance += throughput * f * le * (w / ls.pdf);
+                        }
+                    }
+                }
+            }
+        }
+
+        // Continue the path by sampling the BSDF.
+        let u_lobe = sampler.next_1d();
+        let u_dir = sampler.next_2d();
+        let Some(bs) = bsdf.sample(wo_local, u_lobe, u_dir) else { break };
+        if !(bs.pdf > 0.0) {
+            break;
+        }
+        let wi = sp.frame.to_world(bs.wi);
+        if !consistent_side(&sp, wi, bs.wi) {
+            break;
+        }
+        throughput *= bs.f * (bs.wi.z.abs() / bs.pdf);
+        if !throughput.is_finite() || throughput == Vec3::ZERO {
+            break;
+        }
+        prev_pdf = bs.pdf;
+        prev_delta = bs.delta;
+        prev_p = sp.p;
+        ray = spawn(sp.p, sp.ng, wi, ray.time);
+
+        // Russian roulette once the path has a few bounces.
+        if depth + 1 >= RR_START_DEPTH {
+            let survive = throughput.max_element().min(1.0);
+            if sampler.next_1d() >= survive {
+                break;
+            }
+            throughput /= survive;
+        }
+    }
+    out.radiance = radiance;
+    out
+}
+
+/// World-space unit normal of the front face of triangle `t`. The inverse transpose keeps
+/// the front face right for mirrored instances too (glTF flips the winding when the
+/// determinant is negative). Zero for a degenerate triangle.
+fn front_normal(inst: &crate::bvh::Instance, prim: &crate::scene::Primitive, t: usize) -> Vec3 {
+    (inst.normal_to_world * prim.face_normal(t)).normalize_or_zero()
+}
+
+/// Radiance leaving emissive triangle `triangle` of `instance` at barycentrics (b1, b2)
+/// towards a point in direction `-wi` from it, honouring one-sided emission.
+fn emitted_toward(frame: &PreparedFrame, instance: u32, triangle: u32, b1: f32, b2: f32, wi: Vec3) -> Vec3 {
+    let scene = &*frame.scene;
+    let inst = &frame.bvh.instances()[instance as usize];
+    let mesh = &scene.meshes[inst.mesh as usize];
+    let (p, t) = mesh.locate(triangle);
+    let prim = &mesh.primitives[p];
+    let material = &scene.materials[prim.material as usize];
+    if !material.double_sided && front_normal(inst, prim, t).dot(wi) >= 0.0 {
+        return Vec3::ZERO;
+    }
+    if material.emissive_texture.is_none() {
+        return material.emissive;
+    }
+    let uvs = prim.uvs_at(t, b1, b2);
+    material.sample(&scene.textures, uvs, Vec4::ONE).emission
+}

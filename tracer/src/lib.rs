@@ -5,6 +5,7 @@
 //! | [`scene`] | the loaded scene: nodes, meshes, materials, cameras, lights |
 //! | [`loader`] | glTF 2.0 (.gltf/.glb) into a [`scene::Scene`], with errors naming the element |
 //! | [`demo`] | the built-in demo scene, authored in code |
+//! | [`shapes`] | quads, cubes and spheres as triangle primitives |
 //! | [`geometry`] | rays, hits, boxes, shading frames, the self-intersection offset |
 //! | [`triangle`] | the watertight ray/triangle test |
 //! | [`bvh`] | SAH BVH per mesh and the top-level BVH over instances |
@@ -40,5 +41,6 @@ pub mod output;
 pub mod render;
 pub mod sampler;
 pub mod scene;
+pub mod shapes;
 pub mod texture;
 pub mod triangle;

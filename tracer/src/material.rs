@@ -1,9 +1,10 @@
 //! glTF PBR metallic-roughness materials with the KHR extensions we support, and their
 //! evaluation at a surface point into a [`crate::bsdf::Bsdf`].
 
-use glam::{Vec3, Vec4};
+use glam::{Vec2, Vec3, Vec4};
 
-use crate::texture::TextureRef;
+use crate::bsdf::SurfaceParams;
+use crate::texture::{Texture, TextureRef};
 
 /// How a material's alpha is used (glTF `alphaMode`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -113,5 +114,95 @@ impl Material {
     /// Whether the surface emits light anywhere.
     pub fn is_emissive(&self) -> bool {
         self.emissive.max_element() > 0.0
+    }
+}
+
+/// A material's values at one surface point, after textures and vertex colours.
+#[derive(Clone, Copy, Debug)]
+pub struct MaterialSample {
+    /// Parameters for the BSDF.
+    pub surface: SurfaceParams,
+    /// Coverage in [0,1] (base colour alpha × vertex colour alpha).
+    pub alpha: f32,
+    /// Emitted radiance in nits.
+    pub emission: Vec3,
+    /// Tangent-space normal from the normal map (unit, +Z is the surface normal), already
+    /// scaled by `normal_scale`; `None` without a normal map.
+    pub normal_map: Option<Vec3>,
+}
+
+impl Material {
+    /// Only the coverage at a point: what alpha-masked shadow and camera rays need.
+    pub fn alpha(&self, textures: &[Texture], uvs: [Vec2; 2], vertex_color: Vec4) -> f32 {
+        let mut a = self.base_color.w * vertex_color.w;
+        if let Some(t) = &self.base_color_texture {
+            a *= textures[t.texture as usize].sample(t.uv(uvs), true).w;
+        }
+        a
+    }
+
+    /// Whether a hit with this coverage is cut away. `u` is a uniform number used for
+    /// stochastic coverage of blended materials.
+    pub fn cuts_away(&self, alpha: f32, u: f32) -> bool {
+        match self.alpha_mode {
+            AlphaMode::Opaque => false,
+            AlphaMode::Mask { cutoff } => alpha < cutoff,
+            AlphaMode::Blend => u >= alpha,
+        }
+    }
+
+    /// Evaluates factors × textures at a point with texture coordinates `uvs` and vertex
+    /// colour `vertex_color` (white when the primitive has none).
+    pub fn sample(&self, textures: &[Texture], uvs: [Vec2; 2], vertex_color: Vec4) -> MaterialSample {
+        let read = |r: &Option<TextureRef>, srgb: bool| {
+            r.as_ref().map(|t| textures[t.texture as usize].sample(t.uv(uvs), srgb))
+        };
+        let mut base = self.base_color * vertex_color;
+        if let Some(t) = read(&self.base_color_texture, true) {
+            base *= t;
+        }
+        let (mut metallic, mut roughness) = (self.metallic, self.roughness);
+        if let Some(t) = read(&self.metallic_roughness_texture, false) {
+            roughness *= t.y;
+            metallic *= t.z;
+        }
+        let mut emission = self.emissive;
+        if let Some(t) = read(&self.emissive_texture, true) {
+            emission *= t.truncate();
+        }
+        let mut specular = self.specular;
+        if let Some(t) = read(&self.specular_texture, false) {
+            specular *= t.w;
+        }
+        let mut specular_color = self.specular_color;
+        if let Some(t) = read(&self.specular_color_texture, true) {
+            specular_color *= t.truncate();
+        }
+        let mut transmission = self.transmission;
+        if let Some(t) = read(&self.transmission_texture, false) {
+            transmission *= t.x;
+        }
+        let normal_map = read(&self.normal_texture, false).map(|t| {
+            let n = Vec3::new(
+                (2.0 * t.x - 1.0) * self.normal_scale,
+                (2.0 * t.y - 1.0) * self.normal_scale,
+                2.0 * t.z - 1.0,
+            );
+            n.try_normalize().unwrap_or(Vec3::Z)
+        });
+        MaterialSample {
+            surface: SurfaceParams {
+                base_color: base.truncate(),
+                metallic: metallic.clamp(0.0, 1.0),
+                roughness: roughness.clamp(0.0, 1.0),
+                ior: self.ior,
+                specular: specular.max(0.0),
+                specular_color,
+                transmission: transmission.clamp(0.0, 1.0),
+            },
+            alpha: base.w,
+            emission,
+            normal_map,
+        }
     }
 }

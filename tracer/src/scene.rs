@@ -5,6 +5,7 @@
 use glam::{DMat4, Vec2, Vec3, Vec4};
 
 use crate::bvh::MeshBvh;
+use crate::geometry::barycentric;
 use crate::camera::Projection;
 use crate::light::{Environment, PunctualLight};
 use crate::material::Material;
@@ -168,5 +169,101 @@ impl Features {
             (self.normal_maps, "normal-maps"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
+    }
+}
+
+impl Primitive {
+    /// Vertex indices of triangle `t`.
+    pub fn triangle(&self, t: usize) -> [usize; 3] {
+        self.indices[t].map(|i| i as usize)
+    }
+
+    /// Both texture coordinate sets at barycentrics (b1, b2) of triangle `t`
+    /// (zero for a set the primitive lacks).
+    pub fn uvs_at(&self, t: usize, b1: f32, b2: f32) -> [Vec2; 2] {
+        let [i0, i1, i2] = self.triangle(t);
+        [0, 1].map(|s| match self.uvs[s].as_slice() {
+            [] => Vec2::ZERO,
+            uv => barycentric(uv[i0], uv[i1], uv[i2], b1, b2),
+        })
+    }
+
+    /// Vertex colour at barycentrics (b1, b2) of triangle `t` (white without COLOR_0).
+    pub fn color_at(&self, t: usize, b1: f32, b2: f32) -> Vec4 {
+        let [i0, i1, i2] = self.triangle(t);
+        match self.colors.as_slice() {
+            [] => Vec4::ONE,
+            c => barycentric(c[i0], c[i1], c[i2], b1, b2),
+        }
+    }
+
+    /// Object-space geometric normal of triangle `t` by its winding (not normalised).
+    pub fn face_normal(&self, t: usize) -> Vec3 {
+        let [a, b, c] = self.triangle(t).map(|i| self.positions[i]);
+        (b - a).cross(c - a)
+    }
+}
+
+/// Builds a scene in code: the demo scene, tests and benchmarks use it.
+#[derive(Debug, Default)]
+pub struct SceneBuilder {
+    scene: Scene,
+}
+
+impl SceneBuilder {
+    /// Adds a material and returns its index.
+    pub fn material(&mut self, m: Material) -> u32 {
+        self.scene.materials.push(m);
+        self.scene.materials.len() as u32 - 1
+    }
+
+    fn root(&mut self, node: Node) -> u32 {
+        self.scene.nodes.push(node);
+        let id = self.scene.nodes.len() as u32 - 1;
+        self.scene.roots.push(id);
+        id
+    }
+
+    /// Adds a mesh and a root node drawing it with transform `local`; returns the node.
+    pub fn mesh(&mut self, name: &str, primitives: Vec<Primitive>, local: DMat4) -> u32 {
+        self.scene.meshes.push(Mesh::new(Some(name.into()), primitives));
+        let mesh = Some(self.scene.meshes.len() as u32 - 1);
+        self.root(Node { name: Some(name.into()), local, mesh, ..Default::default() })
+    }
+
+    /// Adds a camera placed by a root node with transform `local`; returns the node.
+    pub fn camera(&mut self, camera: CameraDef, local: DMat4) -> u32 {
+        let name = camera.name.clone();
+        self.scene.cameras.push(camera);
+        let camera = Some(self.scene.cameras.len() as u32 - 1);
+        self.root(Node { name, local, camera, ..Default::default() })
+    }
+
+    /// Adds a punctual light placed by a root node with transform `local`.
+    pub fn light(&mut self, light: PunctualLight, local: DMat4) -> u32 {
+        self.scene.lights.push(light);
+        let light = Some(self.scene.lights.len() as u32 - 1);
+        self.root(Node { local, light, ..Default::default() })
+    }
+
+    /// Sets the environment.
+    pub fn environment(&mut self, environment: Environment) {
+        self.scene.environment = environment;
+    }
+
+    /// The scene, with its feature flags derived from what was added.
+    pub fn finish(mut self) -> Scene {
+        let s = &self.scene;
+        let mats = &s.materials;
+        self.scene.features = Features {
+            textures: mats.iter().any(Material::has_textures),
+            transmission: mats.iter().any(|m| m.transmission > 0.0),
+            alpha_mask: mats.iter().any(|m| m.alpha_mode != crate::material::AlphaMode::Opaque),
+            emissive: mats.iter().any(Material::is_emissive),
+            punctual_lights: !s.lights.is_empty(),
+            environment: !matches!(s.environment, Environment::Black),
+            normal_maps: mats.iter().any(|m| m.normal_texture.is_some()),
+        };
+        self.scene
     }
 }

@@ -1,1 +1,316 @@
-//! (being written)
+//! The watertight ray/triangle test of Woop, Benthin and Wald, "Watertight Ray/Triangle
+//! Intersection", JCGT 2(1), 2013, with the conservative `t > 0` bound of Pharr, Jakob and
+//! Humphreys, "Physically Based Rendering" (3rd and 4th ed., section 6.8.4 / 6.5.3).
+//!
+//! The ray is turned into the +Z axis by a permutation and a shear that depend only on the
+//! ray ([`RayPrecomputed`]); each triangle is then tested in 2D with three edge functions.
+//! Two triangles sharing an edge see the same transformed vertices bit for bit, so the edge
+//! function has the same value (with opposite sign) for both: a ray through the edge can
+//! never slip between them. Where an edge function rounds to exactly zero the test
+//! recomputes the three in double precision, so that zero only means "exactly on the edge".
+
+use glam::{DVec2, Vec3};
+
+use crate::geometry::Ray;
+
+/// `gamma(n)` of Higham / pbrt: the bound `n·u / (1 - n·u)` on the relative error of `n`
+/// successive rounded f32 operations, with `u` the unit roundoff.
+pub(crate) const fn gamma(n: i32) -> f32 {
+    const U: f32 = f32::EPSILON * 0.5;
+    let nu = n as f32 * U;
+    nu / (1.0 - nu)
+}
+
+/// What the watertight test needs from a ray, computed once per ray: the axis along which
+/// the direction is largest (`kz`), the two others in winding-preserving order and the
+/// shear that maps the direction onto +Z.
+#[derive(Clone, Copy, Debug)]
+pub struct RayPrecomputed {
+    origin: Vec3,
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    /// (Sx, Sy, Sz) of the paper.
+    shear: Vec3,
+}
+
+impl RayPrecomputed {
+    /// Precomputes the permutation and shear for `ray`. A ray whose direction is zero or not
+    /// finite gets NaN shear constants, and [`intersect_triangle`] then never reports a hit.
+    pub fn new(ray: &Ray) -> Self {
+        let d = ray.dir;
+        let a = d.abs();
+        // The dimension where the direction is largest, so that the shear is at most 1.
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        // Swapping kx and ky for a negative direction keeps the triangles' winding, so the
+        // sign of the determinant still tells front from back.
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let shear = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        Self {
+            origin: ray.origin,
+            kx,
+            ky,
+            kz,
+            shear,
+        }
+    }
+}
+
+/// Intersects the ray behind `ray` with triangle (`v0`, `v1`, `v2`), from either side.
+///
+/// Returns `(t, b1, b2)` for a hit with `0 < t < t_max`, `b1` and `b2` being the barycentric
+/// weights of `v1` and `v2`. A hit is reported only when `t` is provably positive given the
+/// rounding errors of the test (pbrt's conservative bound), so that a ray leaving a surface
+/// whose origin was offset does not find that surface again at `t ≈ 0`. Degenerate
+/// (zero-area) triangles and rays in the triangle's plane never hit.
+#[inline]
+pub fn intersect_triangle(
+    ray: &RayPrecomputed,
+    v0: Vec3,
+    v1: Vec3,
+    v2: Vec3,
+    t_max: f32,
+) -> Option<(f32, f32, f32)> {
+    let (kx, ky, kz) = (ray.kx, ray.ky, ray.kz);
+    let Vec3 {
+        x: sx,
+        y: sy,
+        z: sz,
+    } = ray.shear;
+
+    // Vertices relative to the ray origin, then sheared so that the ray is the +Z axis.
+    let a = v0 - ray.origin;
+    let b = v1 - ray.origin;
+    let c = v2 - ray.origin;
+    let ax = a[kx] - sx * a[kz];
+    let ay = a[ky] - sy * a[kz];
+    let bx = b[kx] - sx * b[kz];
+    let by = b[ky] - sy * b[kz];
+    let cx = c[kx] - sx * c[kz];
+    let cy = c[ky] - sy * c[kz];
+
+    // Scaled barycentric coordinates: the edge functions of the edges opposite each vertex.
+    let mut u = cx * by - cy * bx;
+    let mut v = ax * cy - ay * cx;
+    let mut w = bx * ay - by * ax;
+
+    // An edge function that rounded to zero may really be slightly positive or negative:
+    // products of f32 are exact in f64, so one rounding there gives the correct sign.
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        let (a2, b2, c2) = (
+            DVec2::new(ax as f64, ay as f64),
+            DVec2::new(bx as f64, by as f64),
+            DVec2::new(cx as f64, cy as f64),
+        );
+        u = (c2.x * b2.y - c2.y * b2.x) as f32;
+        v = (a2.x * c2.y - a2.y * c2.x) as f32;
+        w = (b2.x * a2.y - b2.y * a2.x) as f32;
+    }
+
+    // Both-faced edge test: all three on the same side (zero counts as either side).
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+
+    // Scaled hit distance, compared against the range before the division (the paper's
+    // test, with the determinant's sign folded in). Written so that NaN fails.
+    let az = sz * a[kz];
+    let bz = sz * b[kz];
+    let cz = sz * c[kz];
+    let t_scaled = u * az + v * bz + w * cz;
+    let (t_scaled_abs, det_abs) = if det < 0.0 {
+        (-t_scaled, -det)
+    } else {
+        (t_scaled, det)
+    };
+    if !(t_scaled_abs > 0.0 && t_scaled_abs <= t_max * det_abs) {
+        return None;
+    }
+
+    let inv_det = 1.0 / det;
+    let t = t_scaled * inv_det;
+    if !(t < t_max) {
+        return None;
+    }
+
+    // Conservative t > 0 (pbrt-v4, "Ensure that computed triangle t is conservatively
+    // greater than zero"): the error bound on t from every rounding above.
+    let max_zt = az.abs().max(bz.abs()).max(cz.abs());
+    let max_xt = ax.abs().max(bx.abs()).max(cx.abs());
+    let max_yt = ay.abs().max(by.abs()).max(cy.abs());
+    let delta_z = gamma(3) * max_zt;
+    let delta_x = gamma(5) * (max_xt + max_zt);
+    let delta_y = gamma(5) * (max_yt + max_zt);
+    let delta_e = 2.0 * (gamma(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+    let max_e = u.abs().max(v.abs()).max(w.abs());
+    let delta_t =
+        3.0 * (gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
+    if !(t > delta_t) {
+        return None;
+    }
+
+    Some((t, v * inv_det, w * inv_det))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hit(o: Vec3, d: Vec3, tri: [Vec3; 3], t_max: f32) -> Option<(f32, f32, f32)> {
+        intersect_triangle(
+            &RayPrecomputed::new(&Ray::new(o, d)),
+            tri[0],
+            tri[1],
+            tri[2],
+            t_max,
+        )
+    }
+
+    const TRI: [Vec3; 3] = [
+        Vec3::new(0.0, 0.0, 0.0),
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+    ];
+
+    #[test]
+    fn hits_inside_with_barycentrics_of_v1_and_v2() {
+        let (t, b1, b2) = hit(
+            Vec3::new(0.25, 0.5, 2.0),
+            Vec3::new(0.0, 0.0, -1.0),
+            TRI,
+            f32::INFINITY,
+        )
+        .unwrap();
+        assert!((t - 2.0).abs() < 1e-6);
+        assert!((b1 - 0.25).abs() < 1e-6 && (b2 - 0.5).abs() < 1e-6);
+        // A non-unit direction scales t, not the point.
+        let (t, ..) = hit(
+            Vec3::new(0.25, 0.5, 2.0),
+            Vec3::new(0.0, 0.0, -4.0),
+            TRI,
+            f32::INFINITY,
+        )
+        .unwrap();
+        assert!((t - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn both_faces_and_both_windings_hit() {
+        let o = Vec3::new(0.2, 0.2, 1.0);
+        let flipped = [TRI[0], TRI[2], TRI[1]];
+        for tri in [TRI, flipped] {
+            assert!(hit(o, -Vec3::Z, tri, 10.0).is_some());
+            assert!(hit(o * Vec3::new(1.0, 1.0, -1.0), Vec3::Z, tri, 10.0).is_some());
+        }
+        // Barycentrics follow the vertex order, whatever the winding.
+        let (_, b1, b2) = hit(Vec3::new(0.1, 0.3, 1.0), -Vec3::Z, flipped, 10.0).unwrap();
+        assert!((b1 - 0.3).abs() < 1e-6 && (b2 - 0.1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn misses_outside_behind_and_beyond_t_max() {
+        assert!(hit(Vec3::new(0.8, 0.8, 1.0), -Vec3::Z, TRI, 10.0).is_none());
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), Vec3::Z, TRI, 10.0).is_none());
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, TRI, 1.0).is_none());
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, TRI, 1.0001).is_some());
+    }
+
+    #[test]
+    fn degenerate_cases_never_hit() {
+        // In the triangle's plane.
+        assert!(hit(Vec3::new(-1.0, 0.2, 0.0), Vec3::X, TRI, 10.0).is_none());
+        // Zero-area triangles: a point and a segment.
+        let p = Vec3::splat(0.5);
+        assert!(hit(Vec3::new(0.5, 0.5, 2.0), -Vec3::Z, [p, p, p], 10.0).is_none());
+        let seg = [
+            Vec3::ZERO,
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.5, 0.5, 0.0),
+        ];
+        assert!(hit(Vec3::new(0.5, 0.5, 2.0), -Vec3::Z, seg, 10.0).is_none());
+        // Zero or NaN directions, NaN vertices, NaN t_max.
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), Vec3::ZERO, TRI, 10.0).is_none());
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), Vec3::NAN, TRI, 10.0).is_none());
+        let nan_tri = [TRI[0], Vec3::new(f32::NAN, 0.0, 0.0), TRI[2]];
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, nan_tri, 10.0).is_none());
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, TRI, f32::NAN).is_none());
+    }
+
+    #[test]
+    fn ray_through_a_vertex_hits_with_that_vertex_weight() {
+        let (t, b1, b2) = hit(Vec3::new(1.0, 0.0, 3.0), -Vec3::Z, TRI, 10.0).unwrap();
+        assert_eq!((t, b1, b2), (3.0, 1.0, 0.0));
+    }
+
+    #[test]
+    fn double_precision_fallback_decides_the_edge() {
+        // Ray along +Z from the origin, so the 2D coordinates are the vertices' x and y.
+        // With e = 2^-23, edge (v1, v2) gives Cx·By - Cy·Bx = -(1+e)² + (1+2e) = -e², which
+        // rounds to exactly 0 in f32: without the f64 fallback the origin would count as on
+        // the edge and both triangles below would be hit.
+        let e = f32::EPSILON;
+        let b = Vec3::new(-1.0, -(1.0 + e), 1.0);
+        let c = Vec3::new(1.0 + e, 1.0 + 2.0 * e, 1.0);
+        assert_eq!(c.x * b.y - c.y * b.x, 0.0);
+        let inside = [Vec3::new(-1.0, 1.0, 1.0), b, c];
+        let outside = [Vec3::new(1.0, -1.0, 1.0), b, c];
+        assert!(hit(Vec3::ZERO, Vec3::Z, inside, 10.0).is_some());
+        assert!(hit(Vec3::ZERO, Vec3::Z, outside, 10.0).is_none());
+    }
+
+    /// A small xorshift generator, so that the test needs no dependency.
+    fn rng(state: &mut u64) -> f32 {
+        *state ^= *state << 13;
+        *state ^= *state >> 7;
+        *state ^= *state << 17;
+        (*state >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn rays_through_a_shared_vertex_or_edge_hit_a_fan_of_triangles() {
+        // A closed fan of 7 triangles around a centre vertex, slightly non-planar.
+        let mut s = 0x9e3779b97f4a7c15u64;
+        let centre = Vec3::new(0.1, -0.2, 0.05);
+        let rim: Vec<Vec3> = (0..7)
+            .map(|i| {
+                let a = i as f32 * std::f32::consts::TAU / 7.0;
+                Vec3::new(a.cos(), a.sin(), 0.3 * (rng(&mut s) - 0.5))
+            })
+            .collect();
+        let tris: Vec<[Vec3; 3]> = (0..7).map(|i| [centre, rim[i], rim[(i + 1) % 7]]).collect();
+        for _ in 0..20_000 {
+            let o = Vec3::new(rng(&mut s) - 0.5, rng(&mut s) - 0.5, 1.0 + rng(&mut s)) * 4.0;
+            let i = (rng(&mut s) * 7.0) as usize % 7;
+            let f = rng(&mut s);
+            // Exactly at the centre, or at a point rounded onto a spoke edge.
+            let target = if f < 0.2 {
+                centre
+            } else {
+                centre + (rim[i] - centre) * f
+            };
+            let pre = RayPrecomputed::new(&Ray::new(o, target - o));
+            let hits = tris
+                .iter()
+                .filter(|t| intersect_triangle(&pre, t[0], t[1], t[2], f32::INFINITY).is_some())
+                .count();
+            assert!(
+                hits >= 1,
+                "ray from {o} to {target} slipped through the fan"
+            );
+        }
+    }
+}

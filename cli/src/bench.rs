@@ -1,0 +1,106 @@
+//! `tessera bench`: what the tracer costs and what each sample count buys, on the
+//! built-in demo scene (or any scene).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use clap::Args;
+use glam::Vec2;
+use rayon::prelude::*;
+
+use tracer::film::{Layers, SampleRange, TileRect};
+use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
+
+use crate::args::parse_size;
+use crate::render::load_scene;
+
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Scene to measure; the built-in demo scene when left out.
+    scene: Option<PathBuf>,
+    /// Image size for the measurements.
+    #[arg(long, default_value = "128x128", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Samples per pixel of the reference image that errors are measured against.
+    #[arg(long, default_value_t = 4096)]
+    reference_spp: u32,
+    /// Smaller reference and sweep, for a first look in seconds.
+    #[arg(long)]
+    quick: bool,
+}
+
+/// Root-mean-square error of the beauty RGB of `a` against `reference`.
+pub fn rmse(a: &Layers, reference: &Layers) -> f64 {
+    let sum: f64 = a
+        .beauty
+        .iter()
+        .zip(&reference.beauty)
+        .map(|(x, r)| {
+            let d = (x.truncate() - r.truncate()).as_dvec3();
+            d.length_squared() / 3.0
+        })
+        .sum();
+    (sum / a.beauty.len() as f64).sqrt()
+}
+
+/// Closest-hit rays per second for the camera rays of one pass over the image.
+fn camera_rays_per_second(frame: &PreparedFrame) -> f64 {
+    let (w, h) = (frame.width, frame.height);
+    let rays: Vec<_> = (0..w * h)
+        .map(|i| {
+            let film = Vec2::new(((i % w) as f32 + 0.5) / w as f32, ((i / w) as f32 + 0.5) / h as f32);
+            frame.camera.generate_ray(film)
+        })
+        .collect();
+    let passes = 8;
+    let start = Instant::now();
+    let hits: usize = (0..passes)
+        .map(|_| rays.par_iter().filter(|r| frame.intersect(r, f32::INFINITY).is_some()).count())
+        .sum();
+    std::hint::black_box(hits);
+    (rays.len() * passes) as f64 / start.elapsed().as_secs_f64()
+}
+
+pub fn run(args: BenchArgs) -> anyhow::Result<()> {
+    let (width, height) = if args.quick { (64, 64) } else { args.size };
+    let reference_spp = if args.quick { args.reference_spp.min(512) } else { args.reference_spp };
+    let scene = Arc::new(load_scene(args.scene.as_ref())?);
+    let frame = prepare_frame(scene, &FrameOptions { width, height, ..Default::default() })?;
+    let settings = RenderSettings::default();
+    let rect = TileRect::new(0, 0, width, height);
+    let threads = rayon::current_num_threads();
+    println!("tessera bench: {width}x{height}, max depth {}, {threads} threads", settings.max_depth);
+
+    println!("camera rays (closest hit): {:.2} M rays/s", camera_rays_per_second(&frame) / 1e6);
+
+    // The sweep uses another seed than the reference, so that its samples are not a prefix
+    // of the reference's, which would flatter the error.
+    let render = |spp: u32, seed: u32| {
+        let settings = RenderSettings { seed, ..settings };
+        let start = Instant::now();
+        let tile = render_region(&frame, &settings, rect, SampleRange::new(0, spp), 32, &|_| {});
+        (tile, start.elapsed().as_secs_f64())
+    };
+    let (tile, secs) = render(16, 1);
+    let paths = rect.area() as f64 * 16.0;
+    println!(
+        "full paths: {:.3} M paths/s, {:.2} M rays/s (all ray kinds, 16 spp)",
+        paths / secs / 1e6,
+        tile.rays as f64 / secs / 1e6
+    );
+
+    println!("reference: {reference_spp} spp ...");
+    let (reference, ref_secs) = render(reference_spp, 0);
+    let reference = reference.resolve();
+    println!("reference took {ref_secs:.1} s");
+    println!("| spp | time (s) | RMSE | RMSE x sqrt(time) |");
+    println!("|---:|---:|---:|---:|");
+    let sweep: &[u32] = if args.quick { &[1, 4, 16, 64] } else { &[1, 4, 16, 64, 256] };
+    for &spp in sweep {
+        let (tile, secs) = render(spp, 1);
+        let e = rmse(&tile.resolve(), &reference);
+        println!("| {spp} | {secs:.3} | {e:.5} | {:.5} |", e * secs.sqrt());
+    }
+    Ok(())
+}

@@ -1,0 +1,71 @@
+//! The real `tessera render` binary, as a user runs it.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use tracer::film::TileRect;
+use tracer::output::read_exr;
+
+fn tessera(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tessera"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("tessera runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn renders_the_demo_to_a_multilayer_exr_and_a_preview() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = tessera(&["render", "--size", "32x24", "--spp", "4", "--out", "demo.exr"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(summary.contains("M rays/s") && summary.contains("dropped"), "{summary}");
+
+    let img = read_exr(&dir.path().join("demo.exr")).unwrap();
+    assert_eq!(img.frame_size, (32, 24));
+    assert_eq!(img.layers.rect, TileRect::new(0, 0, 32, 24));
+    assert!(img.layers.beauty.iter().all(|b| b.is_finite() && b.w == 1.0));
+    assert!(img.layers.normal.iter().all(|n| (n.length() - 1.0).abs() < 1e-3));
+    assert_eq!(img.attribute("tessera/spp"), Some("4"));
+    let png = image::open(dir.path().join("demo.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (32, 24));
+}
+
+#[test]
+fn a_region_keeps_the_full_frame_as_display_window_and_matches_the_full_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = ["render", "--size", "32x24", "--spp", "2", "--seed", "7"];
+    let full = tessera(&[&args[..], &["--out", "full.exr"]].concat(), dir.path());
+    assert!(full.status.success(), "{}", stderr(&full));
+    let part = tessera(&[&args[..], &["--region", "5,6,10,8", "--out", "part.exr"]].concat(), dir.path());
+    assert!(part.status.success(), "{}", stderr(&part));
+
+    let full = read_exr(&dir.path().join("full.exr")).unwrap();
+    let part = read_exr(&dir.path().join("part.exr")).unwrap();
+    assert_eq!(part.frame_size, (32, 24));
+    let region = TileRect::new(5, 6, 10, 8);
+    assert_eq!(part.layers.rect, region);
+    assert!(part.layers == full.layers.crop(region), "region pixels differ from the full render");
+}
+
+#[test]
+fn bad_arguments_are_refused_with_a_clear_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&[&str], &str); 5] = [
+        (&["render", "--size", "0x10"], "each side must be"),
+        (&["render", "--spp", "0"], "--spp 0"),
+        (&["render", "--region", "30,0,10,10", "--size", "32x24"], "does not fit"),
+        (&["render", "missing.gltf"], "missing.gltf"),
+        (&["render", "--camera", "7"], "camera 7"),
+    ];
+    for (args, message) in cases {
+        let o = tessera(args, dir.path());
+        assert!(!o.status.success(), "{args:?} should fail");
+        assert!(stderr(&o).contains(message), "{args:?}: {}", stderr(&o));
+    }
+}

@@ -1,0 +1,202 @@
+//! The flat BVH node, the robust ray/box slab test and the ordered stack traversal shared
+//! by the mesh and instance levels.
+
+use glam::{BVec3, Vec3};
+
+use crate::geometry::Ray;
+use crate::triangle::gamma;
+
+/// One BVH node in 32 bytes, so that two siblings fill one 64-byte cache line.
+///
+/// An interior node has `count == 0` and its children at `start` and `start + 1`; a leaf
+/// holds primitives `start .. start + count` of its BVH's primitive array.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
+pub(super) struct Node {
+    pub min: Vec3,
+    pub start: u32,
+    pub max: Vec3,
+    pub count: u32,
+}
+
+/// The traversal stack depth. The builder switches to median splits below depth
+/// [`super::build::SAH_MAX_DEPTH`] (32), and a median split halves the primitive count, so
+/// no path is longer than 32 + 32 nodes for up to 2^32 primitives; at most one sibling per
+/// level waits on the stack.
+pub static VISITS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+pub static LEAVES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+pub static TRIS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+pub(super) const STACK_SIZE: usize = 64;
+
+/// The far slab distance is scaled up by 1 + 2·gamma(3) to cover the rounding of both slab
+/// distances (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013), so a ray through a box's
+/// face or edge is never culled, and triangles lying in that face stay watertight.
+const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
+
+/// A ray prepared for slab tests.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct BoxRay {
+    origin: Vec3,
+    /// 1/dir with IEEE infinities for zero components (of the zero's sign).
+    inv_dir: Vec3,
+    /// Whether each direction component is negative, so the near plane is the box's max.
+    neg: BVec3,
+}
+
+impl BoxRay {
+    pub fn new(ray: &Ray) -> Self {
+        let inv_dir = ray.dir.recip();
+        Self {
+            origin: ray.origin,
+            inv_dir,
+            neg: inv_dir.cmplt(Vec3::ZERO),
+        }
+    }
+
+    /// Distance at which the ray enters `node`'s box, if it does so within `[0, t_max]`.
+    #[inline(always)]
+    pub fn entry(&self, node: &Node, t_max: f32) -> Option<f32> {
+        let lo = (node.min - self.origin) * self.inv_dir;
+        let hi = (node.max - self.origin) * self.inv_dir;
+        let near = Vec3::select(self.neg, hi, lo);
+        let far = Vec3::select(self.neg, lo, hi);
+        // 0 · inf = NaN arises when the ray lies in a slab's plane; f32::max and f32::min
+        // return the other operand for NaN, so that axis simply does not constrain the
+        // interval (Ize 2013's max/min formulation). glam's vector min/max do not promise
+        // this NaN behaviour, hence the scalar calls.
+        let t0 = near.x.max(near.y).max(near.z).max(0.0);
+        let t1 = (far.x.min(far.y).min(far.z) * FAR_SCALE).min(t_max);
+        (t0 <= t1).then_some(t0)
+    }
+}
+
+/// Whether the ray's numbers allow any hit at all; a ray with a zero, infinite or NaN
+/// direction, a non-finite origin or a non-positive `t_max` hits nothing.
+pub(super) fn ray_is_valid(ray: &Ray, t_max: f32) -> bool {
+    ray.origin.is_finite() && ray.dir.is_finite() && ray.dir != Vec3::ZERO && t_max > 0.0
+}
+
+/// Visits the leaves whose boxes the ray enters before `t_max`, nearest child first.
+///
+/// `leaf(start, count, t_max)` handles one leaf and may lower `t_max` (a closer hit); it
+/// returns true to stop the traversal (an any-hit query that found one).
+#[inline(always)]
+pub(super) fn traverse(
+    nodes: &[Node],
+    ray: &BoxRay,
+    t_max: &mut f32,
+    mut leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+) {
+    let Some(root) = nodes.first() else { return };
+    if ray.entry(root, *t_max).is_none() {
+        return;
+    }
+    let mut stack = [(0u32, 0.0f32); STACK_SIZE];
+    let mut sp = 0;
+    let mut node = root;
+    loop {
+        VISITS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if node.count > 0 {
+            LEAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            TRIS.fetch_add(node.count as u64, std::sync::atomic::Ordering::Relaxed);
+            if leaf(node.start, node.count, t_max) {
+                return;
+            }
+        } else {
+            let l = node.start as usize;
+            let (left, right) = (&nodes[l], &nodes[l + 1]);
+            match (ray.entry(left, *t_max), ray.entry(right, *t_max)) {
+                (Some(dl), Some(dr)) => {
+                    // Visit the nearer child now, the farther one later (if still worth it).
+                    let (near, far, d_far) = if dl <= dr {
+                        (left, l + 1, dr)
+                    } else {
+                        (right, l, dl)
+                    };
+                    stack[sp] = (far as u32, d_far);
+                    sp += 1;
+                    node = near;
+                    continue;
+                }
+                (Some(_), None) => {
+                    node = left;
+                    continue;
+                }
+                (None, Some(_)) => {
+                    node = right;
+                    continue;
+                }
+                (None, None) => {}
+            }
+        }
+        // Pop the next deferred subtree that a closer hit has not ruled out.
+        loop {
+            if sp == 0 {
+                return;
+            }
+            sp -= 1;
+            let (idx, d) = stack[sp];
+            if d <= *t_max {
+                node = &nodes[idx as usize];
+                break;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn node(min: Vec3, max: Vec3) -> Node {
+        Node {
+            min,
+            start: 0,
+            max,
+            count: 1,
+        }
+    }
+
+    #[test]
+    fn node_is_32_bytes() {
+        assert_eq!(std::mem::size_of::<Node>(), 32);
+        assert_eq!(std::mem::align_of::<Node>(), 32);
+    }
+
+    #[test]
+    fn slab_test_enters_and_misses() {
+        let n = node(Vec3::splat(1.0), Vec3::splat(2.0));
+        let r = BoxRay::new(&Ray::new(Vec3::ZERO, Vec3::ONE));
+        assert_eq!(r.entry(&n, f32::INFINITY), Some(1.0));
+        assert_eq!(r.entry(&n, 0.5), None);
+        let behind = BoxRay::new(&Ray::new(Vec3::splat(3.0), Vec3::ONE));
+        assert_eq!(behind.entry(&n, f32::INFINITY), None);
+        // Origin inside: entry at 0.
+        let inside = BoxRay::new(&Ray::new(Vec3::splat(1.5), -Vec3::ONE));
+        assert_eq!(inside.entry(&n, f32::INFINITY), Some(0.0));
+    }
+
+    #[test]
+    fn axis_parallel_rays_in_a_face_plane_are_not_culled() {
+        // The ray runs inside the plane x = 1 of the box's face (0 · inf = NaN on x).
+        let n = node(Vec3::new(1.0, 0.0, 0.0), Vec3::new(2.0, 1.0, 1.0));
+        for (o, d) in [
+            (Vec3::new(1.0, 0.5, -1.0), Vec3::Z),
+            (Vec3::new(2.0, 0.5, -1.0), Vec3::Z),
+            (Vec3::new(1.0, 0.5, 3.0), Vec3::new(-0.0, 0.0, -1.0)),
+        ] {
+            assert!(
+                BoxRay::new(&Ray::new(o, d))
+                    .entry(&n, f32::INFINITY)
+                    .is_some(),
+                "{o} {d}"
+            );
+        }
+        // A flat box (a face of a cube) hit head on, and a ray beside it.
+        let flat = node(Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 1.0, 1.0));
+        let r = BoxRay::new(&Ray::new(Vec3::new(1.0, 1.0, 0.0), Vec3::Z));
+        assert_eq!(r.entry(&flat, f32::INFINITY), Some(1.0));
+        let r = BoxRay::new(&Ray::new(Vec3::new(1.5, 1.0, 0.0), Vec3::Z));
+        assert_eq!(r.entry(&flat, f32::INFINITY), None);
+    }
+}

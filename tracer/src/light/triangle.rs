@@ -1,0 +1,355 @@
+//! Emissive triangles: sampling a point on one as seen from a reference point, and the
+//! solid-angle density of that choice.
+//!
+//! Seen from a point where the triangle covers a moderate solid angle Ω, directions are
+//! drawn uniformly inside the spherical triangle (Arvo 1995, in the form of pbrt-v4's
+//! `SampleSphericalTriangle`), with density exactly 1/Ω. Where Ω is tiny (single precision
+//! cannot resolve the spherical construction) or nearly a hemisphere (the construction
+//! degenerates), the point is drawn uniformly by area instead, with density
+//! d² / (|cos θ_light| · area). Both [`TriangleLight::sample`] and [`TriangleLight::pdf`]
+//! decide between the two from the same Ω computed the same way, so they always agree.
+
+use glam::{Vec2, Vec3};
+
+use super::EmissiveTriangle;
+
+/// Below this solid angle (sr), sample by area (pbrt-v4's `MinSphericalSampleArea`).
+const MIN_SPHERICAL_SOLID_ANGLE: f32 = 3e-4;
+/// Above this solid angle (sr), sample by area (pbrt-v4's `MaxSphericalSampleArea`; a
+/// hemisphere is 2π ≈ 6.283).
+const MAX_SPHERICAL_SOLID_ANGLE: f32 = 6.22;
+
+/// An emissive triangle ready for sampling: its vertices, unit geometric normal
+/// (cross(p1 − p0, p2 − p0), not flipped) and area.
+#[derive(Clone, Debug)]
+pub(crate) struct TriangleLight {
+    pub(crate) p: [Vec3; 3],
+    pub(crate) normal: Vec3,
+    pub(crate) area: f32,
+    pub(crate) instance: u32,
+    pub(crate) triangle: u32,
+}
+
+/// A point sampled on a triangle light.
+pub(crate) struct TriangleSample {
+    pub(crate) wi: Vec3,
+    pub(crate) distance: f32,
+    /// Solid-angle density (not including the light's selection probability).
+    pub(crate) pdf: f32,
+    pub(crate) b1: f32,
+    pub(crate) b2: f32,
+}
+
+impl TriangleLight {
+    /// Prepares `t`, or `None` when it cannot emit: zero or non-finite area, vertices not
+    /// finite, or emission without a positive finite component.
+    pub(crate) fn new(t: &EmissiveTriangle) -> Option<Self> {
+        let [p0, p1, p2] = t.p;
+        if !(p0.is_finite() && p1.is_finite() && p2.is_finite()) {
+            return None;
+        }
+        let c = (p1 - p0).cross(p2 - p0);
+        let len = c.length();
+        let area = 0.5 * len;
+        let emits = t.emission.is_finite() && t.emission.max_element() > 0.0;
+        (area > 0.0 && area.is_finite() && emits).then(|| Self {
+            p: t.p,
+            normal: c / len,
+            area,
+            instance: t.instance,
+            triangle: t.triangle,
+        })
+    }
+
+    /// Solid angle of the triangle seen from `p` (Van Oosterom & Strackee 1983).
+    fn solid_angle(&self, p: Vec3) -> f32 {
+        let a = (self.p[0] - p).normalize_or_zero();
+        let b = (self.p[1] - p).normalize_or_zero();
+        let c = (self.p[2] - p).normalize_or_zero();
+        let num = a.dot(b.cross(c)).abs();
+        let den = 1.0 + a.dot(b) + a.dot(c) + b.dot(c);
+        let omega = 2.0 * num.atan2(den);
+        if omega.is_finite() {
+            omega
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether, seen from `p` with solid angle `omega`, directions are sampled on the
+    /// sphere (else by area).
+    fn spherical(omega: f32) -> bool {
+        (MIN_SPHERICAL_SOLID_ANGLE..=MAX_SPHERICAL_SOLID_ANGLE).contains(&omega)
+    }
+
+    /// Area-sampling density converted to solid angle for the point `q` seen from `p`;
+    /// 0 where it is undefined (grazing, or `p` on the light).
+    fn area_pdf_to_solid_angle(&self, p: Vec3, q: Vec3) -> f32 {
+        let d = q - p;
+        let dist2 = d.length_squared();
+        if dist2 <= 0.0 || !dist2.is_finite() {
+            return 0.0;
+        }
+        let cos = self.normal.dot(d).abs() / dist2.sqrt();
+        let pdf = dist2 / (cos * self.area);
+        if pdf.is_finite() && cos > 0.0 {
+            pdf
+        } else {
+            0.0
+        }
+    }
+
+    /// Samples a point of the triangle as seen from `p`; `None` when no direction can be
+    /// sampled (`p` in the triangle's plane, or a numerically degenerate configuration).
+    pub(crate) fn sample(&self, p: Vec3, u: Vec2) -> Option<TriangleSample> {
+        let omega = self.solid_angle(p);
+        let (b1, b2, pdf) = if Self::spherical(omega) {
+            let (b1, b2) = self.sample_spherical(p, u)?;
+            (b1, b2, 1.0 / omega)
+        } else {
+            let (b1, b2) = sample_uniform_triangle(u);
+            let q = self.point(b1, b2);
+            (b1, b2, self.area_pdf_to_solid_angle(p, q))
+        };
+        let q = self.point(b1, b2);
+        let d = q - p;
+        let distance = d.length();
+        if !(pdf > 0.0 && pdf.is_finite() && distance > 0.0 && distance.is_finite()) {
+            return None;
+        }
+        Some(TriangleSample {
+            wi: d / distance,
+            distance,
+            pdf,
+            b1,
+            b2,
+        })
+    }
+
+    /// Solid-angle density with which [`Self::sample`] from `p` picks the point `q` of
+    /// this triangle.
+    pub(crate) fn pdf(&self, p: Vec3, q: Vec3) -> f32 {
+        let omega = self.solid_angle(p);
+        if Self::spherical(omega) {
+            1.0 / omega
+        } else {
+            self.area_pdf_to_solid_angle(p, q)
+        }
+    }
+
+    fn point(&self, b1: f32, b2: f32) -> Vec3 {
+        crate::geometry::barycentric(self.p[0], self.p[1], self.p[2], b1, b2)
+    }
+
+    /// Arvo's uniform spherical-triangle sampling; returns the barycentrics (b1, b2) of the
+    /// point the sampled direction hits.
+    fn sample_spherical(&self, p: Vec3, u: Vec2) -> Option<(f32, f32)> {
+        let a = (self.p[0] - p).normalize_or_zero();
+        let b = (self.p[1] - p).normalize_or_zero();
+        let c = (self.p[2] - p).normalize_or_zero();
+        // Normals of the great-circle arcs.
+        let n_ab = a.cross(b).try_normalize()?;
+        let n_bc = b.cross(c).try_normalize()?;
+        let n_ca = c.cross(a).try_normalize()?;
+        // Angles at the spherical triangle's vertices.
+        let alpha = angle_between(n_ab, -n_ca);
+        let beta = angle_between(n_bc, -n_ab);
+        let gamma = angle_between(n_ca, -n_bc);
+
+        // Uniformly choose the area A' of the sub-triangle (a, b, c').
+        let a_pi = alpha + beta + gamma;
+        let ap_pi = std::f32::consts::PI + u.x * (a_pi - std::f32::consts::PI);
+        let (sin_ap, cos_ap) = ap_pi.sin_cos();
+        let (sin_alpha, cos_alpha) = alpha.sin_cos();
+        let sin_phi = sin_ap * cos_alpha - cos_ap * sin_alpha;
+        let cos_phi = cos_ap * cos_alpha + sin_ap * sin_alpha;
+        let k1 = cos_phi + cos_alpha;
+        let k2 = sin_phi - sin_alpha * a.dot(b);
+        let cos_bp = (k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha)
+            / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha);
+        if !cos_bp.is_finite() {
+            return None;
+        }
+        let cos_bp = cos_bp.clamp(-1.0, 1.0);
+        // c' on the arc from a to c.
+        let sin_bp = (1.0 - cos_bp * cos_bp).max(0.0).sqrt();
+        let cp = cos_bp * a + sin_bp * gram_schmidt(c, a).try_normalize()?;
+        // Direction on the arc from b to c', uniform in the sub-triangle's area.
+        let cos_theta = 1.0 - u.y * (1.0 - cp.dot(b));
+        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+        let w = cos_theta * b + sin_theta * gram_schmidt(cp, b).try_normalize()?;
+
+        // Barycentrics where the ray p + t·w meets the triangle's plane (Möller–Trumbore).
+        let e1 = self.p[1] - self.p[0];
+        let e2 = self.p[2] - self.p[0];
+        let s1 = w.cross(e2);
+        let divisor = s1.dot(e1);
+        if divisor == 0.0 || !divisor.is_finite() {
+            return None;
+        }
+        let s = p - self.p[0];
+        let mut b1 = (s.dot(s1) / divisor).clamp(0.0, 1.0);
+        let mut b2 = (w.dot(s.cross(e1)) / divisor).clamp(0.0, 1.0);
+        if b1 + b2 > 1.0 {
+            let sum = b1 + b2;
+            b1 /= sum;
+            b2 /= sum;
+        }
+        (b1.is_finite() && b2.is_finite()).then_some((b1, b2))
+    }
+}
+
+/// Uniform barycentrics (b1, b2) over a triangle (pbrt-v4's `SampleUniformTriangle`, which
+/// maps the square to the triangle without folding, keeping strata intact).
+fn sample_uniform_triangle(u: Vec2) -> (f32, f32) {
+    let (b0, b1) = if u.x < u.y {
+        let b0 = u.x / 2.0;
+        (b0, u.y - b0)
+    } else {
+        let b1 = u.y / 2.0;
+        (u.x - b1, b1)
+    };
+    (b1, (1.0 - b0 - b1).max(0.0))
+}
+
+/// The component of `v` orthogonal to the unit vector `w`.
+fn gram_schmidt(v: Vec3, w: Vec3) -> Vec3 {
+    v - v.dot(w) * w
+}
+
+/// Angle between two unit vectors, accurate also for nearly (anti)parallel ones.
+fn angle_between(v1: Vec3, v2: Vec3) -> f32 {
+    if v1.dot(v2) < 0.0 {
+        std::f32::consts::PI - 2.0 * ((v1 + v2).length() / 2.0).min(1.0).asin()
+    } else {
+        2.0 * ((v2 - v1).length() / 2.0).min(1.0).asin()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Rng(u64);
+    impl Rng {
+        fn next_f32(&mut self) -> f32 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            (z >> 40) as f32 / (1u64 << 24) as f32
+        }
+        fn vec2(&mut self) -> Vec2 {
+            Vec2::new(self.next_f32(), self.next_f32())
+        }
+    }
+
+    fn light(p: [Vec3; 3]) -> TriangleLight {
+        TriangleLight::new(&EmissiveTriangle {
+            p,
+            emission: Vec3::ONE,
+            double_sided: false,
+            instance: 0,
+            triangle: 0,
+        })
+        .unwrap()
+    }
+
+    /// ∫ h(ω) dω over the triangle by a fine midpoint rule in area (independent of the
+    /// sampler): ∫ h(ω(x)) |cos θ_x| / d² dA.
+    fn area_quadrature(t: &TriangleLight, p: Vec3, h: impl Fn(Vec3) -> f64) -> f64 {
+        let n = 600;
+        let mut sum = 0.0f64;
+        for i in 0..n {
+            for j in 0..n - i {
+                // Two sub-triangles per cell; use the upright one's centroid and, where it
+                // exists, the inverted one's.
+                let c = [(i as f64 + 1.0 / 3.0, j as f64 + 1.0 / 3.0)];
+                let inv = (i + j + 1 < n).then_some((i as f64 + 2.0 / 3.0, j as f64 + 2.0 / 3.0));
+                for (x, y) in c.into_iter().chain(inv) {
+                    let (b1, b2) = ((x / n as f64) as f32, (y / n as f64) as f32);
+                    let q = t.point(b1, b2);
+                    let d = q - p;
+                    let d2 = d.length_squared() as f64;
+                    let w = d.normalize();
+                    let cos = t.normal.dot(w).abs() as f64;
+                    sum += h(w) * cos / d2 * (t.area as f64 / (n * n) as f64);
+                }
+            }
+        }
+        sum
+    }
+
+    #[test]
+    fn spherical_samples_are_uniform_in_solid_angle() {
+        // A triangle covering about 0.8 sr: the spherical branch.
+        let t = light([
+            Vec3::new(-1.0, -0.5, -1.0),
+            Vec3::new(1.0, -0.7, -1.2),
+            Vec3::new(0.2, 1.0, -0.9),
+        ]);
+        let p = Vec3::new(0.1, 0.0, 0.3);
+        let omega = t.solid_angle(p);
+        assert!(TriangleLight::spherical(omega), "{omega}");
+        let h = |w: Vec3| ((w.x + 2.0) as f64).powi(3) * ((w.y + 1.5) as f64);
+        let reference = area_quadrature(&t, p, h);
+        let omega_q = area_quadrature(&t, p, |_| 1.0);
+        assert!(
+            (omega_q - omega as f64).abs() < 1e-3 * omega as f64,
+            "{omega_q} vs {omega}"
+        );
+        let mut rng = Rng(11);
+        let n = 400_000;
+        let mut est = 0.0f64;
+        for _ in 0..n {
+            let s = t.sample(p, rng.vec2()).unwrap();
+            assert!((s.pdf - t.pdf(p, p + s.wi * s.distance)).abs() <= 1e-6 * s.pdf);
+            est += h(s.wi) / s.pdf as f64;
+        }
+        est /= n as f64;
+        assert!(
+            (est - reference).abs() < 0.01 * reference,
+            "{est} vs {reference}"
+        );
+    }
+
+    #[test]
+    fn area_branch_for_tiny_and_huge_solid_angles() {
+        let t = light([
+            Vec3::new(0.0, 0.0, -100.0),
+            Vec3::new(0.1, 0.0, -100.0),
+            Vec3::new(0.0, 0.1, -100.0),
+        ]);
+        assert!(!TriangleLight::spherical(t.solid_angle(Vec3::ZERO)));
+        let s = t.sample(Vec3::ZERO, Vec2::new(0.3, 0.6)).unwrap();
+        let expected = 100.0f32.powi(2) / (0.005 * s.wi.z.abs());
+        assert!(
+            (s.pdf - expected).abs() < 1e-2 * expected,
+            "{} vs {expected}",
+            s.pdf
+        );
+        let big = light([
+            Vec3::new(-1e3, -1e3, -1e-3),
+            Vec3::new(1e3, -1e3, -1e-3),
+            Vec3::new(0.0, 1e3, -1e-3),
+        ]);
+        assert!(big.solid_angle(Vec3::ZERO) > MAX_SPHERICAL_SOLID_ANGLE);
+        let s = big.sample(Vec3::ZERO, Vec2::new(0.5, 0.5)).unwrap();
+        assert!(s.pdf.is_finite() && s.pdf > 0.0);
+    }
+
+    #[test]
+    fn reference_point_on_the_light_gives_no_sample_and_zero_pdf() {
+        let t = light([Vec3::ZERO, Vec3::X, Vec3::Y]);
+        let p = Vec3::new(0.25, 0.25, 0.0);
+        for u in [Vec2::ZERO, Vec2::new(0.3, 0.9), Vec2::splat(0.999)] {
+            assert!(t.sample(p, u).is_none());
+        }
+        assert_eq!(t.pdf(p, Vec3::new(0.5, 0.1, 0.0)), 0.0);
+        // A point in the plane but outside the triangle as well.
+        assert!(t
+            .sample(Vec3::new(3.0, 3.0, 0.0), Vec2::splat(0.5))
+            .is_none());
+    }
+}

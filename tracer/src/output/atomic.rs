@@ -1,0 +1,94 @@
+//! Atomic file writes: a reader of `path` sees the old file or the new one, never half of
+//! one, and after a crash the new file is either complete on disk or absent.
+
+use std::fs::{self, File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use super::OutputError;
+
+/// Writes `bytes` to `path`: into a temp file in the same folder (a rename is atomic only
+/// within one file system), fsync, rename over `path`, then fsync the folder so that the
+/// rename itself is durable. The temp file is removed on failure.
+pub(super) fn write(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    let io = |source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file_name = path.file_name().ok_or_else(|| {
+        io(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a file name",
+        ))
+    })?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let temp = dir.join(temp_name(file_name));
+
+    let written = write_synced(&temp, bytes).and_then(|()| fs::rename(&temp, path));
+    if let Err(source) = written {
+        // Best effort: the temp file may not exist, and the first error is the one to tell.
+        let _ = fs::remove_file(&temp);
+        return Err(io(source));
+    }
+    sync_dir(dir).map_err(io)
+}
+
+/// `.name.tmp-<pid>-<n>`: hidden, unique within this process and across processes, so
+/// that two writers of one path never share a temp file.
+fn temp_name(file_name: &std::ffi::OsStr) -> PathBuf {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let mut name = std::ffi::OsString::from(".");
+    name.push(file_name);
+    name.push(format!(".tmp-{}-{n}", std::process::id()));
+    PathBuf::from(name)
+}
+
+/// Creates `path` (which must not exist), writes `bytes` and waits until they are on disk.
+fn write_synced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut file = OpenOptions::new().write(true).create_new(true).open(path)?;
+    file.write_all(bytes)?;
+    file.sync_all()
+}
+
+/// Makes a rename inside `dir` durable. Only Unix can open and fsync a folder; elsewhere
+/// the rename is atomic but its durability is up to the file system.
+fn sync_dir(dir: &Path) -> std::io::Result<()> {
+    if cfg!(unix) {
+        File::open(dir)?.sync_all()
+    } else {
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replaces_the_file_and_leaves_no_temp_file() {
+        let dir = std::env::temp_dir().join(format!("tessera-atomic-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("frame.bin");
+        write(&path, b"old").unwrap();
+        write(&path, b"new").unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"new");
+        let names: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["frame.bin"]);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_missing_folder_is_an_error_naming_the_file() {
+        let path = std::env::temp_dir().join("tessera-no-such-folder/x/frame.bin");
+        let err = write(&path, b"x").unwrap_err();
+        assert!(err.to_string().contains("frame.bin"), "{err}");
+    }
+}

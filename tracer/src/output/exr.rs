@@ -1,0 +1,529 @@
+//! Multi-layer OpenEXR: one part, scan lines, ZIP, `f32` channels.
+//!
+//! Every channel is `f32`, albedo, normal and depth included: half floats would halve
+//! those layers, but depth at [`NO_HIT_DEPTH`](crate::film::NO_HIT_DEPTH) (1e10) does not
+//! fit in a half, and one sample type keeps tiles bit-exact from worker to assembled frame.
+
+use std::io::Cursor;
+use std::path::Path;
+
+use ::exr::image::{AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer};
+use ::exr::math::Vec2;
+use ::exr::meta::attribute::{AttributeValue, Chromaticities, IntegerBounds, Text};
+use ::exr::meta::header::{standard_names, Header, ImageAttributes, LayerAttributes};
+use ::exr::meta::MetaData;
+use ::exr::prelude::traits::{read, ReadChannels, ReadLayers, WritableImage};
+
+use super::{atomic, check_lengths, check_shape, rect_text, OutputError};
+use crate::film::{Layers, TileRect};
+
+/// The channels of a Tessera EXR, in the order of [`Layers`]' fields: beauty `R G B A`
+/// (linear Rec.709, alpha is coverage), albedo, world-space shading normal and depth `Z`.
+pub const CHANNEL_NAMES: [&str; 11] = [
+    "R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z",
+];
+
+/// Where each of [`CHANNEL_NAMES`] lives in [`Layers`].
+const SLOTS: [Slot; 11] = [
+    Slot::Beauty(0),
+    Slot::Beauty(1),
+    Slot::Beauty(2),
+    Slot::Beauty(3),
+    Slot::Albedo(0),
+    Slot::Albedo(1),
+    Slot::Albedo(2),
+    Slot::Normal(0),
+    Slot::Normal(1),
+    Slot::Normal(2),
+    Slot::Depth,
+];
+
+/// One component of one layer.
+#[derive(Clone, Copy)]
+enum Slot {
+    Beauty(usize),
+    Albedo(usize),
+    Normal(usize),
+    Depth,
+}
+
+impl Slot {
+    /// The value of this component at pixel `i`.
+    fn get(self, layers: &Layers, i: usize) -> f32 {
+        match self {
+            Slot::Beauty(c) => layers.beauty[i][c],
+            Slot::Albedo(c) => layers.albedo[i][c],
+            Slot::Normal(c) => layers.normal[i][c],
+            Slot::Depth => layers.depth[i],
+        }
+    }
+
+    /// Sets this component at pixel `i`.
+    fn set(self, layers: &mut Layers, i: usize, v: f32) {
+        match self {
+            Slot::Beauty(c) => layers.beauty[i][c] = v,
+            Slot::Albedo(c) => layers.albedo[i][c] = v,
+            Slot::Normal(c) => layers.normal[i][c] = v,
+            Slot::Depth => layers.depth[i] = v,
+        }
+    }
+}
+
+/// Images of at least this many pixels are compressed and decompressed on several
+/// threads. The `exr` crate builds a new thread pool for each parallel image, which costs
+/// more than it saves on a typical 64×64 tile.
+const PARALLEL_MIN_PIXELS: usize = 512 * 512;
+
+/// Header attributes of an EXR file: (name, value) string pairs, written in order as
+/// OpenEXR `string` attributes (UTF-8) of the file's one header.
+///
+/// Names are free-form (`tessera/spp`); the few standard OpenEXR text attributes (`owner`,
+/// `comments`, `capDate`, `software`, `renderingTransform`, `lookModTransform`,
+/// `wrapmodes`, `view`) are allowed too. Every file gets `software` = `Tessera <version>`
+/// unless the list names it.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ExrMetadata {
+    /// The attributes, each name at most once.
+    pub attributes: Vec<(String, String)>,
+}
+
+impl ExrMetadata {
+    /// Tessera version that rendered the image.
+    pub const VERSION: &'static str = "tessera/version";
+    /// Samples per pixel.
+    pub const SPP: &'static str = "tessera/spp";
+    /// The render settings (the job's settings, serialised).
+    pub const SETTINGS: &'static str = "tessera/settings";
+    /// The scene features the tracer enabled.
+    pub const FEATURES: &'static str = "tessera/features";
+
+    /// No attributes.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// `self` with `name` set to `value`.
+    pub fn with(mut self, name: impl Into<String>, value: impl Into<String>) -> Self {
+        self.set(name, value);
+        self
+    }
+
+    /// Sets `name` to `value`, replacing an earlier value.
+    pub fn set(&mut self, name: impl Into<String>, value: impl Into<String>) {
+        let (name, value) = (name.into(), value.into());
+        match self.attributes.iter_mut().find(|(n, _)| *n == name) {
+            Some(slot) => slot.1 = value,
+            None => self.attributes.push((name, value)),
+        }
+    }
+
+    /// The value of `name`, if set.
+    pub fn get(&self, name: &str) -> Option<&str> {
+        self.attributes
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+/// An EXR file read back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExrImage {
+    /// Size of the display window: the whole frame.
+    pub frame_size: (u32, u32),
+    /// The data window's pixels; `layers.rect` is the data window, relative to the
+    /// display window's corner.
+    pub layers: Layers,
+    /// Every string attribute of the header, sorted by name (custom ones, and standard
+    /// text ones such as `software`).
+    pub attributes: Vec<(String, String)>,
+}
+
+impl ExrImage {
+    /// The value of the string attribute `name`, if present.
+    pub fn attribute(&self, name: &str) -> Option<&str> {
+        self.attributes
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+/// Encodes `layers` as the data window of a `frame_size` frame: one EXR part, ZIP
+/// compressed scan lines, the channels of [`CHANNEL_NAMES`] in `f32`, Rec.709
+/// chromaticities, and `meta` as string attributes.
+pub fn encode_exr(
+    frame_size: (u32, u32),
+    layers: &Layers,
+    meta: &ExrMetadata,
+) -> Result<Vec<u8>, OutputError> {
+    check_shape(frame_size, layers)?;
+    let rect = layers.rect;
+    let n = rect.area();
+
+    let channels = AnyChannels::sort(
+        CHANNEL_NAMES
+            .iter()
+            .zip(SLOTS)
+            .map(|(&name, slot)| {
+                let values = (0..n).map(|i| slot.get(layers, i)).collect();
+                AnyChannel::new(name, FlatSamples::F32(values))
+            })
+            .collect(),
+    );
+
+    let mut layer_attributes = LayerAttributes {
+        layer_position: Vec2(rect.x as i32, rect.y as i32),
+        software_name: Some(Text::from(concat!("Tessera ", env!("CARGO_PKG_VERSION")))),
+        ..LayerAttributes::default()
+    };
+    set_attributes(&mut layer_attributes, meta)?;
+
+    let display = IntegerBounds::new(
+        Vec2(0, 0),
+        Vec2(frame_size.0 as usize, frame_size.1 as usize),
+    );
+    let mut image_attributes = ImageAttributes::new(display);
+    // The tracer works in linear sRGB (glTF's colour space): Rec.709 primaries, D65.
+    image_attributes.chromaticities = Some(Chromaticities {
+        red: Vec2(0.64, 0.33),
+        green: Vec2(0.30, 0.60),
+        blue: Vec2(0.15, 0.06),
+        white: Vec2(0.3127, 0.3290),
+    });
+
+    let layer = Layer::new(
+        Vec2(rect.width as usize, rect.height as usize),
+        layer_attributes,
+        Encoding::SMALL_LOSSLESS, // ZIP, 16 scan lines per block, increasing y
+        channels,
+    );
+    let image = Image::new(image_attributes, layer);
+
+    let mut out = Cursor::new(Vec::new());
+    let write = image.write();
+    let write = if n >= PARALLEL_MIN_PIXELS {
+        write
+    } else {
+        write.non_parallel()
+    };
+    write.to_buffered(&mut out).map_err(OutputError::Encode)?;
+    Ok(out.into_inner())
+}
+
+/// [`encode_exr`] written atomically to `path` (a temp file in the same folder, fsync,
+/// rename), so that a reader never sees half a file.
+pub fn write_exr(
+    path: &Path,
+    frame_size: (u32, u32),
+    layers: &Layers,
+    meta: &ExrMetadata,
+) -> Result<(), OutputError> {
+    let bytes = encode_exr(frame_size, layers, meta)?;
+    atomic::write(path, &bytes)
+}
+
+/// Decodes an EXR image: Tessera's own files, and any single-part EXR with at least
+/// `R`, `G`, `B` channels. Absent channels take the values of [`Layers::new`] (black,
+/// depth at [`NO_HIT_DEPTH`](crate::film::NO_HIT_DEPTH)), except `A`, which defaults
+/// to 1 (opaque). Channels may be `f16`, `f32` or `u32`; a multi-part file is read from
+/// its first part.
+pub fn decode_exr(bytes: &[u8]) -> Result<ExrImage, OutputError> {
+    let meta = MetaData::read_from_buffered(bytes, false).map_err(OutputError::Corrupt)?;
+    let header = first_header(&meta)?;
+    decode(bytes, header.layer_size.area(), false, &["R", "G", "B"])
+}
+
+/// [`decode_exr`] of the file at `path`; errors name the file.
+pub fn read_exr(path: &Path) -> Result<ExrImage, OutputError> {
+    let bytes = std::fs::read(path).map_err(|source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    decode_exr(&bytes).map_err(|e| OutputError::File {
+        path: path.to_path_buf(),
+        source: Box::new(e),
+    })
+}
+
+/// Checks a tile uploaded by a worker and returns its pixels: the bytes must be one
+/// EXR part whose display window is the `frame_size` frame, whose data window is
+/// `expected_rect`, which has every channel of [`CHANNEL_NAMES`], and whose values are
+/// all finite. The header is checked before any pixel is decompressed, and reading is
+/// strict (OpenEXR's "pedantic" mode).
+pub fn validate_tile(
+    bytes: &[u8],
+    expected_rect: TileRect,
+    frame_size: (u32, u32),
+) -> Result<Layers, OutputError> {
+    let meta = MetaData::read_from_buffered(bytes, true).map_err(OutputError::Corrupt)?;
+    if meta.headers.len() != 1 {
+        return Err(OutputError::Unsupported(format!(
+            "a tile has one part, this file has {}",
+            meta.headers.len()
+        )));
+    }
+    let header = first_header(&meta)?;
+    let (frame, rect) = windows(
+        header.shared_attributes.display_window,
+        header.data_window(),
+    )?;
+    if frame != frame_size {
+        return Err(OutputError::WrongFrameSize {
+            expected: frame_size,
+            found: frame,
+        });
+    }
+    if rect != expected_rect {
+        return Err(OutputError::WrongDataWindow {
+            expected: expected_rect,
+            found: rect,
+        });
+    }
+    for name in CHANNEL_NAMES {
+        if !header.channels.list.iter().any(|c| c.name.eq(name)) {
+            return Err(OutputError::MissingChannel {
+                channel: name.to_string(),
+                present: header
+                    .channels
+                    .list
+                    .iter()
+                    .map(|c| c.name.to_string())
+                    .collect(),
+            });
+        }
+    }
+
+    let image = decode(bytes, expected_rect.area(), true, &CHANNEL_NAMES)?;
+    check_finite(&image.layers)?;
+    Ok(image.layers)
+}
+
+/// Checks that every value of `layers` is finite (and that each layer holds one value per
+/// pixel); the error names the first channel and pixel, in frame coordinates, that is not.
+pub fn check_finite(layers: &Layers) -> Result<(), OutputError> {
+    check_lengths(layers)?;
+    let rect = layers.rect;
+    let w = rect.width.max(1) as usize;
+    for i in 0..rect.area() {
+        for (&channel, slot) in CHANNEL_NAMES.iter().zip(SLOTS) {
+            let value = slot.get(layers, i);
+            if !value.is_finite() {
+                return Err(OutputError::NonFinite {
+                    channel,
+                    x: rect.x + (i % w) as u32,
+                    y: rect.y + (i / w) as u32,
+                    value,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The header of the first part, refusing deep data.
+fn first_header(meta: &MetaData) -> Result<&Header, OutputError> {
+    let header = meta
+        .headers
+        .first()
+        .ok_or_else(|| OutputError::Unsupported("the file has no part".to_string()))?;
+    if header.deep {
+        return Err(OutputError::Unsupported("deep data".to_string()));
+    }
+    Ok(header)
+}
+
+/// The frame size and the data window relative to the display window's corner, refusing
+/// a data window that is empty or reaches outside the display window.
+fn windows(
+    display: IntegerBounds,
+    data: IntegerBounds,
+) -> Result<((u32, u32), TileRect), OutputError> {
+    let size = |v: usize| u32::try_from(v).ok();
+    let frame = match (size(display.size.0), size(display.size.1)) {
+        (Some(w), Some(h)) if w > 0 && h > 0 => (w, h),
+        _ => {
+            return Err(OutputError::BadWindow(format!(
+                "display window {}x{} is empty or too large",
+                display.size.0, display.size.1
+            )))
+        }
+    };
+    let dx = i64::from(data.position.0) - i64::from(display.position.0);
+    let dy = i64::from(data.position.1) - i64::from(display.position.1);
+    let rect = match (
+        u32::try_from(dx).ok(),
+        u32::try_from(dy).ok(),
+        size(data.size.0),
+        size(data.size.1),
+    ) {
+        (Some(x), Some(y), Some(w), Some(h)) if w > 0 && h > 0 => TileRect::new(x, y, w, h),
+        _ => {
+            return Err(OutputError::BadWindow(format!(
+                "data window {}x{} at ({dx}, {dy}) is empty or starts outside the display window",
+                data.size.0, data.size.1
+            )))
+        }
+    };
+    if !rect.fits_in(frame.0, frame.1) {
+        return Err(OutputError::BadWindow(format!(
+            "data window {} reaches outside the {}x{} display window",
+            rect_text(rect),
+            frame.0,
+            frame.1
+        )));
+    }
+    Ok((frame, rect))
+}
+
+/// Decodes the first flat part of `bytes` into layers, requiring the channels named in
+/// `required`. `pixels` (from the header) decides whether to decompress on several threads.
+fn decode(
+    bytes: &[u8],
+    pixels: usize,
+    pedantic: bool,
+    required: &[&str],
+) -> Result<ExrImage, OutputError> {
+    let read = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes();
+    let read = if pedantic { read.pedantic() } else { read };
+    let read = if pixels >= PARALLEL_MIN_PIXELS {
+        read
+    } else {
+        read.non_parallel()
+    };
+    let image = read
+        .from_buffered(Cursor::new(bytes))
+        .map_err(OutputError::Corrupt)?;
+
+    let layer = &image.layer_data;
+    let data = IntegerBounds::new(layer.attributes.layer_position, layer.size);
+    let (frame_size, rect) = windows(image.attributes.display_window, data)?;
+
+    let channels = &layer.channel_data.list;
+    let find = |name: &str| channels.iter().find(|c| c.name.eq(name));
+    for &name in required {
+        if find(name).is_none() {
+            return Err(OutputError::MissingChannel {
+                channel: name.to_string(),
+                present: channels.iter().map(|c| c.name.to_string()).collect(),
+            });
+        }
+    }
+
+    let mut layers = Layers::new(rect);
+    if find("A").is_none() {
+        layers.beauty.iter_mut().for_each(|b| b.w = 1.0);
+    }
+    for (&name, slot) in CHANNEL_NAMES.iter().zip(SLOTS) {
+        let Some(channel) = find(name) else { continue };
+        if channel.sample_data.len() != rect.area() {
+            return Err(OutputError::Unsupported(format!(
+                "channel `{name}` holds {} samples for {} pixels (subsampled)",
+                channel.sample_data.len(),
+                rect.area()
+            )));
+        }
+        for (i, v) in channel.sample_data.values_as_f32().enumerate() {
+            slot.set(&mut layers, i, v);
+        }
+    }
+
+    Ok(ExrImage {
+        frame_size,
+        layers,
+        attributes: string_attributes(&image.attributes, &layer.attributes),
+    })
+}
+
+/// The standard OpenEXR text attributes that `exr` keeps in typed fields, by name.
+fn standard_texts(a: &LayerAttributes) -> [(&'static str, &Option<Text>); 8] {
+    [
+        ("owner", &a.owner),
+        ("comments", &a.comments),
+        ("capDate", &a.capture_date),
+        ("software", &a.software_name),
+        ("renderingTransform", &a.rendering_transform_name),
+        ("lookModTransform", &a.look_modification_transform_name),
+        ("wrapmodes", &a.wrap_mode_name),
+        ("view", &a.view_name),
+    ]
+}
+
+/// The typed field of `a` that holds the standard text attribute `name`, if it is one
+/// of [`standard_texts`].
+fn standard_text_mut<'a>(a: &'a mut LayerAttributes, name: &str) -> Option<&'a mut Option<Text>> {
+    Some(match name {
+        "owner" => &mut a.owner,
+        "comments" => &mut a.comments,
+        "capDate" => &mut a.capture_date,
+        "software" => &mut a.software_name,
+        "renderingTransform" => &mut a.rendering_transform_name,
+        "lookModTransform" => &mut a.look_modification_transform_name,
+        "wrapmodes" => &mut a.wrap_mode_name,
+        "view" => &mut a.view_name,
+        _ => return None,
+    })
+}
+
+/// Puts `meta` into `attributes`, refusing names OpenEXR reserves for other types or
+/// cannot store, and names given twice.
+fn set_attributes(attributes: &mut LayerAttributes, meta: &ExrMetadata) -> Result<(), OutputError> {
+    let bad = |name: &str, reason| OutputError::BadAttribute {
+        name: name.to_string(),
+        reason,
+    };
+    for (k, (name, value)) in meta.attributes.iter().enumerate() {
+        if name.is_empty() {
+            return Err(bad(name, "the name is empty"));
+        }
+        // OpenEXR 2 allows names up to 255 bytes ("long names"), without NUL.
+        if name.len() > 255 {
+            return Err(bad(name, "the name is longer than 255 bytes"));
+        }
+        if name.contains('\0') {
+            return Err(bad(name, "the name contains a NUL byte"));
+        }
+        if meta.attributes[..k].iter().any(|(n, _)| n == name) {
+            return Err(bad(name, "the name is given twice"));
+        }
+        // Strings are stored as their UTF-8 bytes, as OpenEXR's C++ library does
+        // (`exr::Text::from` would refuse characters above U+00FF).
+        let text = Text::from_slice_unchecked(value.as_bytes());
+        if let Some(field) = standard_text_mut(attributes, name) {
+            *field = Some(text);
+        } else if standard_names::ALL.contains(&name.as_bytes()) {
+            return Err(bad(
+                name,
+                "the name is a standard OpenEXR attribute of another type",
+            ));
+        } else {
+            attributes.other.insert(
+                Text::from_slice_unchecked(name.as_bytes()),
+                AttributeValue::Text(text),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Every string attribute of a header, sorted by name; bytes that are not UTF-8 are
+/// replaced.
+fn string_attributes(image: &ImageAttributes, layer: &LayerAttributes) -> Vec<(String, String)> {
+    let text = |t: &Text| String::from_utf8_lossy(t.bytes()).into_owned();
+    let mut out: Vec<(String, String)> = standard_texts(layer)
+        .into_iter()
+        .filter_map(|(name, value)| Some((name.to_string(), text(value.as_ref()?))))
+        .collect();
+    for (name, value) in image.other.iter().chain(&layer.other) {
+        if let AttributeValue::Text(value) = value {
+            out.push((text(name), text(value)));
+        }
+    }
+    out.sort();
+    out
+}
