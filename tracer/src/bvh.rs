@@ -17,7 +17,7 @@
 mod build;
 mod instance;
 mod mesh;
-pub mod node;
+mod node;
 
 pub use instance::{Instance, SceneBvh};
 pub use mesh::MeshBvh;

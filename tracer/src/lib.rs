@@ -26,6 +26,9 @@
 //! Lambertian plane under a 1 lux directional light at normal incidence reflects radiance
 //! 1/π.
 #![warn(missing_docs)]
+// `!(x > 0.0)` is how the tracer rejects NaN together with the values it guards against;
+// rewriting it as `x <= 0.0` would let NaN through.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bsdf;
 pub mod bvh;

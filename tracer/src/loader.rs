@@ -5,7 +5,9 @@
 //! |---|---|
 //! | `container` | GLB chunks, data: URIs and files beside the .gltf, [`pack_glb`] |
 //! | `accessor` | accessors into vectors, every byte range checked before allocating |
-//! | `gltf` | the document into nodes, materials, textures, meshes, cameras, lights |
+//! | `gltf` | the document into a scene: nodes, default scene, cameras, lights, features |
+//! | `materials` | materials and the textures they use (each image decoded once) |
+//! | `meshes` | primitives into triangles: indices checked, normals repaired, tangents |
 //! | `images` | PNG/JPEG into RGBA8 |
 //! | `tangents` | MikkTSpace tangents for normal-mapped primitives without TANGENT |
 //! | [`framing`] | default-scene traversal, [`scene_bounds`], [`framing_camera`] |
@@ -32,6 +34,8 @@ pub mod error;
 pub mod framing;
 mod gltf;
 mod images;
+mod materials;
+mod meshes;
 mod tangents;
 
 pub use error::{Element, SceneError};
@@ -126,7 +130,9 @@ fn check_position_indices(root: &::gltf::json::Root) -> Result<(), SceneError> {
     use ::gltf::json::validation::Checked;
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, prim) in mesh.primitives.iter().enumerate() {
-            let position = prim.attributes.get(&Checked::Valid(::gltf::Semantic::Positions));
+            let position = prim
+                .attributes
+                .get(&Checked::Valid(::gltf::Semantic::Positions));
             if position.is_some_and(|i| i.value() >= root.accessors.len()) {
                 return Err(SceneError::Invalid {
                     path: format!("meshes[{m}].primitives[{p}].attributes.POSITION"),

@@ -148,17 +148,20 @@ pub fn intersect_triangle(
     }
 
     // Conservative t > 0 (pbrt-v4, "Ensure that computed triangle t is conservatively
-    // greater than zero"): the error bound on t from every rounding above.
+    // greater than zero"): the error bound on t from every rounding above. The constants
+    // are named so that they are folded at compile time.
+    const G2: f32 = gamma(2);
+    const G3: f32 = gamma(3);
+    const G5: f32 = gamma(5);
     let max_zt = az.abs().max(bz.abs()).max(cz.abs());
     let max_xt = ax.abs().max(bx.abs()).max(cx.abs());
     let max_yt = ay.abs().max(by.abs()).max(cy.abs());
-    let delta_z = gamma(3) * max_zt;
-    let delta_x = gamma(5) * (max_xt + max_zt);
-    let delta_y = gamma(5) * (max_yt + max_zt);
-    let delta_e = 2.0 * (gamma(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+    let delta_z = G3 * max_zt;
+    let delta_x = G5 * (max_xt + max_zt);
+    let delta_y = G5 * (max_yt + max_zt);
+    let delta_e = 2.0 * (G2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
     let max_e = u.abs().max(v.abs()).max(w.abs());
-    let delta_t =
-        3.0 * (gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
+    let delta_t = 3.0 * (G3 * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
     if !(t > delta_t) {
         return None;
     }

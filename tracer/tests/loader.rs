@@ -45,9 +45,7 @@ struct Doc {
 
 impl Doc {
     fn view(&mut self, bytes: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
-            self.bin.push(0);
-        }
+        self.bin.resize(self.bin.len().next_multiple_of(4), 0);
         self.views.push(format!(
             r#"{{"buffer":0,"byteOffset":{},"byteLength":{}}}"#,
             self.bin.len(),
@@ -185,13 +183,9 @@ fn temp_dir(name: &str) -> PathBuf {
 
 fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
     let mut j = json.as_bytes().to_vec();
-    while j.len() % 4 != 0 {
-        j.push(b' ');
-    }
+    j.resize(j.len().next_multiple_of(4), b' ');
     let mut b = bin.to_vec();
-    while b.len() % 4 != 0 {
-        b.push(0);
-    }
+    b.resize(b.len().next_multiple_of(4), 0);
     let total = 12 + 8 + j.len() + 8 + b.len();
     let mut out = b"glTF".to_vec();
     out.extend(2u32.to_le_bytes());
@@ -345,6 +339,49 @@ fn sparse_accessors_override_their_base() {
         scene.meshes[0].primitives[0].positions[2],
         Vec3::new(5.0, 6.0, 7.0)
     );
+}
+
+#[test]
+fn a_mesh_of_lines_keeps_its_index_and_draws_nothing() {
+    let mut doc = Doc::default();
+    let p = doc.vec3(&[[0.0; 3], [1.0, 0.0, 0.0]]);
+    let (q, _, _, i) = quad(&mut doc);
+    let json = doc.json(&format!(
+        r#","meshes":[{{"name":"Wire","primitives":[{{"attributes":{{"POSITION":{p}}},"mode":1}}]}},
+                      {{"primitives":[{{"attributes":{{"POSITION":{q}}},"indices":{i}}}]}}],
+        "scenes":[{{"nodes":[0,1]}}],"nodes":[{{"mesh":0}},{{"mesh":1}}]"#
+    ));
+    let scene = load(&json).unwrap();
+    assert_eq!(scene.meshes.len(), 2);
+    assert!(scene.meshes[0].primitives.is_empty());
+    assert_eq!(scene.nodes[1].mesh, Some(1));
+    assert_eq!(SceneSummary::of(&scene).triangles, 2);
+    assert!(scene
+        .warnings
+        .iter()
+        .any(|w| w.starts_with("mesh 'Wire', primitive 0: Lines")));
+}
+
+#[test]
+fn images_in_data_uris_decode() {
+    let (png_bytes, texels) = texels_png();
+    let mut doc = Doc::default();
+    let (p, _, t, i) = quad(&mut doc);
+    let json = doc.json(&format!(
+        r#","images":[{{"uri":"data:image/png;base64,{}"}}],"textures":[{{"source":0}}],
+        "materials":[{{"pbrMetallicRoughness":{{"baseColorTexture":{{"index":0}}}}}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":{p},"TEXCOORD_0":{t}}},"indices":{i},"material":0}}]}}]{ONE_NODE}"#,
+        base64(&png_bytes)
+    ));
+    let scene = load(&json).unwrap();
+    assert_eq!(scene.textures[0].texels, texels.to_vec());
+    assert_eq!(
+        (scene.textures[0].wrap_s, scene.textures[0].filter),
+        (Wrap::Repeat, Filter::Linear)
+    );
+    let broken = json.replace("data:image/png;base64,", "data:image/png;base64,AAAA");
+    let m = message(load(&broken));
+    assert!(m.starts_with("image 0: data: URI: "), "{m}");
 }
 
 #[test]

@@ -1,8 +1,9 @@
 use glam::Vec3;
-use std::time::Instant;
-use std::sync::atomic::Ordering::Relaxed;
+struct Instant(u64);
+impl Instant { fn now() -> Self { Instant(cpu_ns()) } fn elapsed(&self) -> std::time::Duration { std::time::Duration::from_nanos(cpu_ns() - self.0) } }
+fn proc_cpu() -> f64 { let s = std::fs::read_to_string("/proc/self/stat").unwrap(); let f: Vec<&str> = s.rsplit(')').next().unwrap().split_whitespace().collect(); (f[11].parse::<u64>().unwrap() + f[12].parse::<u64>().unwrap()) as f64 / 100.0 }
+fn cpu_ns() -> u64 { std::fs::read_to_string("/proc/thread-self/schedstat").unwrap().split_whitespace().next().unwrap().parse().unwrap() }
 use tracer::bvh::MeshBvh;
-use tracer::bvh::node::{VISITS, LEAVES, TRIS};
 use tracer::geometry::Ray;
 struct Rng(u64);
 impl Rng { fn f(&mut self)->f32{ self.0 ^= self.0<<13; self.0^=self.0>>7; self.0^=self.0<<17; (self.0>>40) as f32/(1u64<<24) as f32 }
@@ -15,11 +16,10 @@ fn sphere(n: u32) -> Vec<[Vec3;3]> {
   t }
 fn run(name: &str, bvh: &MeshBvh, rays: &[Ray]) {
     let n = rays.len();
-    VISITS.store(0, Relaxed); LEAVES.store(0, Relaxed); TRIS.store(0, Relaxed);
     let t0 = Instant::now(); let mut h = 0;
     for r in rays { if bvh.intersect(r, f32::INFINITY, |_,_,_| true).is_some() { h+=1; } }
     let dt = t0.elapsed().as_secs_f64();
-    println!("  {name}: {:.2} Mrays/s ({} hits) visits {:.1} leaves {:.1} tris {:.1}", n as f64/dt/1e6, h, VISITS.load(Relaxed) as f64/n as f64, LEAVES.load(Relaxed) as f64/n as f64, TRIS.load(Relaxed) as f64/n as f64);
+    println!("  {name}: {:.2} Mrays/s ({} hits)", n as f64/dt/1e6, h);
     let t0 = Instant::now(); let mut h = 0;
     for r in rays { if bvh.occluded(r, f32::INFINITY, |_,_,_| true) { h+=1; } }
     let dt = t0.elapsed().as_secs_f64();
@@ -29,15 +29,24 @@ fn run(name: &str, bvh: &MeshBvh, rays: &[Ray]) {
 fn perf() {
   let mut rng = Rng(88172645463325252);
   let soup: Vec<[Vec3;3]> = (0..1_000_000).map(|_| { let c = rng.cube()*100.0; [c+rng.cube(), c+rng.cube(), c+rng.cube()] }).collect();
+  let only = std::env::var("ONLY").unwrap_or_default();
   for (name, tris) in [("sphere 10k", sphere(50)), ("sphere 1M", sphere(500)), ("soup 1M", soup)] {
+    if !only.is_empty() && !name.contains(&only) { continue; }
     let t0 = Instant::now();
     let mut bvh = MeshBvh::build(&tris);
     let mut best = t0.elapsed().as_secs_f64();
     for _ in 0..2 { let t0 = Instant::now(); bvh = MeshBvh::build(&tris); best = best.min(t0.elapsed().as_secs_f64()); }
-    println!("{name}: {} tris, build {:.3}s, {} nodes", tris.len(), best, bvh.node_count());
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let w0 = std::time::Instant::now(); let c0 = proc_cpu();
+    pool.install(|| MeshBvh::build(&tris));
+    let (w1, c1) = (w0.elapsed().as_secs_f64(), proc_cpu() - c0);
+    let w0 = std::time::Instant::now(); let c0 = proc_cpu();
+    MeshBvh::build(&tris);
+    let w2 = w0.elapsed().as_secs_f64(); let c2 = proc_cpu() - c0;
+    println!("{name}: {} tris, build {:.3}s (cpu, main thread), 1 thread: wall {w1:.3}s cpu {c1:.3}s; default pool wall {w2:.3}s cpu {c2:.2}s; {} nodes, {:.1} B/tri", tris.len(), best, bvh.node_count(), bvh.memory_bytes() as f64 / tris.len() as f64);
     let ext = bvh.bounds().extent().length();
     let c = bvh.bounds().center();
-    let rays: Vec<Ray> = (0..200_000).map(|_| { let o = c + rng.dir()*ext; let tgt = c + rng.cube()*ext*0.3; Ray::new(o, tgt-o) }).collect();
+    let rays: Vec<Ray> = (0..1_000_000).map(|_| { let o = c + rng.dir()*ext; let tgt = c + rng.cube()*ext*0.3; Ray::new(o, tgt-o) }).collect();
     run("random", &bvh, &rays);
     // coherent: a 448x448 camera looking at the centre
     let o = c + Vec3::new(0.3, 0.4, 1.0).normalize() * ext;

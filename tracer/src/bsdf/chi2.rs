@@ -58,9 +58,9 @@ pub(crate) struct Config {
 impl Default for Config {
     fn default() -> Self {
         Self {
-            n_cos: 32,
-            n_phi: 64,
-            samples: 200_000,
+            n_cos: 16,
+            n_phi: 32,
+            samples: 100_000,
         }
     }
 }
@@ -92,41 +92,163 @@ struct Rect {
     p1: f64,
 }
 
-/// Simpson's rule on a 3 × 3 grid over `r`.
-fn simpson(f: &impl Fn(f64, f64) -> f64, r: &Rect) -> f64 {
-    const W: [f64; 3] = [1.0, 4.0, 1.0];
+/// Simpson weights on three points.
+const SIMPSON: [f64; 3] = [1.0, 4.0, 1.0];
+
+/// `f` on the 3 × 3 grid of `r` (corners, edge midpoints, centre).
+fn grid3(f: &impl Fn(f64, f64) -> f64, r: &Rect) -> [[f64; 3]; 3] {
+    let mut v = [[0.0; 3]; 3];
+    for (a, row) in v.iter_mut().enumerate() {
+        for (b, x) in row.iter_mut().enumerate() {
+            *x = f(
+                r.t0 + (r.t1 - r.t0) * a as f64 * 0.5,
+                r.p0 + (r.p1 - r.p0) * b as f64 * 0.5,
+            );
+        }
+    }
+    v
+}
+
+/// Simpson's rule over `r` from its 3 × 3 grid values.
+fn simpson(r: &Rect, v: &[[f64; 3]; 3]) -> f64 {
     let mut acc = 0.0;
-    for (a, wa) in W.iter().enumerate() {
-        let t = r.t0 + (r.t1 - r.t0) * a as f64 * 0.5;
-        for (b, wb) in W.iter().enumerate() {
-            let p = r.p0 + (r.p1 - r.p0) * b as f64 * 0.5;
-            acc += wa * wb * f(t, p);
+    for (a, row) in v.iter().enumerate() {
+        for (b, x) in row.iter().enumerate() {
+            acc += SIMPSON[a] * SIMPSON[b] * x;
         }
     }
     acc * (r.t1 - r.t0) * (r.p1 - r.p0) / 36.0
 }
 
-/// Adaptive Simpson cubature: split into quadrants until they agree with the whole to
-/// `tol` (absolute; halved per level) or to 1e-4 of the whole. The absolute tolerance of
-/// a cell, 16 · 1e-8 of probability, is 0.03 samples at 200 000 samples.
-fn adaptive(f: &impl Fn(f64, f64) -> f64, r: &Rect, whole: f64, tol: f64, depth: u32) -> f64 {
+/// How the adaptive cubature refines.
+struct Refine {
+    /// Absolute tolerance of a start rectangle (halved per level).
+    tol: f64,
+    /// A rectangle holding more sampled directions than this is split regardless of the
+    /// error estimate.
+    max_points: usize,
+}
+
+/// Adaptive Simpson cubature over `r`, whose 3 × 3 grid values are `v`: split into
+/// quadrants (16 new evaluations, the rest shared) until they agree with the whole to
+/// `tol` or to 1e-3 of the whole. An error estimate cannot see a lobe that lies between
+/// all the points it looked at, so a rectangle is also split while it holds more than
+/// `max_points` of the sampled directions `points` (in the rectangle's coordinates): the
+/// sampler shows where narrow lobes are. (This only picks where to refine; the integral
+/// does not depend on the samples otherwise.)
+fn adaptive(
+    f: &impl Fn(f64, f64) -> f64,
+    r: &Rect,
+    v: &[[f64; 3]; 3],
+    refine: &Refine,
+    points: &[(f64, f64)],
+    depth: u32,
+) -> f64 {
+    let whole = simpson(r, v);
+    // The 5 × 5 grid: even indices are the parent's points.
+    let mut g = [[0.0; 5]; 5];
+    for (a, row) in g.iter_mut().enumerate() {
+        for (b, x) in row.iter_mut().enumerate() {
+            *x = if a % 2 == 0 && b % 2 == 0 {
+                v[a / 2][b / 2]
+            } else {
+                f(
+                    r.t0 + (r.t1 - r.t0) * a as f64 * 0.25,
+                    r.p0 + (r.p1 - r.p0) * b as f64 * 0.25,
+                )
+            };
+        }
+    }
     let (tm, pm) = (0.5 * (r.t0 + r.t1), 0.5 * (r.p0 + r.p1));
     let quads = [
-        Rect { t1: tm, p1: pm, ..*r },
-        Rect { t0: tm, p1: pm, ..*r },
-        Rect { t1: tm, p0: pm, ..*r },
-        Rect { t0: tm, p0: pm, ..*r },
+        (Rect { t1: tm, p1: pm, ..*r }, 0, 0),
+        (Rect { t0: tm, p1: pm, ..*r }, 2, 0),
+        (Rect { t1: tm, p0: pm, ..*r }, 0, 2),
+        (Rect { t0: tm, p0: pm, ..*r }, 2, 2),
     ];
-    let parts = quads.map(|q| simpson(f, &q));
-    let sum: f64 = parts.iter().sum();
-    if depth >= 12 || (sum - whole).abs() <= (15.0 * tol).max(1e-4 * sum.abs()) {
+    let sub = |a0: usize, b0: usize| {
+        let mut s = [[0.0; 3]; 3];
+        for (a, row) in s.iter_mut().enumerate() {
+            for (b, x) in row.iter_mut().enumerate() {
+                *x = g[a0 + a][b0 + b];
+            }
+        }
+        s
+    };
+    let parts = quads.map(|(q, a0, b0)| (q, sub(a0, b0)));
+    let sum: f64 = parts.iter().map(|(q, s)| simpson(q, s)).sum();
+    let tol = refine.tol * 0.5f64.powi(depth as i32);
+    let converged = (sum - whole).abs() <= (15.0 * tol).max(1e-3 * sum.abs());
+    if depth >= 10 || (converged && points.len() <= refine.max_points) {
         return sum + (sum - whole) / 15.0;
     }
-    quads
+    parts
         .iter()
-        .zip(parts)
-        .map(|(q, part)| adaptive(f, q, part, tol * 0.5, depth + 1))
+        .map(|(q, s)| {
+            let inside: Vec<(f64, f64)> = points
+                .iter()
+                .copied()
+                .filter(|&(t, p)| t >= q.t0 && t < q.t1 && p >= q.p0 && p < q.p1)
+                .collect();
+            adaptive(f, q, s, refine, &inside, depth + 1)
+        })
         .sum()
+}
+
+/// The bands (φ range left empty) to start integrating the row `[c0, c1]` of cosθ from,
+/// each flagged whether it is in θ (else in cosθ). Bands are in θ, because a lobe around
+/// the pole of width α has width α²/2 in cosθ but α in θ: `k` of them, or, in the rows
+/// holding a pole, bands that shrink geometrically towards it, because a lobe at normal
+/// incidence may be narrower than any fixed split. In the rows touching the horizon the
+/// bands are in cosθ and shrink geometrically towards it, because lobes of grazing
+/// directions hug the horizon within a fraction of a degree.
+fn bands(c0: f64, c1: f64, k: usize) -> Vec<(Rect, bool)> {
+    // Edges from `from` towards `to` at distances 0, 1e-6·4ⁿ, ..., |to − from|.
+    let geometric = |from: f64, to: f64, in_theta: bool| {
+        let span = (to - from).abs();
+        let mut d = vec![0.0];
+        let mut e = 1e-6;
+        while e < span {
+            d.push(e);
+            e *= 4.0;
+        }
+        d.push(span);
+        let sign = (to - from).signum();
+        d.windows(2)
+            .map(|w| {
+                let (a, b) = (from + sign * w[0], from + sign * w[1]);
+                let rect = Rect {
+                    t0: a.min(b),
+                    t1: a.max(b),
+                    p0: 0.0,
+                    p1: 0.0,
+                };
+                (rect, in_theta)
+            })
+            .collect::<Vec<_>>()
+    };
+    let (t_lo, t_hi) = (c1.clamp(-1.0, 1.0).acos(), c0.clamp(-1.0, 1.0).acos());
+    if c0 == 0.0 {
+        geometric(0.0, c1, false)
+    } else if c1 == 0.0 {
+        geometric(0.0, c0, false)
+    } else if c1 >= 1.0 {
+        geometric(0.0, t_hi, true)
+    } else if c0 <= -1.0 {
+        geometric(PI, t_lo, true)
+    } else {
+        (0..k)
+            .map(|a| {
+                let rect = Rect {
+                    t0: t_lo + (t_hi - t_lo) * a as f64 / k as f64,
+                    t1: t_lo + (t_hi - t_lo) * (a + 1) as f64 / k as f64,
+                    p0: 0.0,
+                    p1: 0.0,
+                };
+                (rect, true)
+            })
+            .collect()
+    }
 }
 
 fn direction(cos_theta: f64, phi: f64) -> Vec3 {
@@ -138,13 +260,18 @@ fn direction(cos_theta: f64, phi: f64) -> Vec3 {
     )
 }
 
+fn phi_of(v: Vec3) -> f64 {
+    let phi = f64::from(v.y).atan2(f64::from(v.x));
+    if phi < 0.0 {
+        phi + 2.0 * PI
+    } else {
+        phi
+    }
+}
+
 fn cell_of(v: Vec3, cfg: &Config) -> usize {
     let c = ((f64::from(v.z).clamp(-1.0, 1.0) + 1.0) * 0.5 * cfg.n_cos as f64) as usize;
-    let mut phi = f64::from(v.y).atan2(f64::from(v.x));
-    if phi < 0.0 {
-        phi += 2.0 * PI;
-    }
-    let p = (phi / (2.0 * PI) * cfg.n_phi as f64) as usize;
+    let p = (phi_of(v) / (2.0 * PI) * cfg.n_phi as f64) as usize;
     c.min(cfg.n_cos - 1) * cfg.n_phi + p.min(cfg.n_phi - 1)
 }
 
@@ -159,10 +286,16 @@ pub(crate) fn run(
     let cells = cfg.n_cos * cfg.n_phi;
     // Observed counts, the last cell holding rejections.
     let mut observed = vec![0f64; cells + 1];
+    // The sampled directions per cell, as (cosθ, φ).
+    let mut points: Vec<Vec<(f64, f64)>> = vec![Vec::new(); cells];
     let mut rng = Rng::new(seed);
     for _ in 0..cfg.samples {
         match sample(&mut rng) {
-            Some(v) if v.is_finite() => observed[cell_of(v, &cfg)] += 1.0,
+            Some(v) if v.is_finite() => {
+                let cell = cell_of(v, &cfg);
+                observed[cell] += 1.0;
+                points[cell].push((f64::from(v.z).clamp(-1.0, 1.0), phi_of(v)));
+            }
             Some(_) => panic!("sampler returned a non-finite direction"),
             None => observed[cells] += 1.0,
         }
@@ -175,49 +308,39 @@ pub(crate) fn run(
     let mut mass = 0.0;
     for ci in 0..cfg.n_cos {
         let (c0, c1) = (-1.0 + dc * ci as f64, -1.0 + dc * (ci + 1) as f64);
-        // Sub-rectangles to start from, in (θ, φ) or in (cosθ, φ) with their Jacobians.
-        // Away from the horizon integrate over θ: a lobe around the pole of width α has
-        // width α²/2 in cosθ but α in θ. In the rows touching the horizon integrate over
-        // cosθ on geometrically shrinking intervals: lobes of grazing directions hug the
-        // horizon within a fraction of a degree and would slip between the samples.
-        let mut starts: Vec<(Rect, bool)> = Vec::new();
-        if c0 == 0.0 || c1 == 0.0 {
-            let (lo, hi, sign) = if c0 == 0.0 { (0.0, c1, 1.0) } else { (0.0, -c0, -1.0) };
-            let mut edges = vec![lo];
-            let mut e = 1e-6;
-            while e < hi {
-                edges.push(e);
-                e *= 3.0;
-            }
-            edges.push(hi);
-            for w in edges.windows(2) {
-                let (a, b) = if sign > 0.0 { (w[0], w[1]) } else { (-w[1], -w[0]) };
-                starts.push((Rect { t0: a, t1: b, p0: 0.0, p1: 0.0 }, false));
-            }
-        } else {
-            let t0 = c1.clamp(-1.0, 1.0).acos();
-            let t1 = c0.clamp(-1.0, 1.0).acos();
-            for a in 0..4 {
-                let (x0, x1) = (t0 + (t1 - t0) * a as f64 / 4.0, t0 + (t1 - t0) * (a + 1) as f64 / 4.0);
-                starts.push((Rect { t0: x0, t1: x1, p0: 0.0, p1: 0.0 }, true));
-            }
-        }
         for pi in 0..cfg.n_phi {
+            let cell = ci * cfg.n_phi + pi;
+            let refine = Refine {
+                tol: 1e-6,
+                max_points: cfg.samples / 1000,
+            };
             let mut integral = 0.0;
-            for &(band, in_theta) in &starts {
+            for &(band, in_theta) in &bands(c0, c1, 2) {
                 let f = |x: f64, p: f64| {
                     let (cos, jac) = if in_theta { (x.cos(), x.sin()) } else { (x, 1.0) };
                     let v = f64::from(pdf(direction(cos, p)));
                     assert!(v.is_finite() && v >= 0.0, "pdf {v} at cos {cos} phi {p}");
                     v * jac
                 };
-                for b in 0..4 {
+                // The cell's samples in the band's coordinates.
+                let pts: Vec<(f64, f64)> = points[cell]
+                    .iter()
+                    .map(|&(c, p)| (if in_theta { c.acos() } else { c }, p))
+                    .collect();
+                for b in 0..2 {
                     let sub = Rect {
-                        p0: dp * (pi as f64 + b as f64 / 4.0),
-                        p1: dp * (pi as f64 + (b + 1) as f64 / 4.0),
+                        p0: dp * (pi as f64 + b as f64 / 2.0),
+                        p1: dp * (pi as f64 + (b + 1) as f64 / 2.0),
                         ..band
                     };
-                    integral += adaptive(&f, &sub, simpson(&f, &sub), 1e-8, 0);
+                    let inside: Vec<(f64, f64)> = pts
+                        .iter()
+                        .copied()
+                        .filter(|&(t, p)| {
+                            t >= sub.t0 && t <= sub.t1 && p >= sub.p0 && p < sub.p1
+                        })
+                        .collect();
+                    integral += adaptive(&f, &sub, &grid3(&f, &sub), &refine, &inside, 0);
                 }
             }
             mass += integral;
@@ -383,41 +506,3 @@ fn chi2_rejects_a_wrong_pdf() {
     assert!(bad.p_value < 1e-6, "{bad:?}");
 }
 
-#[test]
-fn scratch_adaptive_vs_brute() {
-    use super::*;
-    let bsdf = Bsdf::new(SurfaceParams { metallic: 0.0, transmission: 1.0, ..SurfaceParams::default() });
-    let wo = Vec3::new(0.99999845, 0.0, -0.0017452986);
-    let pdf = |v: Vec3| bsdf.pdf(wo, v);
-    let (nc, np) = (32usize, 64usize);
-    let dc = 2.0 / nc as f64;
-    let dp = 2.0 * PI / np as f64;
-    let mut diffs = Vec::new();
-    for ci in 16..nc { for pi in 0..np {
-        let theta_hi = (-1.0 + dc * ci as f64).clamp(-1.0, 1.0).acos();
-        let theta_lo = (-1.0 + dc * (ci + 1) as f64).clamp(-1.0, 1.0).acos();
-        let cell = Rect { t0: theta_lo, t1: theta_hi, p0: dp * pi as f64, p1: dp * (pi + 1) as f64 };
-        let f = |t: f64, p: f64| f64::from(pdf(direction(t.cos(), p))) * t.sin();
-        let mut integral = 0.0;
-        for a in 0..4 { for b in 0..4 {
-            let sub = Rect {
-                t0: cell.t0 + (cell.t1 - cell.t0) * a as f64 / 4.0,
-                t1: cell.t0 + (cell.t1 - cell.t0) * (a + 1) as f64 / 4.0,
-                p0: cell.p0 + (cell.p1 - cell.p0) * b as f64 / 4.0,
-                p1: cell.p0 + (cell.p1 - cell.p0) * (b + 1) as f64 / 4.0,
-            };
-            integral += adaptive(&f, &sub, simpson(&f, &sub), 1e-8, 0);
-        }}
-        let k = 64;
-        let mut acc = 0.0;
-        for a in 0..k { for b in 0..k {
-            let c = -1.0 + dc * (ci as f64 + (a as f64 + 0.5) / k as f64);
-            let p = dp * (pi as f64 + (b as f64 + 0.5) / k as f64);
-            acc += f64::from(pdf(direction(c, p)));
-        }}
-        let brute = acc / (k * k) as f64 * dc * dp;
-        diffs.push(((integral - brute).abs() * 2e5, ci, pi, integral * 2e5, brute * 2e5));
-    }}
-    diffs.sort_by(|a, b| b.0.total_cmp(&a.0));
-    for d in &diffs[..10] { println!("{d:?}"); }
-}

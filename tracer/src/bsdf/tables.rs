@@ -7,15 +7,21 @@
 //!   entries, about 10⁶ lobe evaluations: a few milliseconds.
 //! - [`dielectric`]: for the rough dielectric interface (exact Fresnel, reflection plus
 //!   refraction, counted as energy, i.e. without the 1/η² radiance factor), per side of
-//!   the interface, over (μ, α, η). 2 × 16 × 16 × 16 entries, about 4 · 10⁶ evaluations:
-//!   built only when a scene first evaluates a rough transmissive surface.
+//!   the interface, over (μ, α, η). 2 × 32 × 16 × 16 entries, about 8 · 10⁶ Fresnel
+//!   evaluations on 2 · 10⁵ visible normals (a quarter of a second): built only when a
+//!   scene first evaluates a rough transmissive surface.
 //!
 //! Axes: `μ = t²` with `t` uniform, because the albedo changes fastest at grazing angles
 //! (its features scale with α, so small α needs fine steps near μ = 0); roughness
 //! `r = √α` uniform on `[√ALPHA_MIN, 1]` (below that the BSDF is a delta lobe and needs no
-//! table); and for the dielectric `x = (η − 1)/(η + 1)` uniform on `[0, X_MAX]`, the
-//! square root of the normal-incidence reflectance, which spreads the common IORs
-//! (1.3–2.5) over the table instead of crowding them at one end.
+//! table); and for the dielectric `y = √((η − 1)/(η + 1))` uniform on `[0, Y_MAX]`: near
+//! η = 1 the cosine of the critical angle grows like `√(η − 1)`, and the albedo seen from
+//! inside changes with it, so the nodes crowd there; the common IORs (1.3–2.5) still get
+//! a third of the axis.
+//!
+//! The tables are built serially, not with rayon: the first lookup happens inside
+//! rendering, on a rayon worker, and a parallel build there could steal a rendering job
+//! that waits for the same `OnceLock`.
 
 use super::fresnel;
 use super::microfacet;
@@ -25,8 +31,12 @@ use std::sync::OnceLock;
 
 /// Nodes along μ and roughness for the conductor table.
 const COND_N: usize = 32;
-/// Nodes along μ, roughness and x for the dielectric table.
+/// Nodes along μ and roughness for the dielectric table.
 const DIEL_N: usize = 16;
+/// Nodes along the IOR axis of the dielectric table. Seen from inside, the albedo
+/// changes quickly with η where the critical angle sweeps through the visible normals;
+/// the extra nodes are cheap because all IORs share one pass over the visible normals.
+const DIEL_N_ETA: usize = 32;
 /// Largest `y = √((η − 1)/(η + 1))` tabulated: η = 10.5. Larger IORs use the η = 10.5
 /// entries (their albedo changes little beyond).
 const Y_MAX: f32 = 0.909;
@@ -275,17 +285,17 @@ pub(crate) struct DielectricCoord {
 
 impl DielectricTable {
     fn index(inside: bool, xi: usize, rj: usize, mi: usize) -> usize {
-        ((usize::from(inside) * DIEL_N + xi) * DIEL_N + rj) * DIEL_N + mi
+        ((usize::from(inside) * DIEL_N_ETA + xi) * DIEL_N + rj) * DIEL_N + mi
     }
 
     fn build() -> Self {
         let pts = quad_points::<DQ_PHI, DQ_Z>();
-        // Relative indices of every (side, x node), in table order.
+        // Relative indices of every (side, IOR node), in table order.
         let etas: Vec<f32> = [false, true]
             .into_iter()
             .flat_map(|inside| {
-                (0..DIEL_N).map(move |xi| {
-                    let y = Y_MAX * xi as f32 / (DIEL_N - 1) as f32;
+                (0..DIEL_N_ETA).map(move |xi| {
+                    let y = Y_MAX * xi as f32 / (DIEL_N_ETA - 1) as f32;
                     let x = y * y;
                     let eta = (1.0 + x) / (1.0 - x);
                     if inside {
@@ -296,14 +306,14 @@ impl DielectricTable {
                 })
             })
             .collect();
-        let mut data = vec![[0.0; 3]; 2 * DIEL_N * DIEL_N * DIEL_N];
+        let mut data = vec![[0.0; 3]; 2 * DIEL_N_ETA * DIEL_N * DIEL_N];
         let mut row = vec![[0.0; 3]; etas.len()];
         for rj in 0..DIEL_N {
             let alpha = node_alpha(rj, DIEL_N);
             for mi in 0..DIEL_N {
                 dielectric_albedo_with(node_mu(mi, DIEL_N), alpha, &etas, &pts, &mut row);
                 for (k, v) in row.iter().enumerate() {
-                    let (inside, xi) = (k >= DIEL_N, k % DIEL_N);
+                    let (inside, xi) = (k >= DIEL_N_ETA, k % DIEL_N_ETA);
                     data[Self::index(inside, xi, rj, mi)] = *v;
                 }
             }
@@ -317,7 +327,7 @@ impl DielectricTable {
         let y = ((eta - 1.0) / (eta + 1.0)).max(0.0).sqrt();
         DielectricCoord {
             r: AxisCoord::uniform(roughness_axis(alpha), DIEL_N),
-            x: AxisCoord::uniform(y / Y_MAX, DIEL_N),
+            x: AxisCoord::uniform(y / Y_MAX, DIEL_N_ETA),
             inside,
         }
     }

@@ -9,12 +9,13 @@
 //! centroids equal or areas overflowing) nodes split at the object median instead, which
 //! bounds the depth by 64 and the work by O(n log n) whatever the input.
 
-use glam::Vec3;
+use glam::{UVec3, Vec3, Vec3A};
 
 use super::node::Node;
 
-/// Bins per axis. Wald reports 16 to be as good as a full sweep for most scenes; 32
-/// measured no better on our scenes while binning costs the same.
+/// Most bins per axis. Wald reports 16 to be about as good as a full sweep; a node with
+/// fewer primitives uses as many bins as primitives, since sweeping empty bins costs more
+/// than binning for the millions of small nodes near the leaves.
 const BINS: usize = 16;
 
 /// Depth from which nodes split at the object median, so that the tree stays shallower
@@ -40,31 +41,43 @@ pub(super) struct BuildPrim {
     pub index: u32,
 }
 
+// The builder computes in Vec3A, whose min/max are single SIMD instructions; it sees no
+// NaN (primitives are finite), so their NaN behaviour does not matter here.
 impl BuildPrim {
+    #[inline]
+    fn min(&self) -> Vec3A {
+        self.min.into()
+    }
+
+    #[inline]
+    fn max(&self) -> Vec3A {
+        self.max.into()
+    }
+
     /// Box centroid, written so that boxes reaching ±f32::MAX do not overflow to infinity.
     #[inline]
-    fn centroid(&self) -> Vec3 {
-        self.min * 0.5 + self.max * 0.5
+    fn centroid(&self) -> Vec3A {
+        self.min() * 0.5 + self.max() * 0.5
     }
 }
 
 #[derive(Clone, Copy)]
 struct Bin {
-    min: Vec3,
-    max: Vec3,
+    min: Vec3A,
+    max: Vec3A,
     count: u32,
 }
 
 const EMPTY_BIN: Bin = Bin {
-    min: Vec3::INFINITY,
-    max: Vec3::NEG_INFINITY,
+    min: Vec3A::INFINITY,
+    max: Vec3A::NEG_INFINITY,
     count: 0,
 };
 
 /// Half the surface area of a box (the factor 2 cancels in SAH ratios); 0 when empty.
 #[inline]
-fn half_area(min: Vec3, max: Vec3) -> f32 {
-    let e = (max - min).max(Vec3::ZERO);
+fn half_area(min: Vec3A, max: Vec3A) -> f32 {
+    let e = (max - min).max(Vec3A::ZERO);
     e.x * e.y + e.y * e.z + e.z * e.x
 }
 
@@ -76,83 +89,116 @@ struct Task {
     depth: u32,
 }
 
-/// A chosen split: primitives go left when `bin_of(centroid[axis]) < bin`.
+/// A chosen split: primitives go left when their centroid's bin along `axis` (of `bins`)
+/// is below `bin`.
 #[derive(Clone, Copy)]
 struct Split {
     axis: usize,
+    bins: usize,
     bin: usize,
     /// Σ half-area × count over both children.
     cost: f32,
 }
 
+/// Subtrees with at least this many primitives build their two children in parallel.
+/// Each parallel level copies its subtree's nodes once when joining, so it only pays off
+/// for large ranges.
+const PARALLEL_MIN: usize = 1 << 15;
+
 /// Builds the hierarchy over `prims`, reordering them so that every leaf's primitives are
-/// contiguous. Returns the nodes (empty for no primitives); node 0 is the root.
+/// contiguous. Returns the nodes (empty for no primitives); node 0 is the root, and every
+/// node's children come after it. The result does not depend on the thread count.
 pub(super) fn build(prims: &mut [BuildPrim], params: &BuildParams) -> Vec<Node> {
-    let mut nodes = Vec::new();
     if prims.is_empty() {
-        return nodes;
+        return Vec::new();
     }
+    let mut nodes = build_subtree(prims, 0, 0, params);
+    nodes.shrink_to_fit();
+    nodes
+}
+
+/// Builds the subtree over `prims`, which start at `offset` in the whole primitive array,
+/// splitting large ranges in parallel with `rayon::join`. The subtree's root is its node 0.
+fn build_subtree(
+    prims: &mut [BuildPrim],
+    offset: usize,
+    depth: u32,
+    params: &BuildParams,
+) -> Vec<Node> {
+    if prims.len() < PARALLEL_MIN {
+        return build_sequential(prims, offset, depth, params);
+    }
+    let (min, max, split) = split_node(prims, depth, params);
+    let Some(mid) = split else {
+        return vec![Node {
+            min,
+            start: offset as u32,
+            max,
+            count: prims.len() as u32,
+        }];
+    };
+    let (left, right) = prims.split_at_mut(mid);
+    let (l, r) = rayon::join(
+        || build_subtree(left, offset, depth + 1, params),
+        || build_subtree(right, offset + mid, depth + 1, params),
+    );
+    // Layout: root, both subtree roots, then the rest of the left and right subtrees.
+    // Interior nodes' child indices move with their subtree.
+    let shift = |n: &Node, by: usize| {
+        if n.count == 0 {
+            Node {
+                start: n.start + by as u32,
+                ..*n
+            }
+        } else {
+            *n
+        }
+    };
+    let (l_shift, r_shift) = (2, l.len() + 1);
+    let mut nodes = Vec::with_capacity(1 + l.len() + r.len());
+    nodes.push(Node {
+        min,
+        start: 1,
+        max,
+        count: 0,
+    });
+    nodes.push(shift(&l[0], l_shift));
+    nodes.push(shift(&r[0], r_shift));
+    nodes.extend(l[1..].iter().map(|n| shift(n, l_shift)));
+    nodes.extend(r[1..].iter().map(|n| shift(n, r_shift)));
+    nodes
+}
+
+/// Builds the subtree over `prims` (at `offset` in the whole array) on this thread,
+/// depth first with an explicit stack, so lopsided inputs cannot overflow the call stack.
+fn build_sequential(
+    prims: &mut [BuildPrim],
+    offset: usize,
+    depth: u32,
+    params: &BuildParams,
+) -> Vec<Node> {
     // A binary tree with leaves of at least one primitive has at most 2n - 1 nodes.
-    nodes.reserve(2 * prims.len() - 1);
+    let mut nodes = Vec::with_capacity(2 * prims.len() - 1);
     nodes.push(placeholder());
-    // Depth-first with an explicit stack: no recursion limit on lopsided inputs.
     let mut tasks = vec![Task {
         node: 0,
         begin: 0,
         end: prims.len(),
-        depth: 0,
+        depth,
     }];
     while let Some(task) = tasks.pop() {
         let range = &mut prims[task.begin..task.end];
-        let count = range.len();
-
-        // Node bounds and centroid bounds in one pass.
-        let (mut min, mut max) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        let (mut cmin, mut cmax) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        for p in range.iter() {
-            min = min.min(p.min);
-            max = max.max(p.max);
-            let c = p.centroid();
-            cmin = cmin.min(c);
-            cmax = cmax.max(c);
-        }
-        let leaf = Node {
-            min,
-            start: task.begin as u32,
-            max,
-            count: count as u32,
-        };
-        if count == 1 {
-            nodes[task.node] = leaf;
+        let (min, max, split) = split_node(range, task.depth, params);
+        let Some(mid) = split else {
+            let start = (offset + task.begin) as u32;
+            nodes[task.node] = Node {
+                min,
+                start,
+                max,
+                count: range.len() as u32,
+            };
             continue;
-        }
-
-        let split = if task.depth < SAH_MAX_DEPTH {
-            best_split(range, cmin, cmax)
-        } else {
-            None
         };
-        let mid = match split {
-            Some(split) => {
-                let parent = half_area(min, max);
-                let leaf_cost = params.intersect_cost * count as f32 * parent;
-                let split_cost =
-                    params.traversal_cost * parent + params.intersect_cost * split.cost;
-                // Costs are scaled by the parent's area rather than divided by it, so a
-                // zero-area node compares 0 with 0 and becomes a leaf if it may.
-                if count as u32 <= params.max_leaf && leaf_cost <= split_cost {
-                    nodes[task.node] = leaf;
-                    continue;
-                }
-                partition_at(range, split, cmin, cmax)
-            }
-            None if count as u32 <= params.max_leaf => {
-                nodes[task.node] = leaf;
-                continue;
-            }
-            None => median_split(range, cmin, cmax),
-        };
-
         let left = nodes.len();
         nodes.push(placeholder());
         nodes.push(placeholder());
@@ -164,21 +210,67 @@ pub(super) fn build(prims: &mut [BuildPrim], params: &BuildParams) -> Vec<Node> 
         };
         let depth = task.depth + 1;
         // Push right first so the left subtree is built (and laid out) first.
+        let (begin, mid, end) = (task.begin, task.begin + mid, task.end);
         tasks.push(Task {
             node: left + 1,
-            begin: task.begin + mid,
-            end: task.end,
+            begin: mid,
+            end,
             depth,
         });
         tasks.push(Task {
             node: left,
-            begin: task.begin,
-            end: task.begin + mid,
+            begin,
+            end: mid,
             depth,
         });
     }
-    nodes.shrink_to_fit();
     nodes
+}
+
+/// Decides one node over `prims`: returns its bounds and, when it is to be split, the
+/// number of primitives that now lie in the left child (the slice is partitioned).
+fn split_node(
+    prims: &mut [BuildPrim],
+    depth: u32,
+    params: &BuildParams,
+) -> (Vec3, Vec3, Option<usize>) {
+    let count = prims.len();
+    // Node bounds and centroid bounds in one pass.
+    let (mut min, mut max) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    let (mut cmin, mut cmax) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    for p in prims.iter() {
+        min = min.min(p.min());
+        max = max.max(p.max());
+        let c = p.centroid();
+        cmin = cmin.min(c);
+        cmax = cmax.max(c);
+    }
+    let leaf = (min.into(), max.into(), None);
+    if count == 1 {
+        return leaf;
+    }
+    let may_be_leaf = count as u32 <= params.max_leaf;
+    let split = if depth < SAH_MAX_DEPTH {
+        best_split(prims, cmin, cmax)
+    } else {
+        None
+    };
+    let mid = match split {
+        Some(split) => {
+            let parent = half_area(min, max);
+            let leaf_cost = params.intersect_cost * count as f32 * parent;
+            let split_cost = params.traversal_cost * parent + params.intersect_cost * split.cost;
+            // Costs are scaled by the parent's area rather than divided by it, so a
+            // zero-area node compares 0 with 0 and becomes a leaf if it may.
+            if may_be_leaf && leaf_cost <= split_cost {
+                return leaf;
+            }
+            partition_at(prims, split, cmin, cmax)
+        }
+        None if may_be_leaf => return leaf,
+        None => median_split(prims, cmin, cmax),
+    };
+    (min.into(), max.into(), Some(mid))
 }
 
 fn placeholder() -> Node {
@@ -190,36 +282,42 @@ fn placeholder() -> Node {
     }
 }
 
-/// Scale mapping a centroid coordinate to its bin along each axis (0 for a flat axis).
+/// Scale mapping a centroid coordinate to one of `bins` bins along each axis (0 for a
+/// flat axis, which then puts everything in bin 0 and is skipped).
 #[inline]
-fn bin_scale(cmin: Vec3, cmax: Vec3) -> Vec3 {
+fn bin_scale(cmin: Vec3A, cmax: Vec3A, bins: usize) -> Vec3A {
     let extent = cmax - cmin;
-    // Slightly under BINS / extent so the largest centroid lands in the last bin.
-    let s = Vec3::splat(BINS as f32 * (1.0 - 1e-6)) / extent;
-    Vec3::select(extent.cmpgt(Vec3::ZERO) & s.is_finite_mask(), s, Vec3::ZERO)
+    // Slightly under bins / extent so the largest centroid lands in the last bin.
+    let s = Vec3A::splat(bins as f32 * (1.0 - 1e-6)) / extent;
+    Vec3A::select(
+        extent.cmpgt(Vec3A::ZERO) & s.is_finite_mask(),
+        s,
+        Vec3A::ZERO,
+    )
 }
 
-/// Bin of centroid coordinate `c`; the float-to-int cast saturates, so rounding at the ends
-/// (or a NaN) still lands in a valid bin.
+/// Bins of centroid `c` along the three axes; float-to-int casts saturate, so rounding
+/// at the ends still lands in a valid bin.
 #[inline]
-fn bin_of(c: f32, cmin: f32, scale: f32) -> usize {
-    (((c - cmin) * scale) as usize).min(BINS - 1)
+fn bins_of(c: Vec3A, cmin: Vec3A, scale: Vec3A, bins: usize) -> UVec3 {
+    ((c - cmin) * scale)
+        .as_uvec3()
+        .min(UVec3::splat(bins as u32 - 1))
 }
 
 /// The cheapest SAH plane over all axes, or None when no plane separates the centroids
 /// or every candidate's cost overflowed.
-fn best_split(prims: &[BuildPrim], cmin: Vec3, cmax: Vec3) -> Option<Split> {
-    let scale = bin_scale(cmin, cmax);
+fn best_split(prims: &[BuildPrim], cmin: Vec3A, cmax: Vec3A) -> Option<Split> {
+    let nb = prims.len().clamp(2, BINS);
+    let scale = bin_scale(cmin, cmax, nb);
     let mut bins = [[EMPTY_BIN; BINS]; 3];
     for p in prims {
-        let c = p.centroid();
-        for axis in 0..3 {
-            if scale[axis] == 0.0 {
-                continue;
-            }
-            let bin = &mut bins[axis][bin_of(c[axis], cmin[axis], scale[axis])];
-            bin.min = bin.min.min(p.min);
-            bin.max = bin.max.max(p.max);
+        let (pmin, pmax) = (p.min(), p.max());
+        let b = bins_of(p.centroid(), cmin, scale, nb);
+        for (axis, bins) in bins.iter_mut().enumerate() {
+            let bin = &mut bins[b[axis] as usize];
+            bin.min = bin.min.min(pmin);
+            bin.max = bin.max.max(pmax);
             bin.count += 1;
         }
     }
@@ -229,10 +327,11 @@ fn best_split(prims: &[BuildPrim], cmin: Vec3, cmax: Vec3) -> Option<Split> {
         if scale[axis] == 0.0 {
             continue;
         }
+        let bins = &bins[..nb];
         // Sweep from the right: cost share of bins[i..] for each plane i.
         let mut right_cost = [0.0f32; BINS];
         let mut acc = EMPTY_BIN;
-        for i in (1..BINS).rev() {
+        for i in (1..nb).rev() {
             acc.min = acc.min.min(bins[i].min);
             acc.max = acc.max.max(bins[i].max);
             acc.count += bins[i].count;
@@ -244,7 +343,7 @@ fn best_split(prims: &[BuildPrim], cmin: Vec3, cmax: Vec3) -> Option<Split> {
         }
         // Sweep from the left, pricing plane i between bins i-1 and i.
         let mut acc = EMPTY_BIN;
-        for i in 1..BINS {
+        for i in 1..nb {
             acc.min = acc.min.min(bins[i - 1].min);
             acc.max = acc.max.max(bins[i - 1].max);
             acc.count += bins[i - 1].count;
@@ -254,7 +353,12 @@ fn best_split(prims: &[BuildPrim], cmin: Vec3, cmax: Vec3) -> Option<Split> {
             // NaN (an empty right side, or overflowing areas) never compares less.
             let cost = half_area(acc.min, acc.max) * acc.count as f32 + right_cost[i];
             if cost.is_finite() && best.is_none_or(|b| cost < b.cost) {
-                best = Some(Split { axis, bin: i, cost });
+                best = Some(Split {
+                    axis,
+                    bins: nb,
+                    bin: i,
+                    cost,
+                });
             }
         }
     }
@@ -263,10 +367,11 @@ fn best_split(prims: &[BuildPrim], cmin: Vec3, cmax: Vec3) -> Option<Split> {
 
 /// Moves the primitives left of `split` to the front; returns how many there are (never
 /// 0 nor all, since the split was priced from non-empty sides).
-fn partition_at(prims: &mut [BuildPrim], split: Split, cmin: Vec3, cmax: Vec3) -> usize {
-    let axis = split.axis;
-    let (lo, scale) = (cmin[axis], bin_scale(cmin, cmax)[axis]);
-    let goes_left = |p: &BuildPrim| bin_of(p.centroid()[axis], lo, scale) < split.bin;
+fn partition_at(prims: &mut [BuildPrim], split: Split, cmin: Vec3A, cmax: Vec3A) -> usize {
+    let scale = bin_scale(cmin, cmax, split.bins);
+    let goes_left = |p: &BuildPrim| {
+        (bins_of(p.centroid(), cmin, scale, split.bins)[split.axis] as usize) < split.bin
+    };
     // Hoare-style in-place partition.
     let (mut i, mut j) = (0, prims.len());
     while i < j {
@@ -282,7 +387,7 @@ fn partition_at(prims: &mut [BuildPrim], split: Split, cmin: Vec3, cmax: Vec3) -
 
 /// Splits at the object median along the axis of largest centroid extent: always two
 /// non-empty halves, whatever the centroids.
-fn median_split(prims: &mut [BuildPrim], cmin: Vec3, cmax: Vec3) -> usize {
+fn median_split(prims: &mut [BuildPrim], cmin: Vec3A, cmax: Vec3A) -> usize {
     let axis = (cmax - cmin).max_position();
     let mid = prims.len() / 2;
     prims.select_nth_unstable_by(mid, |a, b| {
@@ -380,6 +485,26 @@ mod tests {
         });
         let nodes = build(&mut prims, &PARAMS);
         check(&nodes, &prims, 102);
+    }
+
+    #[test]
+    fn parallel_build_lays_out_the_same_tree_as_the_sequential_one() {
+        let mut state = 0x853c_49e6_748f_ea9bu64;
+        let mut f = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let n = 3 * PARALLEL_MIN;
+        let points: Vec<Vec3> = (0..n).map(|_| Vec3::new(f(), f(), f() * 0.1)).collect();
+        let prims = point_prims(&points);
+        let (mut a, mut b) = (prims.clone(), prims);
+        let parallel = build(&mut a, &PARAMS);
+        let sequential = build_sequential(&mut b, 0, 0, &PARAMS);
+        assert_eq!(parallel, sequential);
+        assert!(a.iter().zip(&b).all(|(a, b)| a.index == b.index));
+        check(&parallel, &a, n);
     }
 
     #[test]

@@ -23,9 +23,6 @@ pub(super) struct Node {
 /// [`super::build::SAH_MAX_DEPTH`] (32), and a median split halves the primitive count, so
 /// no path is longer than 32 + 32 nodes for up to 2^32 primitives; at most one sibling per
 /// level waits on the stack.
-pub static VISITS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-pub static LEAVES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-pub static TRIS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 pub(super) const STACK_SIZE: usize = 64;
 
 /// The far slab distance is scaled up by 1 + 2·gamma(3) to cover the rounding of both slab
@@ -95,10 +92,7 @@ pub(super) fn traverse(
     let mut sp = 0;
     let mut node = root;
     loop {
-        VISITS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         if node.count > 0 {
-            LEAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            TRIS.fetch_add(node.count as u64, std::sync::atomic::Ordering::Relaxed);
             if leaf(node.start, node.count, t_max) {
                 return;
             }

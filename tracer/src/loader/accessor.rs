@@ -84,7 +84,9 @@ struct Strided<'b> {
 impl<'b> Strided<'b> {
     /// Checks that `count` elements of `elem` bytes, `stride` apart from `offset`, fit in
     /// `view_bytes`; `what` names the run in the error.
+    #[allow(clippy::too_many_arguments)]
     fn new(
+        view: usize,
         view_bytes: &'b [u8],
         offset: usize,
         stride: usize,
@@ -113,8 +115,8 @@ impl<'b> Strided<'b> {
             _ => Err(SceneError::at(
                 element,
                 format!(
-                    "{what}: {count} elements of {elem} bytes every {stride} bytes from offset \
-                     {offset} do not fit in a buffer view of {} bytes",
+                    "{what}: {count} elements of {elem} bytes, {stride} apart from byte {offset}, \
+                     overrun bufferView {view} ({} bytes)",
                     view_bytes.len()
                 ),
             )),
@@ -209,6 +211,7 @@ pub(crate) fn read_floats(
         let view = sparse.values().view();
         let vb = view_bytes(&view, buffers)?;
         let run = Strided::new(
+            view.index(),
             vb,
             sparse.values().offset(),
             n * csize,
@@ -264,6 +267,7 @@ pub(crate) fn read_indices(
         let view = sparse.values().view();
         let vb = view_bytes(&view, buffers)?;
         let run = Strided::new(
+            view.index(),
             vb,
             sparse.values().offset(),
             csize,
@@ -304,7 +308,16 @@ fn dense<T: Default + Clone>(
                 ));
             }
             let vb = view_bytes(&view, buffers)?;
-            let run = Strided::new(vb, acc.offset(), stride, elem, count, element, what)?;
+            let run = Strided::new(
+                view.index(),
+                vb,
+                acc.offset(),
+                stride,
+                elem,
+                count,
+                element,
+                what,
+            )?;
             let mut out = Vec::with_capacity(count * per_elem);
             for i in 0..count {
                 push(run.get(i), &mut out);
@@ -338,9 +351,19 @@ fn sparse_indices(
         gltf::accessor::sparse::IndexType::U32 => DataType::U32,
     };
     let size = component_size(ty);
-    let vb = view_bytes(&idx.view(), buffers)?;
+    let view = idx.view();
+    let vb = view_bytes(&view, buffers)?;
     let n = sparse.count();
-    let run = Strided::new(vb, idx.offset(), size, size, n, element, "sparse indices")?;
+    let run = Strided::new(
+        view.index(),
+        vb,
+        idx.offset(),
+        size,
+        size,
+        n,
+        element,
+        "sparse indices",
+    )?;
     let mut out = Vec::with_capacity(n);
     for k in 0..n {
         let i = unsigned(run.get(k), ty).unwrap_or(0);

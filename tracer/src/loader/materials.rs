@@ -1,0 +1,326 @@
+//! Materials with the KHR material extensions, and the textures they use: one texture per
+//! distinct (image, sampler) pair, each image decoded once.
+
+use std::borrow::Cow;
+use std::collections::HashMap;
+
+use glam::{Vec2, Vec3, Vec4};
+use gltf::json::Value;
+use rayon::prelude::*;
+
+use super::accessor::view_bytes;
+use super::error::{Element, SceneError};
+use super::gltf::Input;
+use super::images;
+use crate::material::{AlphaMode, Material};
+use crate::texture::{Filter, Texture, TextureRef, UvTransform, Wrap};
+
+/// The scene's textures: one per distinct (image, sampler settings) that a material uses.
+#[derive(Default)]
+pub(crate) struct TextureTable {
+    index: HashMap<(usize, u8, u8, u8), u32>,
+    entries: Vec<(usize, Wrap, Wrap, Filter)>,
+}
+
+fn wrap_of(w: gltf::texture::WrappingMode) -> Wrap {
+    match w {
+        gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+        gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+        gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+    }
+}
+
+impl TextureTable {
+    fn add(&mut self, tex: &gltf::Texture<'_>) -> u32 {
+        let s = tex.sampler();
+        let (ws, wt) = (wrap_of(s.wrap_s()), wrap_of(s.wrap_t()));
+        let filter = match s.mag_filter() {
+            Some(gltf::texture::MagFilter::Nearest) => Filter::Nearest,
+            _ => Filter::Linear,
+        };
+        let image = tex.source().index();
+        let key = (image, ws as u8, wt as u8, filter as u8);
+        let next = self.entries.len() as u32;
+        *self.index.entry(key).or_insert_with(|| {
+            self.entries.push((image, ws, wt, filter));
+            next
+        })
+    }
+
+    /// Decodes every image the table uses, once each and in parallel.
+    pub(crate) fn decode(&self, input: &Input<'_>) -> Result<Vec<Texture>, SceneError> {
+        let mut unique: Vec<usize> = self.entries.iter().map(|e| e.0).collect();
+        unique.sort_unstable();
+        unique.dedup();
+        let decoded: Vec<Result<images::Decoded, SceneError>> =
+            unique.par_iter().map(|&i| decode_image(input, i)).collect();
+        let mut decoded: Vec<Option<images::Decoded>> = decoded
+            .into_iter()
+            .map(|d| d.map(Some))
+            .collect::<Result<_, _>>()?;
+        let mut uses_left: HashMap<usize, usize> = HashMap::new();
+        for e in &self.entries {
+            *uses_left.entry(e.0).or_default() += 1;
+        }
+        let mut out = Vec::with_capacity(self.entries.len());
+        for &(image, wrap_s, wrap_t, filter) in &self.entries {
+            let slot = unique
+                .binary_search(&image)
+                .expect("every entry's image was decoded");
+            let left = uses_left.get_mut(&image).expect("counted above");
+            *left -= 1;
+            // The last texture using an image takes its texels; earlier ones copy them.
+            let d = if *left == 0 {
+                decoded[slot].take().expect("taken only by the last use")
+            } else {
+                let d = decoded[slot]
+                    .as_ref()
+                    .expect("not taken before the last use");
+                images::Decoded {
+                    width: d.width,
+                    height: d.height,
+                    texels: d.texels.clone(),
+                }
+            };
+            out.push(Texture {
+                width: d.width,
+                height: d.height,
+                texels: d.texels,
+                wrap_s,
+                wrap_t,
+                filter,
+            });
+        }
+        Ok(out)
+    }
+}
+
+fn decode_image(input: &Input<'_>, index: usize) -> Result<images::Decoded, SceneError> {
+    let element = Element::Image(index);
+    // Read the JSON rather than `gltf::Image::source`, which panics on an image with a
+    // bufferView but no mimeType, or with neither bufferView nor uri.
+    let json = &input.doc.as_json().images[index];
+    let declared = json.mime_type.as_ref().map(|m| m.0.clone());
+    let (bytes, mime, what): (Cow<'_, [u8]>, Option<String>, String) =
+        match (&json.buffer_view, &json.uri) {
+            (Some(view), _) => {
+                let view = input
+                    .doc
+                    .views()
+                    .nth(view.value())
+                    .expect("validated index");
+                let what = format!("bufferView {}", view.index());
+                (
+                    Cow::Borrowed(view_bytes(&view, input.buffers)?),
+                    declared,
+                    what,
+                )
+            }
+            (None, Some(uri)) => {
+                let r = input.resolver.resolve(uri, element)?;
+                let what = if uri.starts_with("data:") {
+                    "data: URI".into()
+                } else {
+                    format!("'{uri}'")
+                };
+                (Cow::Owned(r.bytes), declared.or(r.mime), what)
+            }
+            (None, None) => {
+                return Err(SceneError::at(
+                    element,
+                    "has neither a bufferView nor a uri",
+                ))
+            }
+        };
+    images::decode(&bytes, mime.as_deref())
+        .map_err(|e| SceneError::at(element, format!("{what}: {e}")))
+}
+
+fn uv_transform(offset: [f32; 2], rotation: f32, scale: [f32; 2]) -> UvTransform {
+    UvTransform {
+        offset: Vec2::from_array(offset),
+        rotation,
+        scale: Vec2::from_array(scale),
+    }
+}
+
+fn texture_ref(
+    table: &mut TextureTable,
+    info: &gltf::texture::Info<'_>,
+    context: &str,
+    warnings: &mut Vec<String>,
+) -> TextureRef {
+    let (texcoord, transform) = match info.texture_transform() {
+        Some(t) => (
+            t.tex_coord().unwrap_or(info.tex_coord()),
+            Some(uv_transform(t.offset(), t.rotation(), t.scale())),
+        ),
+        None => (info.tex_coord(), None),
+    };
+    finish_ref(
+        table,
+        &info.texture(),
+        texcoord,
+        transform,
+        context,
+        warnings,
+    )
+}
+
+fn finish_ref(
+    table: &mut TextureTable,
+    tex: &gltf::Texture<'_>,
+    texcoord: u32,
+    transform: Option<UvTransform>,
+    context: &str,
+    warnings: &mut Vec<String>,
+) -> TextureRef {
+    if texcoord > 1 {
+        warnings.push(format!(
+            "{context} reads TEXCOORD_{texcoord}; only TEXCOORD_0 and TEXCOORD_1 are loaded"
+        ));
+    }
+    // An identity transform is no transform: skip the work per sample.
+    let transform = transform.filter(|t| *t != uv_transform([0.0; 2], 0.0, [1.0; 2]));
+    TextureRef {
+        texture: table.add(tex),
+        texcoord,
+        transform,
+    }
+}
+
+/// KHR_texture_transform on a normal texture, read from the raw JSON (the `gltf` crate
+/// exposes it only for `textureInfo`). Returns (texCoord override, transform).
+fn normal_texture_transform(raw: &Value, material: usize) -> (Option<u32>, Option<UvTransform>) {
+    let t = &raw["materials"][material]["normalTexture"]["extensions"]["KHR_texture_transform"];
+    if !t.is_object() {
+        return (None, None);
+    }
+    let pair = |v: &Value, d: [f32; 2]| -> [f32; 2] {
+        match (v[0].as_f64(), v[1].as_f64()) {
+            (Some(a), Some(b)) => [a as f32, b as f32],
+            _ => d,
+        }
+    };
+    let offset = pair(&t["offset"], [0.0, 0.0]);
+    let scale = pair(&t["scale"], [1.0, 1.0]);
+    let rotation = t["rotation"].as_f64().unwrap_or(0.0) as f32;
+    let texcoord = t["texCoord"]
+        .as_u64()
+        .map(|c| c.min(u32::MAX as u64) as u32);
+    (texcoord, Some(uv_transform(offset, rotation, scale)))
+}
+
+pub(crate) fn convert_material(
+    m: &gltf::Material<'_>,
+    raw: &Value,
+    table: &mut TextureTable,
+    warnings: &mut Vec<String>,
+) -> Result<Material, SceneError> {
+    let index = m.index().expect("document materials have an index");
+    let element = Element::Material(index);
+    let ctx = |slot: &str| format!("material {index} {slot}");
+    let pbr = m.pbr_metallic_roughness();
+
+    let mut out = Material {
+        name: m.name().map(str::to_owned),
+        base_color: Vec4::from_array(pbr.base_color_factor()),
+        metallic: pbr.metallic_factor(),
+        roughness: pbr.roughness_factor(),
+        emissive: Vec3::from_array(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0),
+        ior: m.ior().unwrap_or(1.5),
+        alpha_mode: match m.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Mask => AlphaMode::Mask {
+                cutoff: m.alpha_cutoff().unwrap_or(0.5),
+            },
+            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+        },
+        double_sided: m.double_sided(),
+        ..Material::default()
+    };
+    out.base_color_texture = pbr
+        .base_color_texture()
+        .map(|i| texture_ref(table, &i, &ctx("baseColorTexture"), warnings));
+    out.metallic_roughness_texture = pbr
+        .metallic_roughness_texture()
+        .map(|i| texture_ref(table, &i, &ctx("metallicRoughnessTexture"), warnings));
+    out.emissive_texture = m
+        .emissive_texture()
+        .map(|i| texture_ref(table, &i, &ctx("emissiveTexture"), warnings));
+    if let Some(n) = m.normal_texture() {
+        let (cover, transform) = normal_texture_transform(raw, index);
+        let texcoord = cover.unwrap_or(n.tex_coord());
+        out.normal_texture = Some(finish_ref(
+            table,
+            &n.texture(),
+            texcoord,
+            transform,
+            &ctx("normalTexture"),
+            warnings,
+        ));
+        out.normal_scale = n.scale();
+    }
+    if let Some(s) = m.specular() {
+        out.specular = s.specular_factor();
+        out.specular_color = Vec3::from_array(s.specular_color_factor());
+        out.specular_texture = s
+            .specular_texture()
+            .map(|i| texture_ref(table, &i, &ctx("specularTexture"), warnings));
+        out.specular_color_texture = s
+            .specular_color_texture()
+            .map(|i| texture_ref(table, &i, &ctx("specularColorTexture"), warnings));
+    }
+    if let Some(t) = m.transmission() {
+        out.transmission = t.transmission_factor();
+        out.transmission_texture = t
+            .transmission_texture()
+            .map(|i| texture_ref(table, &i, &ctx("transmissionTexture"), warnings));
+    }
+
+    // A NaN factor would reach every pixel the material covers: refuse it here.
+    let cutoff = match out.alpha_mode {
+        AlphaMode::Mask { cutoff } => cutoff,
+        _ => 0.5,
+    };
+    let factors = [
+        ("baseColorFactor", out.base_color.to_array().to_vec()),
+        ("metallicFactor", vec![out.metallic]),
+        ("roughnessFactor", vec![out.roughness]),
+        (
+            "emissive (factor × strength)",
+            out.emissive.to_array().to_vec(),
+        ),
+        ("normalTexture.scale", vec![out.normal_scale]),
+        ("ior", vec![out.ior]),
+        ("specularFactor", vec![out.specular]),
+        (
+            "specularColorFactor",
+            out.specular_color.to_array().to_vec(),
+        ),
+        ("transmissionFactor", vec![out.transmission]),
+        ("alphaCutoff", vec![cutoff]),
+    ];
+    for (name, values) in factors {
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(SceneError::at(
+                element,
+                format!("{name} {values:?} is not finite"),
+            ));
+        }
+    }
+    if out.emissive.min_element() < 0.0 {
+        return Err(SceneError::at(
+            element,
+            format!("emissive {} is negative", out.emissive),
+        ));
+    }
+    // Factors outside the spec's ranges are clamped, as renderers commonly do.
+    out.base_color = out.base_color.clamp(Vec4::ZERO, Vec4::ONE);
+    out.metallic = out.metallic.clamp(0.0, 1.0);
+    out.roughness = out.roughness.clamp(0.0, 1.0);
+    out.transmission = out.transmission.clamp(0.0, 1.0);
+    out.specular = out.specular.max(0.0);
+    out.specular_color = out.specular_color.max(Vec3::ZERO);
+    Ok(out)
+}
