@@ -52,7 +52,8 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 0)]
     seed: u32,
     /// Environment: `black`, a radiance `R,G,B` or one number, or an equirectangular .exr.
-    /// By default the scene's own; a scene without any light gets a white one.
+    /// By default the scene's own; a glTF scene without punctual lights gets a uniform white
+    /// environment of radiance 1, one with punctual lights none.
     #[arg(long)]
     environment: Option<String>,
     /// Worker threads (all cores by default).

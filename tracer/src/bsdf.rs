@@ -50,7 +50,7 @@
 //! # Energy
 //!
 //! Single-scattering GGX loses the light that bounces more than once among the
-//! microfacets. [`tables`] integrates directional albedos once, on first use, and:
+//! microfacets. `bsdf/tables.rs` integrates directional albedos once, on first use, and:
 //!
 //! - the metal and the specular layer get Turquin et al.'s (2019) factor
 //!   `1 + F0 (1 − E1(μo)) / E1(μo)`, exact for F0 = 1;
@@ -310,6 +310,15 @@ impl Bsdf {
         self.pdf_local(wo, wi, &at)
     }
 
+    /// `eval(wo, wi)` and `pdf(wo, wi)` together, sharing the work that depends on `wo`
+    /// (for light sampling with MIS, which needs both).
+    pub fn eval_and_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
+        let Some((wo, wi, at)) = self.prepare_pair(wo, wi) else {
+            return (Vec3::ZERO, 0.0);
+        };
+        (self.eval_local(wo, wi, &at), self.pdf_local(wo, wi, &at))
+    }
+
     /// Samples an incident direction from `u_lobe` (lobe choice) and `u` (direction).
     /// `None` when no direction carries energy (a black material, a grazing `wo`, or a
     /// sampled microfacet whose reflection or refraction points the wrong way).
@@ -345,8 +354,7 @@ impl Bsdf {
 
     /// Validates a pair and moves it into the frame where `wo.z > 0`.
     fn prepare_pair(&self, wo: Vec3, wi: Vec3) -> Option<(Vec3, Vec3, AtWo)> {
-        if !wo.is_finite() || !wi.is_finite() || wo.z.abs() < COS_EPS || wi.z.abs() < COS_EPS
-        {
+        if !wo.is_finite() || !wi.is_finite() || wo.z.abs() < COS_EPS || wi.z.abs() < COS_EPS {
             return None;
         }
         let inside = wo.z < 0.0;
@@ -366,31 +374,30 @@ impl Bsdf {
         let c_mean = mean(self.base);
 
         // Metal and specular layer: Turquin factor and albedo estimates.
-        let (metal_comp, spec_comp, e_metal, e_spec_max, e_spec_mean) = if self.w_metal == 0.0
-            && self.w_plastic == 0.0
-        {
-            (Vec3::ONE, Vec3::ONE, 0.0, 0.0, 0.0)
-        } else if self.smooth {
-            (
-                Vec3::ONE,
-                Vec3::ONE,
-                fresnel::schlick_scalar(c_mean, mu_o),
-                self.spec * fresnel::schlick_scalar(f0_max, mu_o),
-                self.spec * fresnel::schlick_scalar(f0_mean, mu_o),
-            )
-        } else {
-            let [e1, ew] = tables::conductor().lookup(mu_o, self.cond);
-            let e1 = e1.clamp(0.05, 1.0);
-            let ew = ew.clamp(0.0, e1);
-            let k = (1.0 - e1) / e1;
-            (
-                Vec3::ONE + self.base * k,
-                Vec3::ONE + self.f0_spec * k,
-                compensated_albedo(c_mean, e1, ew, k),
-                self.spec * compensated_albedo(f0_max, e1, ew, k),
-                self.spec * compensated_albedo(f0_mean, e1, ew, k),
-            )
-        };
+        let (metal_comp, spec_comp, e_metal, e_spec_max, e_spec_mean) =
+            if self.w_metal == 0.0 && self.w_plastic == 0.0 {
+                (Vec3::ONE, Vec3::ONE, 0.0, 0.0, 0.0)
+            } else if self.smooth {
+                (
+                    Vec3::ONE,
+                    Vec3::ONE,
+                    fresnel::schlick_scalar(c_mean, mu_o),
+                    self.spec * fresnel::schlick_scalar(f0_max, mu_o),
+                    self.spec * fresnel::schlick_scalar(f0_mean, mu_o),
+                )
+            } else {
+                let [e1, ew] = tables::conductor().lookup(mu_o, self.cond);
+                let e1 = e1.clamp(0.05, 1.0);
+                let ew = ew.clamp(0.0, e1);
+                let k = (1.0 - e1) / e1;
+                (
+                    Vec3::ONE + self.base * k,
+                    Vec3::ONE + self.f0_spec * k,
+                    compensated_albedo(c_mean, e1, ew, k),
+                    self.spec * compensated_albedo(f0_max, e1, ew, k),
+                    self.spec * compensated_albedo(f0_mean, e1, ew, k),
+                )
+            };
         // Albedo scaling: the base gets what the specular layer leaves. Using the
         // largest F0 channel keeps every channel at or below 1 (as glTF's
         // `max_value(fr)` does).
@@ -466,8 +473,12 @@ impl Bsdf {
                 let cos_om = wo.dot(wm).clamp(0.0, 1.0);
                 let lobe = microfacet::d(wm, self.alpha) * microfacet::g2(mu_o, mu_i, self.alpha)
                     / (4.0 * mu_o * mu_i);
-                let mut fresnel = self.w_metal * fresnel::schlick(self.base, cos_om) * at.metal_comp
-                    + self.w_plastic * self.spec * fresnel::schlick(self.f0_spec, cos_om) * at.spec_comp;
+                let mut fresnel =
+                    self.w_metal * fresnel::schlick(self.base, cos_om) * at.metal_comp
+                        + self.w_plastic
+                            * self.spec
+                            * fresnel::schlick(self.f0_spec, cos_om)
+                            * at.spec_comp;
                 if self.w_glass > 0.0 && !self.glass_smooth {
                     let fr = fresnel::dielectric(cos_om, at.eta_rel);
                     fresnel += self.w_glass * fr * self.glass_tint;
@@ -540,8 +551,8 @@ impl Bsdf {
             if !self.smooth {
                 let wm = (wo + wi).normalize_or(Vec3::Z);
                 // Reflection through the visible-normal density: D_wo(wm) / (4 wo·wm).
-                let pdf_refl = microfacet::g1(wo.z, self.alpha) * microfacet::d(wm, self.alpha)
-                    / (4.0 * wo.z);
+                let pdf_refl =
+                    microfacet::g1(wo.z, self.alpha) * microfacet::d(wm, self.alpha) / (4.0 * wo.z);
                 pdf += p_ggx * pdf_refl;
                 if glass_rough {
                     let fr = fresnel::dielectric(wo.dot(wm).clamp(0.0, 1.0), at.eta_rel);

@@ -5,6 +5,7 @@
 use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
 
 use crate::camera::Projection;
+use crate::light::Environment;
 use crate::material::Material;
 use crate::scene::{CameraDef, Scene, SceneBuilder};
 use crate::shapes::{cube, quad, uv_sphere};
@@ -64,6 +65,8 @@ fn cornell_shell(b: &mut SceneBuilder) {
         },
     };
     b.camera(camera, DMat4::from_translation(DVec3::new(0.0, 1.0, 3.75)));
+    // Closed but for the front: only the ceiling light lights it.
+    b.environment(Environment::Black);
 }
 
 /// The measured Cornell box with its two diffuse blocks: the reference scene for

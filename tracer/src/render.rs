@@ -47,8 +47,9 @@ pub struct FrameOptions {
     pub height: u32,
     /// The camera.
     pub camera: CameraChoice,
-    /// Replaces the scene's environment; `None` keeps it, and a scene with no light at all
-    /// then gets a uniform white environment so that it is visible.
+    /// Replaces the scene's environment. `None` keeps the scene's own; a scene that defines
+    /// none (every glTF file) gets a uniform white environment of radiance 1 when it has no
+    /// punctual light, so a bare model is lit as in a viewer, and darkness otherwise.
     pub environment: Option<Environment>,
 }
 
@@ -238,13 +239,17 @@ pub fn prepare_frame(scene: Arc<Scene>, options: &FrameOptions) -> Result<Prepar
 
     let bvh = SceneBvh::build(instances);
     let mut features = scene.features;
-    let environment = match &options.environment {
-        Some(env) => env.clone(),
-        None if punctual.is_empty() && triangles.is_empty() && matches!(scene.environment, Environment::Black) => {
-            warnings.push("the scene has no light: using a uniform white environment".into());
+    let environment = match (&options.environment, &scene.environment) {
+        (Some(env), _) | (None, Some(env)) => env.clone(),
+        (None, None) if punctual.is_empty() => {
+            warnings.push(
+                "the scene defines no environment and no punctual light: using a uniform white \
+                 environment of radiance 1"
+                    .into(),
+            );
             Environment::Constant(Vec3::ONE)
         }
-        None => scene.environment.clone(),
+        (None, None) => Environment::Black,
     };
     features.environment = !matches!(environment, Environment::Black);
     let lights = LightSet::new(punctual, triangles, environment, bvh.bounds());

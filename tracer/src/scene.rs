@@ -29,8 +29,10 @@ pub struct Scene {
     pub cameras: Vec<CameraDef>,
     /// Punctual lights in their node's space; a node places them.
     pub lights: Vec<PunctualLight>,
-    /// Light arriving from infinitely far away.
-    pub environment: Environment,
+    /// Light arriving from infinitely far away, when the scene defines it. glTF has no
+    /// environment, so loaded scenes leave this `None` and the renderer picks a default
+    /// (see [`crate::render::FrameOptions::environment`]); built-in scenes set it.
+    pub environment: Option<Environment>,
     /// What the scene needs from the tracer.
     pub features: Features,
     /// Problems that did not stop loading (an optional extension ignored, a degenerate
@@ -248,7 +250,7 @@ impl SceneBuilder {
 
     /// Sets the environment.
     pub fn environment(&mut self, environment: Environment) {
-        self.scene.environment = environment;
+        self.scene.environment = Some(environment);
     }
 
     /// The scene, with its feature flags derived from what was added.
@@ -261,7 +263,7 @@ impl SceneBuilder {
             alpha_mask: mats.iter().any(|m| m.alpha_mode != crate::material::AlphaMode::Opaque),
             emissive: mats.iter().any(Material::is_emissive),
             punctual_lights: !s.lights.is_empty(),
-            environment: !matches!(s.environment, Environment::Black),
+            environment: s.environment.as_ref().is_some_and(|e| !e.is_black()),
             normal_maps: mats.iter().any(|m| m.normal_texture.is_some()),
         };
         self.scene

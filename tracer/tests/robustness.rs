@@ -189,8 +189,11 @@ fn offset_rays_never_rehit_their_triangle() {
     );
 }
 
+/// Vertex positions and triangles as vertex indices.
+type IndexedMesh = (Vec<Vec3>, Vec<[u32; 3]>);
+
 /// A closed sphere: an icosahedron subdivided `levels` times, vertices shared by index.
-fn icosphere(levels: u32, radius: f32, centre: Vec3) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+fn icosphere(levels: u32, radius: f32, centre: Vec3) -> IndexedMesh {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
     let mut verts: Vec<Vec3> = [
         (-1.0, t, 0.0),
@@ -259,7 +262,7 @@ fn icosphere(levels: u32, radius: f32, centre: Vec3) -> (Vec<Vec3>, Vec<[u32; 3]
 /// A closed cube of half-size `h` with an `n`×`n` grid of quads per face. Vertex positions
 /// come from one formula of the grid coordinates, so vertices shared between faces are
 /// bitwise equal even though the faces share no indices.
-fn grid_cube(n: u32, h: f32, centre: Vec3) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+fn grid_cube(n: u32, h: f32, centre: Vec3) -> IndexedMesh {
     let coord = |i: u32| -h + (2.0 * h) * (i as f32 / n as f32);
     let mut verts = Vec::new();
     let mut faces = Vec::new();
@@ -312,7 +315,7 @@ fn surface_targets(rng: &mut Rng, verts: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec
 #[test]
 fn closed_meshes_do_not_leak() {
     let mut rng = Rng(2);
-    let shapes: Vec<(&str, (Vec<Vec3>, Vec<[u32; 3]>), f32)> = vec![
+    let shapes: Vec<(&str, IndexedMesh, f32)> = vec![
         ("icosphere r=1e-3", icosphere(4, 1e-3, Vec3::ZERO), 1e-3),
         ("icosphere r=1", icosphere(4, 1.0, Vec3::ZERO), 1.0),
         ("icosphere r=1e3", icosphere(4, 1e3, Vec3::ZERO), 1e3),

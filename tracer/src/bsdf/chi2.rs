@@ -3,11 +3,13 @@
 //!
 //! The sphere is split into `n_cos × n_phi` cells of equal solid angle (uniform in cosθ
 //! and φ). Sampled directions are counted per cell; the expected count of a cell is the
-//! sample count times the pdf integrated over the cell (adaptive Simpson cubature in
-//! (θ, φ), so that narrow lobes are resolved). Samples the sampler rejects (`None`) form one more cell whose
-//! expected count is the pdf mass missing from the sphere, so a pdf that does not match
-//! the sampler's failure rate is caught too. Cells expecting fewer than 5 samples are
-//! pooled, and the statistic is compared with the χ² distribution.
+//! sample count times the pdf integrated over the cell by adaptive Simpson cubature
+//! (in θ near the poles and in cosθ near the horizon, refined wherever the samples crowd,
+//! so that lobes far narrower than a cell are resolved). Samples the sampler rejects
+//! (`None`) form one more cell whose expected count is the pdf mass missing from the
+//! sphere, so a pdf that disagrees with the sampler's failure rate is caught too. Cells
+//! expecting fewer than 5 samples are pooled, and the statistic is compared with the χ²
+//! distribution.
 
 use glam::Vec3;
 use std::f64::consts::PI;
@@ -161,10 +163,42 @@ fn adaptive(
     }
     let (tm, pm) = (0.5 * (r.t0 + r.t1), 0.5 * (r.p0 + r.p1));
     let quads = [
-        (Rect { t1: tm, p1: pm, ..*r }, 0, 0),
-        (Rect { t0: tm, p1: pm, ..*r }, 2, 0),
-        (Rect { t1: tm, p0: pm, ..*r }, 0, 2),
-        (Rect { t0: tm, p0: pm, ..*r }, 2, 2),
+        (
+            Rect {
+                t1: tm,
+                p1: pm,
+                ..*r
+            },
+            0,
+            0,
+        ),
+        (
+            Rect {
+                t0: tm,
+                p1: pm,
+                ..*r
+            },
+            2,
+            0,
+        ),
+        (
+            Rect {
+                t1: tm,
+                p0: pm,
+                ..*r
+            },
+            0,
+            2,
+        ),
+        (
+            Rect {
+                t0: tm,
+                p0: pm,
+                ..*r
+            },
+            2,
+            2,
+        ),
     ];
     let sub = |a0: usize, b0: usize| {
         let mut s = [[0.0; 3]; 3];
@@ -317,7 +351,11 @@ pub(crate) fn run(
             let mut integral = 0.0;
             for &(band, in_theta) in &bands(c0, c1, 2) {
                 let f = |x: f64, p: f64| {
-                    let (cos, jac) = if in_theta { (x.cos(), x.sin()) } else { (x, 1.0) };
+                    let (cos, jac) = if in_theta {
+                        (x.cos(), x.sin())
+                    } else {
+                        (x, 1.0)
+                    };
                     let v = f64::from(pdf(direction(cos, p)));
                     assert!(v.is_finite() && v >= 0.0, "pdf {v} at cos {cos} phi {p}");
                     v * jac
@@ -336,9 +374,7 @@ pub(crate) fn run(
                     let inside: Vec<(f64, f64)> = pts
                         .iter()
                         .copied()
-                        .filter(|&(t, p)| {
-                            t >= sub.t0 && t <= sub.t1 && p >= sub.p0 && p < sub.p1
-                        })
+                        .filter(|&(t, p)| t >= sub.t0 && t <= sub.t1 && p >= sub.p0 && p < sub.p1)
                         .collect();
                     integral += adaptive(&f, &sub, &grid3(&f, &sub), &refine, &inside, 0);
                 }
@@ -502,7 +538,8 @@ fn chi2_rejects_a_wrong_pdf() {
     };
     let good = run(cfg, 1, sampler, |_| 0.25 / std::f32::consts::PI);
     assert!(good.p_value > 1e-3, "{good:?}");
-    let bad = run(cfg, 1, sampler, |v| (1.0 + 0.1 * v.z) * 0.25 / std::f32::consts::PI);
+    let bad = run(cfg, 1, sampler, |v| {
+        (1.0 + 0.1 * v.z) * 0.25 / std::f32::consts::PI
+    });
     assert!(bad.p_value < 1e-6, "{bad:?}");
 }
-

@@ -11,8 +11,8 @@
 //!   evaluations on 2 · 10⁵ visible normals (a quarter of a second): built only when a
 //!   scene first evaluates a rough transmissive surface.
 //!
-//! Axes: `μ = t²` with `t` uniform, because the albedo changes fastest at grazing angles
-//! (its features scale with α, so small α needs fine steps near μ = 0); roughness
+//! Axes: μ through [`mu_axis`], which follows the grazing-angle dip of the albedo as it
+//! narrows with α (half of the nodes lie below μ = α); roughness
 //! `r = √α` uniform on `[√ALPHA_MIN, 1]` (below that the BSDF is a delta lobe and needs no
 //! table); and for the dielectric `y = √((η − 1)/(η + 1))` uniform on `[0, Y_MAX]`: near
 //! η = 1 the cosine of the critical angle grows like `√(η − 1)`, and the albedo seen from
@@ -79,10 +79,32 @@ fn node_alpha(j: usize, n: usize) -> f32 {
     r * r
 }
 
-/// The μ of node `i` of `n` on the μ axis.
-fn node_mu(i: usize, n: usize) -> f32 {
-    let t = i as f32 / (n - 1) as f32;
-    (t * t).max(MU_NODE_MIN)
+/// The normalised μ-axis position of `mu` for roughness `alpha`: the mean of `√μ` and
+/// `√(μ(1 + α)/(μ + α))`. The Fresnel terms change with μ itself, smoothly, and `√μ`
+/// alone (nodes at `μ = t²`) serves them and rough surfaces well. But near grazing the
+/// albedo of a smoother surface dips and recovers over a range of μ about as wide as α
+/// (a smooth GGX surface is self-similar in μ/α); the second term follows μ/α and keeps
+/// that feature on the same nodes for every α, so that interpolation along roughness
+/// stays accurate too.
+fn mu_axis(mu: f32, alpha: f32) -> f32 {
+    let mu = mu.clamp(0.0, 1.0);
+    0.5 * (mu.sqrt() + (mu * (1.0 + alpha) / (mu + alpha)).sqrt())
+}
+
+/// The μ of node `i` of `n` on the μ axis for roughness `alpha` (inverse of [`mu_axis`],
+/// by bisection: it is monotonic).
+fn node_mu(i: usize, n: usize, alpha: f32) -> f32 {
+    let s = i as f32 / (n - 1) as f32;
+    let (mut lo, mut hi) = (0.0f32, 1.0f32);
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if mu_axis(mid, alpha) < s {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (0.5 * (lo + hi)).max(MU_NODE_MIN)
 }
 
 /// One quadrature point in the visible-normal sample space.
@@ -233,6 +255,7 @@ pub(crate) struct ConductorTable {
 /// A conductor-table lookup position for one α, reusable for many μ.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct ConductorCoord {
+    alpha: f32,
     r: AxisCoord,
 }
 
@@ -243,7 +266,8 @@ impl ConductorTable {
         for j in 0..COND_N {
             let alpha = node_alpha(j, COND_N);
             for i in 0..COND_N {
-                data[j * COND_N + i] = conductor_albedo_with(node_mu(i, COND_N), alpha, &pts);
+                data[j * COND_N + i] =
+                    conductor_albedo_with(node_mu(i, COND_N, alpha), alpha, &pts);
             }
         }
         Self { data }
@@ -252,13 +276,14 @@ impl ConductorTable {
     /// The lookup position for `alpha`.
     pub(crate) fn coord(alpha: f32) -> ConductorCoord {
         ConductorCoord {
+            alpha,
             r: AxisCoord::uniform(roughness_axis(alpha), COND_N),
         }
     }
 
     /// `[E1, Ew]` at cosine `mu`, bilinear.
     pub(crate) fn lookup(&self, mu: f32, c: ConductorCoord) -> [f32; 2] {
-        let m = AxisCoord::uniform(mu.clamp(0.0, 1.0).sqrt(), COND_N);
+        let m = AxisCoord::uniform(mu_axis(mu, c.alpha), COND_N);
         let at = |j: usize, i: usize| self.data[j * COND_N + i];
         let mut out = [0.0; 2];
         for (k, o) in out.iter_mut().enumerate() {
@@ -278,8 +303,9 @@ pub(crate) struct DielectricTable {
 /// A dielectric-table lookup position for one (α, η, side), reusable for many μ.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct DielectricCoord {
+    alpha: f32,
     r: AxisCoord,
-    x: AxisCoord,
+    y: AxisCoord,
     inside: bool,
 }
 
@@ -311,7 +337,7 @@ impl DielectricTable {
         for rj in 0..DIEL_N {
             let alpha = node_alpha(rj, DIEL_N);
             for mi in 0..DIEL_N {
-                dielectric_albedo_with(node_mu(mi, DIEL_N), alpha, &etas, &pts, &mut row);
+                dielectric_albedo_with(node_mu(mi, DIEL_N, alpha), alpha, &etas, &pts, &mut row);
                 for (k, v) in row.iter().enumerate() {
                     let (inside, xi) = (k >= DIEL_N_ETA, k % DIEL_N_ETA);
                     data[Self::index(inside, xi, rj, mi)] = *v;
@@ -326,21 +352,22 @@ impl DielectricTable {
     pub(crate) fn coord(alpha: f32, eta: f32, inside: bool) -> DielectricCoord {
         let y = ((eta - 1.0) / (eta + 1.0)).max(0.0).sqrt();
         DielectricCoord {
+            alpha,
             r: AxisCoord::uniform(roughness_axis(alpha), DIEL_N),
-            x: AxisCoord::uniform(y / Y_MAX, DIEL_N_ETA),
+            y: AxisCoord::uniform(y / Y_MAX, DIEL_N_ETA),
             inside,
         }
     }
 
     /// `[A, B, C]` at cosine `mu`, trilinear.
     pub(crate) fn lookup(&self, mu: f32, c: DielectricCoord) -> [f32; 3] {
-        let m = AxisCoord::uniform(mu.clamp(0.0, 1.0).sqrt(), DIEL_N);
+        let m = AxisCoord::uniform(mu_axis(mu, c.alpha), DIEL_N);
         let mut out = [0.0; 3];
-        for (dx, wx) in [(0, 1.0 - c.x.t), (1, c.x.t)] {
+        for (dx, wx) in [(0, 1.0 - c.y.t), (1, c.y.t)] {
             for (dr, wr) in [(0, 1.0 - c.r.t), (1, c.r.t)] {
                 for (dm, wm) in [(0, 1.0 - m.t), (1, m.t)] {
                     let w = wx * wr * wm;
-                    let v = self.data[Self::index(c.inside, c.x.i + dx, c.r.i + dr, m.i + dm)];
+                    let v = self.data[Self::index(c.inside, c.y.i + dx, c.r.i + dr, m.i + dm)];
                     for k in 0..3 {
                         out[k] += w * v[k];
                     }

@@ -96,7 +96,7 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         textures,
         cameras,
         lights,
-        environment: Default::default(),
+        environment: None,
         features: Features::default(),
         warnings,
     };
