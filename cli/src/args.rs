@@ -10,7 +10,9 @@ pub const MAX_SIDE: u32 = 16384;
 
 /// `WxH`, e.g. `1280x720`.
 pub fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
-    let (w, h) = s.split_once(['x', 'X']).context("expected WIDTHxHEIGHT, e.g. 640x360")?;
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .context("expected WIDTHxHEIGHT, e.g. 640x360")?;
     let w: u32 = w.trim().parse().context("width is not a whole number")?;
     let h: u32 = h.trim().parse().context("height is not a whole number")?;
     if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
@@ -26,7 +28,9 @@ pub fn parse_region(s: &str) -> anyhow::Result<TileRect> {
         .map(|p| p.trim().parse::<u32>())
         .collect::<Result<_, _>>()
         .context("expected X,Y,WIDTH,HEIGHT as whole numbers")?;
-    let [x, y, w, h] = v[..] else { bail!("expected four numbers X,Y,WIDTH,HEIGHT") };
+    let [x, y, w, h] = v[..] else {
+        bail!("expected four numbers X,Y,WIDTH,HEIGHT")
+    };
     if w == 0 || h == 0 {
         bail!("region {s}: width and height must be at least 1");
     }
@@ -55,6 +59,9 @@ mod tests {
         assert!(parse_region("1,2,3").is_err());
         assert!(parse_region("1,2,0,4").is_err());
         assert_eq!(parse_camera("2").unwrap(), CameraChoice::Index(2));
-        assert_eq!(parse_camera("Main").unwrap(), CameraChoice::Name("Main".into()));
+        assert_eq!(
+            parse_camera("Main").unwrap(),
+            CameraChoice::Name("Main".into())
+        );
     }
 }

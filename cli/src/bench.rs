@@ -49,14 +49,21 @@ fn camera_rays_per_second(frame: &PreparedFrame) -> f64 {
     let (w, h) = (frame.width, frame.height);
     let rays: Vec<_> = (0..w * h)
         .map(|i| {
-            let film = Vec2::new(((i % w) as f32 + 0.5) / w as f32, ((i / w) as f32 + 0.5) / h as f32);
+            let film = Vec2::new(
+                ((i % w) as f32 + 0.5) / w as f32,
+                ((i / w) as f32 + 0.5) / h as f32,
+            );
             frame.camera.generate_ray(film)
         })
         .collect();
     let passes = 8;
     let start = Instant::now();
     let hits: usize = (0..passes)
-        .map(|_| rays.par_iter().filter(|r| frame.intersect(r, f32::INFINITY).is_some()).count())
+        .map(|_| {
+            rays.par_iter()
+                .filter(|r| frame.intersect(r, f32::INFINITY).is_some())
+                .count()
+        })
         .sum();
     std::hint::black_box(hits);
     (rays.len() * passes) as f64 / start.elapsed().as_secs_f64()
@@ -64,22 +71,46 @@ fn camera_rays_per_second(frame: &PreparedFrame) -> f64 {
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let (width, height) = if args.quick { (64, 64) } else { args.size };
-    let reference_spp = if args.quick { args.reference_spp.min(512) } else { args.reference_spp };
+    let reference_spp = if args.quick {
+        args.reference_spp.min(512)
+    } else {
+        args.reference_spp
+    };
     let scene = Arc::new(load_scene(args.scene.as_ref())?);
-    let frame = prepare_frame(scene, &FrameOptions { width, height, ..Default::default() })?;
+    let frame = prepare_frame(
+        scene,
+        &FrameOptions {
+            width,
+            height,
+            ..Default::default()
+        },
+    )?;
     let settings = RenderSettings::default();
     let rect = TileRect::new(0, 0, width, height);
     let threads = rayon::current_num_threads();
-    println!("tessera bench: {width}x{height}, max depth {}, {threads} threads", settings.max_depth);
+    println!(
+        "tessera bench: {width}x{height}, max depth {}, {threads} threads",
+        settings.max_depth
+    );
 
-    println!("camera rays (closest hit): {:.2} M rays/s", camera_rays_per_second(&frame) / 1e6);
+    println!(
+        "camera rays (closest hit): {:.2} M rays/s",
+        camera_rays_per_second(&frame) / 1e6
+    );
 
     // The sweep uses another seed than the reference, so that its samples are not a prefix
     // of the reference's, which would flatter the error.
     let render = |spp: u32, seed: u32| {
         let settings = RenderSettings { seed, ..settings };
         let start = Instant::now();
-        let tile = render_region(&frame, &settings, rect, SampleRange::new(0, spp), 32, &|_| {});
+        let tile = render_region(
+            &frame,
+            &settings,
+            rect,
+            SampleRange::new(0, spp),
+            32,
+            &|_| {},
+        );
         (tile, start.elapsed().as_secs_f64())
     };
     let (tile, secs) = render(16, 1);
@@ -96,7 +127,11 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     println!("reference took {ref_secs:.1} s");
     println!("| spp | time (s) | RMSE | RMSE x sqrt(time) |");
     println!("|---:|---:|---:|---:|");
-    let sweep: &[u32] = if args.quick { &[1, 4, 16, 64] } else { &[1, 4, 16, 64, 256] };
+    let sweep: &[u32] = if args.quick {
+        &[1, 4, 16, 64]
+    } else {
+        &[1, 4, 16, 64, 256]
+    };
     for &spp in sweep {
         let (tile, secs) = render(spp, 1);
         let e = rmse(&tile.resolve(), &reference);

@@ -1,7 +1,7 @@
 //! The `tessera` binary: thin command-line glue over the tracer, server and worker crates.
 
-mod bench;
 mod args;
+mod bench;
 mod render;
 
 use clap::{Parser, Subcommand};

@@ -99,13 +99,18 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         bail!("--spp {}: must be 1..={MAX_SPP}", args.spp);
     }
     if args.max_depth > MAX_DEPTH {
-        bail!("--max-depth {}: must be at most {MAX_DEPTH}", args.max_depth);
+        bail!(
+            "--max-depth {}: must be at most {MAX_DEPTH}",
+            args.max_depth
+        );
     }
     if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
         bail!("--fps {}: must be in (0, 1000]", args.fps);
     }
     if let Some(n) = args.threads {
-        rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global()?;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()?;
     }
     let (width, height) = args.size;
     let region = args.region.unwrap_or(TileRect::new(0, 0, width, height));
@@ -118,7 +123,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
-    let environment = args.environment.as_deref().map(parse_environment).transpose()?;
+    let environment = args
+        .environment
+        .as_deref()
+        .map(parse_environment)
+        .transpose()?;
     let options = FrameOptions {
         frame: args.frame,
         fps: args.fps,
@@ -133,12 +142,17 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     }
     let load_time = t_load.elapsed();
 
-    let settings = RenderSettings { max_depth: args.max_depth, seed: args.seed };
+    let settings = RenderSettings {
+        max_depth: args.max_depth,
+        seed: args.seed,
+    };
     let samples = SampleRange::new(0, args.spp);
     let bar = ProgressBar::new(region.area() as u64);
     bar.set_style(
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}")
-            .expect("valid template"),
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}",
+        )
+        .expect("valid template"),
     );
     let t_render = Instant::now();
     let tile = render_region(&frame, &settings, region, samples, 32, &|t| {

@@ -21,17 +21,33 @@ fn stderr(o: &Output) -> String {
 #[test]
 fn renders_the_demo_to_a_multilayer_exr_and_a_preview() {
     let dir = tempfile::tempdir().unwrap();
-    let o = tessera(&["render", "--size", "24x24", "--spp", "4", "--out", "demo.exr"], dir.path());
+    let o = tessera(
+        &[
+            "render", "--size", "24x24", "--spp", "4", "--out", "demo.exr",
+        ],
+        dir.path(),
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let summary = String::from_utf8_lossy(&o.stdout);
-    assert!(summary.contains("M rays/s") && summary.contains("dropped"), "{summary}");
+    assert!(
+        summary.contains("M rays/s") && summary.contains("dropped"),
+        "{summary}"
+    );
 
     let img = read_exr(&dir.path().join("demo.exr")).unwrap();
     assert_eq!(img.frame_size, (24, 24));
     assert_eq!(img.layers.rect, TileRect::new(0, 0, 24, 24));
     // A square view of the demo sees only the inside of the closed box.
-    assert!(img.layers.beauty.iter().all(|b| b.is_finite() && b.w == 1.0));
-    assert!(img.layers.normal.iter().all(|n| (n.length() - 1.0).abs() < 1e-3));
+    assert!(img
+        .layers
+        .beauty
+        .iter()
+        .all(|b| b.is_finite() && b.w == 1.0));
+    assert!(img
+        .layers
+        .normal
+        .iter()
+        .all(|n| (n.length() - 1.0).abs() < 1e-3));
     assert_eq!(img.attribute("tessera/spp"), Some("4"));
     let png = image::open(dir.path().join("demo.png")).unwrap();
     assert_eq!((png.width(), png.height()), (24, 24));
@@ -43,7 +59,10 @@ fn a_region_keeps_the_full_frame_as_display_window_and_matches_the_full_render()
     let args = ["render", "--size", "32x24", "--spp", "2", "--seed", "7"];
     let full = tessera(&[&args[..], &["--out", "full.exr"]].concat(), dir.path());
     assert!(full.status.success(), "{}", stderr(&full));
-    let part = tessera(&[&args[..], &["--region", "5,6,10,8", "--out", "part.exr"]].concat(), dir.path());
+    let part = tessera(
+        &[&args[..], &["--region", "5,6,10,8", "--out", "part.exr"]].concat(),
+        dir.path(),
+    );
     assert!(part.status.success(), "{}", stderr(&part));
 
     let full = read_exr(&dir.path().join("full.exr")).unwrap();
@@ -51,7 +70,10 @@ fn a_region_keeps_the_full_frame_as_display_window_and_matches_the_full_render()
     assert_eq!(part.frame_size, (32, 24));
     let region = TileRect::new(5, 6, 10, 8);
     assert_eq!(part.layers.rect, region);
-    assert!(part.layers == full.layers.crop(region), "region pixels differ from the full render");
+    assert!(
+        part.layers == full.layers.crop(region),
+        "region pixels differ from the full render"
+    );
 }
 
 #[test]
@@ -60,7 +82,10 @@ fn bad_arguments_are_refused_with_a_clear_message() {
     let cases: [(&[&str], &str); 5] = [
         (&["render", "--size", "0x10"], "each side must be"),
         (&["render", "--spp", "0"], "--spp 0"),
-        (&["render", "--region", "30,0,10,10", "--size", "32x24"], "does not fit"),
+        (
+            &["render", "--region", "30,0,10,10", "--size", "32x24"],
+            "does not fit",
+        ),
         (&["render", "missing.gltf"], "missing.gltf"),
         (&["render", "--camera", "7"], "camera 7"),
     ];

@@ -27,7 +27,11 @@ fn grid(n: usize) -> Vec<[Vec3; 3]> {
 }
 
 fn demo_frame(size: u32) -> PreparedFrame {
-    let options = FrameOptions { width: size, height: size, ..Default::default() };
+    let options = FrameOptions {
+        width: size,
+        height: size,
+        ..Default::default()
+    };
     prepare_frame(Arc::new(tracer::demo::demo_scene()), &options).expect("demo prepares")
 }
 
@@ -47,12 +51,20 @@ fn bvh_build(c: &mut Criterion) {
 fn camera_rays(c: &mut Criterion) {
     let frame = demo_frame(64);
     let rays: Vec<_> = (0..64 * 64)
-        .map(|i| frame.camera.generate_ray(Vec2::new((i % 64) as f32 / 64.0, (i / 64) as f32 / 64.0)))
+        .map(|i| {
+            frame
+                .camera
+                .generate_ray(Vec2::new((i % 64) as f32 / 64.0, (i / 64) as f32 / 64.0))
+        })
         .collect();
     let mut g = c.benchmark_group("camera_rays");
     g.throughput(Throughput::Elements(rays.len() as u64));
     g.bench_function("demo_closest_hit", |b| {
-        b.iter(|| rays.iter().filter(|r| frame.intersect(r, f32::INFINITY).is_some()).count())
+        b.iter(|| {
+            rays.iter()
+                .filter(|r| frame.intersect(r, f32::INFINITY).is_some())
+                .count()
+        })
     });
     g.finish();
 }

@@ -197,6 +197,18 @@ struct AtWo {
     p: [f32; 3],
 }
 
+/// Builds the energy-compensation tables now rather than at the first rough surface a
+/// render meets (about 0.1 s for the conductor table, 0.25 s more for the dielectric one
+/// with `with_dielectric`, at opt-level 3). Optional: call it while preparing a frame so
+/// that no rendering thread waits on the build, and only ask for the dielectric table
+/// when the scene has transmissive materials.
+pub fn precompute_tables(with_dielectric: bool) {
+    tables::conductor();
+    if with_dielectric {
+        tables::dielectric();
+    }
+}
+
 /// A finite value clamped to [lo, hi]; NaN becomes `default`.
 fn sane(x: f32, lo: f32, hi: f32, default: f32) -> f32 {
     if x.is_nan() {

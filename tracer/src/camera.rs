@@ -53,9 +53,10 @@ impl Camera {
             }
             // glTF's xmag and ymag fix both extents; the image's aspect wins, so the
             // horizontal extent follows ymag (as the perspective case follows yfov).
-            Projection::Orthographic { ymag, .. } => {
-                (Vec3::new(ndc.x * ymag * self.aspect, ndc.y * ymag, 0.0), Vec3::NEG_Z)
-            }
+            Projection::Orthographic { ymag, .. } => (
+                Vec3::new(ndc.x * ymag * self.aspect, ndc.y * ymag, 0.0),
+                Vec3::NEG_Z,
+            ),
         };
         let origin = self.to_world.transform_point3(origin);
         let dir = self.to_world.transform_vector3(dir).normalize();

@@ -44,16 +44,54 @@ fn cornell_shell(b: &mut SceneBuilder) {
     });
     let v = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
     let walls = vec![
-        quad([v(-1., 0., 1.), v(1., 0., 1.), v(1., 0., -1.), v(-1., 0., -1.)], white), // floor
-        quad([v(-1., 2., -1.), v(1., 2., -1.), v(1., 2., 1.), v(-1., 2., 1.)], white), // ceiling
-        quad([v(-1., 0., -1.), v(1., 0., -1.), v(1., 2., -1.), v(-1., 2., -1.)], white), // back
-        quad([v(-1., 0., 1.), v(-1., 0., -1.), v(-1., 2., -1.), v(-1., 2., 1.)], red), // left
-        quad([v(1., 0., -1.), v(1., 0., 1.), v(1., 2., 1.), v(1., 2., -1.)], green), // right
+        quad(
+            [
+                v(-1., 0., 1.),
+                v(1., 0., 1.),
+                v(1., 0., -1.),
+                v(-1., 0., -1.),
+            ],
+            white,
+        ), // floor
+        quad(
+            [
+                v(-1., 2., -1.),
+                v(1., 2., -1.),
+                v(1., 2., 1.),
+                v(-1., 2., 1.),
+            ],
+            white,
+        ), // ceiling
+        quad(
+            [
+                v(-1., 0., -1.),
+                v(1., 0., -1.),
+                v(1., 2., -1.),
+                v(-1., 2., -1.),
+            ],
+            white,
+        ), // back
+        quad(
+            [
+                v(-1., 0., 1.),
+                v(-1., 0., -1.),
+                v(-1., 2., -1.),
+                v(-1., 2., 1.),
+            ],
+            red,
+        ), // left
+        quad(
+            [v(1., 0., -1.), v(1., 0., 1.), v(1., 2., 1.), v(1., 2., -1.)],
+            green,
+        ), // right
     ];
     b.mesh("walls", walls, DMat4::IDENTITY);
     // The light sits just below the ceiling, facing down; 0.47 × 0.38 m like the original.
     let (hx, hz, y) = (0.235, 0.19, 1.998);
-    let lamp = quad([v(-hx, y, -hz), v(hx, y, -hz), v(hx, y, hz), v(-hx, y, hz)], light);
+    let lamp = quad(
+        [v(-hx, y, -hz), v(hx, y, -hz), v(hx, y, hz), v(-hx, y, hz)],
+        light,
+    );
     b.mesh("light", vec![lamp], DMat4::IDENTITY);
 
     let camera = CameraDef {
@@ -120,9 +158,21 @@ pub fn demo_scene() -> Scene {
     );
     b.mesh("box", vec![cube(block)], boxy);
     let sphere_at = |r: f64, x: f64, z: f64| {
-        DMat4::from_scale_rotation_translation(DVec3::splat(r), DQuat::IDENTITY, DVec3::new(x, r, z))
+        DMat4::from_scale_rotation_translation(
+            DVec3::splat(r),
+            DQuat::IDENTITY,
+            DVec3::new(x, r, z),
+        )
     };
-    b.mesh("metal sphere", vec![uv_sphere(metal, 48, 96)], sphere_at(0.35, 0.45, -0.45));
-    b.mesh("glass sphere", vec![uv_sphere(glass, 48, 96)], sphere_at(0.32, 0.15, 0.45));
+    b.mesh(
+        "metal sphere",
+        vec![uv_sphere(metal, 48, 96)],
+        sphere_at(0.35, 0.45, -0.45),
+    );
+    b.mesh(
+        "glass sphere",
+        vec![uv_sphere(glass, 48, 96)],
+        sphere_at(0.32, 0.15, 0.45),
+    );
     b.finish()
 }

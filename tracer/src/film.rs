@@ -20,7 +20,12 @@ pub struct TileRect {
 impl TileRect {
     /// A rectangle.
     pub fn new(x: u32, y: u32, width: u32, height: u32) -> Self {
-        Self { x, y, width, height }
+        Self {
+            x,
+            y,
+            width,
+            height,
+        }
     }
 
     /// Number of pixels.
@@ -164,7 +169,10 @@ impl TileBuffer {
     /// # Panics
     /// If the rectangles differ.
     pub fn merge(&mut self, other: &TileBuffer) {
-        assert_eq!(self.rect, other.rect, "merging tiles of different rectangles");
+        assert_eq!(
+            self.rect, other.rect,
+            "merging tiles of different rectangles"
+        );
         for i in 0..self.beauty.len() {
             self.beauty[i] += other.beauty[i];
             self.albedo[i] += other.albedo[i];
@@ -199,11 +207,19 @@ impl TileBuffer {
         let n = self.rect.area();
         let mut out = Layers::new(self.rect);
         for i in 0..n {
-            let inv = if self.samples[i] > 0 { 1.0 / self.samples[i] as f32 } else { 0.0 };
+            let inv = if self.samples[i] > 0 {
+                1.0 / self.samples[i] as f32
+            } else {
+                0.0
+            };
             out.beauty[i] = self.beauty[i] * inv;
             out.albedo[i] = self.albedo[i] * inv;
             let nrm = self.normal[i];
-            out.normal[i] = if nrm.length_squared() > 0.0 { nrm.normalize() } else { Vec3::ZERO };
+            out.normal[i] = if nrm.length_squared() > 0.0 {
+                nrm.normalize()
+            } else {
+                Vec3::ZERO
+            };
             out.depth[i] = if self.hits[i] > 0 {
                 self.depth[i] / self.hits[i] as f32
             } else {
@@ -300,15 +316,36 @@ mod tests {
         let tiles = r.tiles(16);
         assert_eq!(tiles.len(), 3 * 2);
         assert_eq!(tiles.iter().map(|t| t.area()).sum::<usize>(), r.area());
-        assert!(tiles.iter().all(|t| t.x >= 3 && t.x + t.width <= 40 && t.y + t.height <= 25));
+        assert!(tiles
+            .iter()
+            .all(|t| t.x >= 3 && t.x + t.width <= 40 && t.y + t.height <= 25));
     }
 
     #[test]
     fn non_finite_samples_are_dropped_and_counted() {
         let mut b = TileBuffer::new(TileRect::new(0, 0, 1, 1));
-        b.add(0, &SampleValue { radiance: Vec3::ONE, alpha: 1.0, ..Default::default() });
-        b.add(0, &SampleValue { radiance: Vec3::NAN, ..Default::default() });
-        b.add(0, &SampleValue { depth: Some(f32::INFINITY), ..Default::default() });
+        b.add(
+            0,
+            &SampleValue {
+                radiance: Vec3::ONE,
+                alpha: 1.0,
+                ..Default::default()
+            },
+        );
+        b.add(
+            0,
+            &SampleValue {
+                radiance: Vec3::NAN,
+                ..Default::default()
+            },
+        );
+        b.add(
+            0,
+            &SampleValue {
+                depth: Some(f32::INFINITY),
+                ..Default::default()
+            },
+        );
         assert_eq!(b.dropped, 2);
         assert_eq!(b.resolve().beauty[0], Vec4::ONE);
         assert_eq!(b.resolve().depth[0], NO_HIT_DEPTH);
@@ -324,7 +361,11 @@ mod tests {
         frame.paste(&tile);
         assert_eq!(frame.crop(tile.rect), tile);
         assert_eq!(frame.beauty[3 * 8 + 2], Vec4::splat(0.0));
-        assert_eq!(frame.beauty[3 * 8 + 1], Vec4::ZERO, "outside the tile stays black");
+        assert_eq!(
+            frame.beauty[3 * 8 + 1],
+            Vec4::ZERO,
+            "outside the tile stays black"
+        );
         assert_eq!(frame.beauty[4 * 8 + 5], Vec4::splat(7.0));
     }
 }

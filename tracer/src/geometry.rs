@@ -16,7 +16,11 @@ pub struct Ray {
 impl Ray {
     /// A ray at time 0.
     pub fn new(origin: Vec3, dir: Vec3) -> Self {
-        Self { origin, dir, time: 0.0 }
+        Self {
+            origin,
+            dir,
+            time: 0.0,
+        }
     }
 
     /// The point at parameter `t`.
@@ -57,11 +61,17 @@ impl Default for Aabb {
 
 impl Aabb {
     /// The box that contains nothing; growing it by a point gives that point.
-    pub const EMPTY: Aabb = Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY };
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::INFINITY,
+        max: Vec3::NEG_INFINITY,
+    };
 
     /// The smallest box holding both points.
     pub fn from_points(a: Vec3, b: Vec3) -> Self {
-        Self { min: a.min(b), max: a.max(b) }
+        Self {
+            min: a.min(b),
+            max: a.max(b),
+        }
     }
 
     /// Whether the box contains no point.
@@ -77,7 +87,10 @@ impl Aabb {
 
     /// The union of two boxes.
     pub fn union(&self, o: &Aabb) -> Aabb {
-        Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
+        Aabb {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
     }
 
     /// Size along each axis (negative for the empty box).
@@ -147,7 +160,11 @@ impl Frame {
             return Self::from_normal(n);
         }
         let x = t / len2.sqrt();
-        Self { x, y: n.cross(x), z: n }
+        Self {
+            x,
+            y: n.cross(x),
+            z: n,
+        }
     }
 
     /// World direction to local coordinates.
@@ -176,8 +193,18 @@ pub fn offset_ray_origin(p: Vec3, ng: Vec3) -> Vec3 {
         f32::from_bits((bits + if p < 0.0 { -o } else { o }) as u32)
     };
     let p_i = Vec3::new(step(p.x, of_i.x), step(p.y, of_i.y), step(p.z, of_i.z));
-    let pick = |p: f32, p_i: f32, n: f32| if p.abs() < ORIGIN { p + FLOAT_SCALE * n } else { p_i };
-    Vec3::new(pick(p.x, p_i.x, ng.x), pick(p.y, p_i.y, ng.y), pick(p.z, p_i.z, ng.z))
+    let pick = |p: f32, p_i: f32, n: f32| {
+        if p.abs() < ORIGIN {
+            p + FLOAT_SCALE * n
+        } else {
+            p_i
+        }
+    };
+    Vec3::new(
+        pick(p.x, p_i.x, ng.x),
+        pick(p.y, p_i.y, ng.y),
+        pick(p.z, p_i.z, ng.z),
+    )
 }
 
 /// Interpolates three per-vertex values with barycentric weights (b1, b2).

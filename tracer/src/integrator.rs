@@ -48,7 +48,11 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     let [a, b, c] = [i0, i1, i2].map(|i| prim.positions[i]);
     let p = inst.to_world.transform_point3(barycentric(a, b, c, b1, b2));
     let ng_raw = front_normal(inst, prim, t);
-    let ng = if ng_raw == Vec3::ZERO { -ray.dir.normalize() } else { ng_raw };
+    let ng = if ng_raw == Vec3::ZERO {
+        -ray.dir.normalize()
+    } else {
+        ng_raw
+    };
     let front = ng.dot(ray.dir) < 0.0;
 
     let (uvs, color) = (prim.uvs_at(t, b1, b2), prim.color_at(t, b1, b2));
@@ -69,7 +73,13 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     };
     let mut shading = Frame::from_normal(ns);
     if let (Some(nm), false) = (sample.normal_map, prim.tangents.is_empty()) {
-        let t4 = barycentric(prim.tangents[i0], prim.tangents[i1], prim.tangents[i2], b1, b2);
+        let t4 = barycentric(
+            prim.tangents[i0],
+            prim.tangents[i1],
+            prim.tangents[i2],
+            b1,
+            b2,
+        );
         let tangent = inst.to_world.transform_vector3(t4.truncate());
         let tf = Frame::from_normal_tangent(ns, tangent);
         let sign = if t4.w < 0.0 { -1.0 } else { 1.0 };
@@ -79,7 +89,9 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
             shading = Frame::from_normal_tangent(ns, tf.x);
         }
     } else if sample.normal_map.is_none() && !prim.tangents.is_empty() {
-        let tangent = inst.to_world.transform_vector3(prim.tangents[i0].truncate());
+        let tangent = inst
+            .to_world
+            .transform_vector3(prim.tangents[i0].truncate());
         shading = Frame::from_normal_tangent(ns, tangent);
     }
 
@@ -87,7 +99,11 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     // their orientation so the BSDF knows inside from outside.
     let transmissive = sample.surface.transmission > 0.0;
     let (ng, shading) = if !front && !transmissive {
-        let flipped = Frame { x: shading.x, y: -shading.y, z: -shading.z };
+        let flipped = Frame {
+            x: shading.x,
+            y: -shading.y,
+            z: -shading.z,
+        };
         (-ng, flipped)
     } else {
         (ng, shading)
@@ -118,7 +134,11 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
 /// A ray leaving `p` towards `dir`, offset to the side of `ng` the direction is on.
 fn spawn(p: Vec3, ng: Vec3, dir: Vec3, time: f32) -> Ray {
     let n = if dir.dot(ng) >= 0.0 { ng } else { -ng };
-    Ray { origin: offset_ray_origin(p, n), dir, time }
+    Ray {
+        origin: offset_ray_origin(p, n),
+        dir,
+        time,
+    }
 }
 
 /// Whether a direction is on the geometric side its shading-frame sign claims: stops
@@ -128,7 +148,13 @@ fn consistent_side(sp: &SurfacePoint, wi: Vec3, wi_local: Vec3) -> bool {
 }
 
 /// Traces camera sample `index` of pixel (`x`, `y`).
-pub fn trace_sample(frame: &PreparedFrame, settings: &RenderSettings, x: u32, y: u32, index: u32) -> SampleValue {
+pub fn trace_sample(
+    frame: &PreparedFrame,
+    settings: &RenderSettings,
+    x: u32,
+    y: u32,
+    index: u32,
+) -> SampleValue {
     let mut sampler = PixelSampler::new(x, y, index, frame.frame, settings.seed);
     let jitter = sampler.next_2d();
     let film = Vec2::new(
@@ -136,7 +162,11 @@ pub fn trace_sample(frame: &PreparedFrame, settings: &RenderSettings, x: u32, y:
         (y as f32 + jitter.y) / frame.height as f32,
     );
     let mut ray = frame.camera.generate_ray(film);
-    let view_axis = frame.camera.to_world.transform_vector3(Vec3::NEG_Z).normalize();
+    let view_axis = frame
+        .camera
+        .to_world
+        .transform_vector3(Vec3::NEG_Z)
+        .normalize();
 
     let mut out = SampleValue::default();
     let mut radiance = Vec3::ZERO;
@@ -183,7 +213,9 @@ pub fn trace_sample(frame: &PreparedFrame, settings: &RenderSettings, x: u32, y:
                 1.0
             } else {
                 let light_pdf =
-                    frame.lights.pdf_triangle(hit.instance, hit.triangle, prev_p, sp.p, sp.ng);
+                    frame
+                        .lights
+                        .pdf_triangle(hit.instance, hit.triangle, prev_p, sp.p, sp.ng);
                 power_heuristic(prev_pdf, light_pdf)
             };
             radiance += throughput * le * w;
@@ -205,21 +237,34 @@ pub fn trace_sample(frame: &PreparedFrame, settings: &RenderSettings, x: u32, y:
         if !bsdf.is_delta() {
             if let Some(ls) = frame.lights.sample(sp.p, Some(sp.ng), u_light, u_point) {
                 let wi_local = sp.frame.to_local(ls.wi);
-                let f = bsdf.eval(wo_local, wi_local) * wi_local.z.abs();
+                let (f, bsdf_pdf) = bsdf.eval_and_pdf(wo_local, wi_local);
+                let f = f * wi_local.z.abs();
                 if ls.pdf > 0.0 && f != Vec3::ZERO && consistent_side(&sp, ls.wi, wi_local) {
                     let le = match ls.emitter {
                         Emitter::Radiance(l) => l,
-                        Emitter::Triangle { instance, triangle, b1, b2, .. } => {
-                            emitted_toward(frame, instance, triangle, b1, b2, ls.wi)
-                        }
+                        Emitter::Triangle {
+                            instance,
+                            triangle,
+                            b1,
+                            b2,
+                            ..
+                        } => emitted_toward(frame, instance, triangle, b1, b2, ls.wi),
                     };
                     if le != Vec3::ZERO {
                         let shadow = spawn(sp.p, sp.ng, ls.wi, ray.time);
                         // Stop just short of the light so it does not occlude itself.
-                        let t_max = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) } else { f32::INFINITY };
+                        let t_max = if ls.distance.is_finite() {
+                            ls.distance * (1.0 - 1e-4)
+                        } else {
+                            f32::INFINITY
+                        };
                         out.rays += 1;
                         if !frame.occluded(&shadow, t_max) {
-                            let w = if ls.delta { 1.0 } else { power_heuristic(ls.pdf, bsdf.pdf(wo_local, wi_local)) };
+                            let w = if ls.delta {
+                                1.0
+                            } else {
+                                power_heuristic(ls.pdf, bsdf_pdf)
+                            };
                             radiance += throughput * f * le * (w / ls.pdf);
                         }
                     }
@@ -230,7 +275,9 @@ pub fn trace_sample(frame: &PreparedFrame, settings: &RenderSettings, x: u32, y:
         // Continue the path by sampling the BSDF.
         let u_lobe = sampler.next_1d();
         let u_dir = sampler.next_2d();
-        let Some(bs) = bsdf.sample(wo_local, u_lobe, u_dir) else { break };
+        let Some(bs) = bsdf.sample(wo_local, u_lobe, u_dir) else {
+            break;
+        };
         if !(bs.pdf > 0.0) {
             break;
         }
@@ -269,7 +316,14 @@ fn front_normal(inst: &crate::bvh::Instance, prim: &crate::scene::Primitive, t: 
 
 /// Radiance leaving emissive triangle `triangle` of `instance` at barycentrics (b1, b2)
 /// towards a point in direction `-wi` from it, honouring one-sided emission.
-fn emitted_toward(frame: &PreparedFrame, instance: u32, triangle: u32, b1: f32, b2: f32, wi: Vec3) -> Vec3 {
+fn emitted_toward(
+    frame: &PreparedFrame,
+    instance: u32,
+    triangle: u32,
+    b1: f32,
+    b2: f32,
+    wi: Vec3,
+) -> Vec3 {
     let scene = &*frame.scene;
     let inst = &frame.bvh.instances()[instance as usize];
     let mesh = &scene.meshes[inst.mesh as usize];

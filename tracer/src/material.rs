@@ -153,9 +153,15 @@ impl Material {
 
     /// Evaluates factors × textures at a point with texture coordinates `uvs` and vertex
     /// colour `vertex_color` (white when the primitive has none).
-    pub fn sample(&self, textures: &[Texture], uvs: [Vec2; 2], vertex_color: Vec4) -> MaterialSample {
+    pub fn sample(
+        &self,
+        textures: &[Texture],
+        uvs: [Vec2; 2],
+        vertex_color: Vec4,
+    ) -> MaterialSample {
         let read = |r: &Option<TextureRef>, srgb: bool| {
-            r.as_ref().map(|t| textures[t.texture as usize].sample(t.uv(uvs), srgb))
+            r.as_ref()
+                .map(|t| textures[t.texture as usize].sample(t.uv(uvs), srgb))
         };
         let mut base = self.base_color * vertex_color;
         if let Some(t) = read(&self.base_color_texture, true) {

@@ -77,7 +77,10 @@ pub struct RenderSettings {
 
 impl Default for RenderSettings {
     fn default() -> Self {
-        Self { max_depth: 8, seed: 0 }
+        Self {
+            max_depth: 8,
+            seed: 0,
+        }
     }
 }
 
@@ -125,8 +128,12 @@ pub struct PreparedFrame {
 /// Composes world transforms of every node reachable from the roots, in double precision.
 fn world_transforms(scene: &Scene) -> Vec<(u32, DMat4)> {
     let mut out = Vec::new();
-    let mut stack: Vec<(u32, DMat4, usize)> =
-        scene.roots.iter().rev().map(|&r| (r, DMat4::IDENTITY, 0)).collect();
+    let mut stack: Vec<(u32, DMat4, usize)> = scene
+        .roots
+        .iter()
+        .rev()
+        .map(|&r| (r, DMat4::IDENTITY, 0))
+        .collect();
     while let Some((node, parent, depth)) = stack.pop() {
         // The loader rejects cycles; the depth bound keeps a hand-built scene from looping.
         if depth > scene.nodes.len() {
@@ -153,7 +160,10 @@ fn to_f32_affine(m: &DMat4) -> Affine3A {
 }
 
 /// Flattens `scene` for one frame.
-pub fn prepare_frame(scene: Arc<Scene>, options: &FrameOptions) -> Result<PreparedFrame, RenderError> {
+pub fn prepare_frame(
+    scene: Arc<Scene>,
+    options: &FrameOptions,
+) -> Result<PreparedFrame, RenderError> {
     if options.width == 0 || options.height == 0 {
         return Err(RenderError::EmptyImage(options.width, options.height));
     }
@@ -188,7 +198,9 @@ pub fn prepare_frame(scene: Arc<Scene>, options: &FrameOptions) -> Result<Prepar
     let (projection, camera_world) = match (wanted, placed) {
         (Some(_), Some(p)) => p,
         (Some(cam), None) if options.camera != CameraChoice::Default => {
-            return Err(RenderError::Camera(format!("{cam} is not placed by any node of the scene")))
+            return Err(RenderError::Camera(format!(
+                "{cam} is not placed by any node of the scene"
+            )))
         }
         _ => framing_camera(&scene, aspect),
     };
@@ -225,7 +237,8 @@ pub fn prepare_frame(scene: Arc<Scene>, options: &FrameOptions) -> Result<Prepar
                 continue;
             }
             for (t, &[a, b, c]) in prim.indices.iter().enumerate() {
-                let [a, b, c] = [a, b, c].map(|v| inst.to_world.transform_point3(prim.positions[v as usize]));
+                let [a, b, c] =
+                    [a, b, c].map(|v| inst.to_world.transform_point3(prim.positions[v as usize]));
                 triangles.push(EmissiveTriangle {
                     p: [a, b, c],
                     emission: material.emissive,
@@ -237,6 +250,8 @@ pub fn prepare_frame(scene: Arc<Scene>, options: &FrameOptions) -> Result<Prepar
         }
     }
 
+    // Build the BSDF's energy tables now rather than inside the first tile's threads.
+    crate::bsdf::precompute_tables(scene.features.transmission);
     let bvh = SceneBvh::build(instances);
     let mut features = scene.features;
     let environment = match (&options.environment, &scene.environment) {
@@ -262,7 +277,8 @@ pub fn prepare_frame(scene: Arc<Scene>, options: &FrameOptions) -> Result<Prepar
                 .iter()
                 .map(|p| {
                     let mat = &scene.materials[p.material as usize];
-                    mat.alpha_mode != AlphaMode::Opaque || (!mat.double_sided && mat.transmission == 0.0)
+                    mat.alpha_mode != AlphaMode::Opaque
+                        || (!mat.double_sided && mat.transmission == 0.0)
                 })
                 .collect()
         })
@@ -290,7 +306,14 @@ impl PreparedFrame {
     /// their coverage says so, and a single-sided opaque surface is invisible from behind
     /// (glTF's back-face culling; transmissive surfaces keep both sides, since refracted
     /// rays must find the inside of the object).
-    pub(crate) fn accepts(&self, ray: &Ray, instance: u32, triangle: u32, b1: f32, b2: f32) -> bool {
+    pub(crate) fn accepts(
+        &self,
+        ray: &Ray,
+        instance: u32,
+        triangle: u32,
+        b1: f32,
+        b2: f32,
+    ) -> bool {
         let inst = &self.bvh.instances()[instance as usize];
         let mesh = &self.scene.meshes[inst.mesh as usize];
         let (p, t) = mesh.locate(triangle);
@@ -300,7 +323,9 @@ impl PreparedFrame {
         let prim = &mesh.primitives[p];
         let mat = &self.scene.materials[prim.material as usize];
         if !mat.double_sided && mat.transmission == 0.0 {
-            let facing = prim.face_normal(t).dot(inst.to_object.transform_vector3(ray.dir));
+            let facing = prim
+                .face_normal(t)
+                .dot(inst.to_object.transform_vector3(ray.dir));
             if facing > 0.0 {
                 return false;
             }
@@ -313,7 +338,10 @@ impl PreparedFrame {
         // Stochastic coverage for blended surfaces, keyed by the ray and the triangle so
         // the result is a pure function of the sample.
         let key = hash_combine(
-            hash_combine(ray.origin.x.to_bits() ^ ray.dir.y.to_bits(), ray.dir.x.to_bits()),
+            hash_combine(
+                ray.origin.x.to_bits() ^ ray.dir.y.to_bits(),
+                ray.dir.x.to_bits(),
+            ),
             triangle ^ (instance << 20),
         );
         let u = (key >> 8) as f32 / (1u32 << 24) as f32;
@@ -324,7 +352,9 @@ impl PreparedFrame {
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<crate::geometry::Hit> {
         let meshes = &self.scene.meshes;
         if self.any_hit_filter {
-            self.bvh.intersect(meshes, ray, t_max, |i, t, b1, b2| self.accepts(ray, i, t, b1, b2))
+            self.bvh.intersect(meshes, ray, t_max, |i, t, b1, b2| {
+                self.accepts(ray, i, t, b1, b2)
+            })
         } else {
             self.bvh.intersect(meshes, ray, t_max, |_, _, _, _| true)
         }
@@ -334,7 +364,9 @@ impl PreparedFrame {
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         let meshes = &self.scene.meshes;
         if self.any_hit_filter {
-            self.bvh.occluded(meshes, ray, t_max, |i, t, b1, b2| self.accepts(ray, i, t, b1, b2))
+            self.bvh.occluded(meshes, ray, t_max, |i, t, b1, b2| {
+                self.accepts(ray, i, t, b1, b2)
+            })
         } else {
             self.bvh.occluded(meshes, ray, t_max, |_, _, _, _| true)
         }
@@ -371,7 +403,13 @@ pub fn render_tile(
             let mut buf = TileBuffer::new(TileRect::new(rect.x, rect.y + row, rect.width, 1));
             for col in 0..rect.width {
                 for index in samples.start..samples.end {
-                    let s = integrator::trace_sample(frame, settings, rect.x + col, rect.y + row, index);
+                    let s = integrator::trace_sample(
+                        frame,
+                        settings,
+                        rect.x + col,
+                        rect.y + row,
+                        index,
+                    );
                     buf.add(col as usize, &s);
                 }
             }

@@ -110,9 +110,15 @@ pub struct PixelSampler {
 impl PixelSampler {
     /// The sampler for sample `index` of pixel (`x`, `y`) in `frame`, with a user `seed`.
     pub fn new(x: u32, y: u32, index: u32, frame: i32, seed: u32) -> Self {
-        let pixel_seed =
-            hash_combine(hash_combine(hash_combine(hash_u32(x), y), frame as u32), seed);
-        Self { pixel_seed, index, dimension: 0 }
+        let pixel_seed = hash_combine(
+            hash_combine(hash_combine(hash_u32(x), y), frame as u32),
+            seed,
+        );
+        Self {
+            pixel_seed,
+            index,
+            dimension: 0,
+        }
     }
 
     /// Continues at a given dimension (so a feature that is off need not shift the

@@ -5,8 +5,8 @@
 use glam::{DMat4, Vec2, Vec3, Vec4};
 
 use crate::bvh::MeshBvh;
-use crate::geometry::barycentric;
 use crate::camera::Projection;
+use crate::geometry::barycentric;
 use crate::light::{Environment, PunctualLight};
 use crate::material::Material;
 use crate::texture::Texture;
@@ -120,11 +120,20 @@ impl Mesh {
         for prim in &primitives {
             first_triangle.push(triangles.len() as u32);
             triangles.extend(prim.indices.iter().map(|&[a, b, c]| {
-                [prim.positions[a as usize], prim.positions[b as usize], prim.positions[c as usize]]
+                [
+                    prim.positions[a as usize],
+                    prim.positions[b as usize],
+                    prim.positions[c as usize],
+                ]
             }));
         }
         let bvh = MeshBvh::build(&triangles);
-        Self { name, primitives, first_triangle, bvh }
+        Self {
+            name,
+            primitives,
+            first_triangle,
+            bvh,
+        }
     }
 
     /// The primitive holding mesh-wide triangle `tri`, and the triangle's index inside it.
@@ -228,9 +237,16 @@ impl SceneBuilder {
 
     /// Adds a mesh and a root node drawing it with transform `local`; returns the node.
     pub fn mesh(&mut self, name: &str, primitives: Vec<Primitive>, local: DMat4) -> u32 {
-        self.scene.meshes.push(Mesh::new(Some(name.into()), primitives));
+        self.scene
+            .meshes
+            .push(Mesh::new(Some(name.into()), primitives));
         let mesh = Some(self.scene.meshes.len() as u32 - 1);
-        self.root(Node { name: Some(name.into()), local, mesh, ..Default::default() })
+        self.root(Node {
+            name: Some(name.into()),
+            local,
+            mesh,
+            ..Default::default()
+        })
     }
 
     /// Adds a camera placed by a root node with transform `local`; returns the node.
@@ -238,14 +254,23 @@ impl SceneBuilder {
         let name = camera.name.clone();
         self.scene.cameras.push(camera);
         let camera = Some(self.scene.cameras.len() as u32 - 1);
-        self.root(Node { name, local, camera, ..Default::default() })
+        self.root(Node {
+            name,
+            local,
+            camera,
+            ..Default::default()
+        })
     }
 
     /// Adds a punctual light placed by a root node with transform `local`.
     pub fn light(&mut self, light: PunctualLight, local: DMat4) -> u32 {
         self.scene.lights.push(light);
         let light = Some(self.scene.lights.len() as u32 - 1);
-        self.root(Node { local, light, ..Default::default() })
+        self.root(Node {
+            local,
+            light,
+            ..Default::default()
+        })
     }
 
     /// Sets the environment.
@@ -260,7 +285,9 @@ impl SceneBuilder {
         self.scene.features = Features {
             textures: mats.iter().any(Material::has_textures),
             transmission: mats.iter().any(|m| m.transmission > 0.0),
-            alpha_mask: mats.iter().any(|m| m.alpha_mode != crate::material::AlphaMode::Opaque),
+            alpha_mask: mats
+                .iter()
+                .any(|m| m.alpha_mode != crate::material::AlphaMode::Opaque),
             emissive: mats.iter().any(Material::is_emissive),
             punctual_lights: !s.lights.is_empty(),
             environment: s.environment.as_ref().is_some_and(|e| !e.is_black()),

@@ -7,7 +7,9 @@ use crate::scene::Primitive;
 /// A quad a, b, c, d (counter-clockwise seen from its front) as two triangles with flat
 /// normals.
 pub fn quad(corners: [Vec3; 4], material: u32) -> Primitive {
-    let n = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
+    let n = (corners[1] - corners[0])
+        .cross(corners[2] - corners[0])
+        .normalize();
     Primitive {
         positions: corners.to_vec(),
         normals: vec![n; 4],
@@ -19,11 +21,20 @@ pub fn quad(corners: [Vec3; 4], material: u32) -> Primitive {
 
 /// An axis-aligned unit cube [-0.5, 0.5]³ with flat normals.
 pub fn cube(material: u32) -> Primitive {
-    let mut prim = Primitive { material, ..Default::default() };
+    let mut prim = Primitive {
+        material,
+        ..Default::default()
+    };
     for axis in 0..3 {
         for sign in [-1.0f32, 1.0] {
             let n = Vec3::from_array(std::array::from_fn(|i| if i == axis { sign } else { 0.0 }));
-            let u = Vec3::from_array(std::array::from_fn(|i| if i == (axis + 1) % 3 { 1.0 } else { 0.0 }));
+            let u = Vec3::from_array(std::array::from_fn(|i| {
+                if i == (axis + 1) % 3 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }));
             let v = n.cross(u);
             let base = prim.positions.len() as u32;
             for (su, sv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
@@ -39,12 +50,19 @@ pub fn cube(material: u32) -> Primitive {
 
 /// A UV sphere of radius 1 with smooth normals.
 pub fn uv_sphere(material: u32, rings: u32, segments: u32) -> Primitive {
-    let mut prim = Primitive { material, ..Default::default() };
+    let mut prim = Primitive {
+        material,
+        ..Default::default()
+    };
     for r in 0..=rings {
         let theta = std::f32::consts::PI * r as f32 / rings as f32;
         for s in 0..=segments {
             let phi = std::f32::consts::TAU * s as f32 / segments as f32;
-            let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), -theta.sin() * phi.sin());
+            let n = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                -theta.sin() * phi.sin(),
+            );
             prim.positions.push(n);
             prim.normals.push(n);
         }
@@ -63,4 +81,3 @@ pub fn uv_sphere(material: u32, rings: u32, segments: u32) -> Primitive {
     }
     prim
 }
-

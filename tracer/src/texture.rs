@@ -134,7 +134,12 @@ impl Texture {
         let a = t[3] as f32 / 255.0;
         if srgb {
             let lut = srgb_lut();
-            Vec4::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize], a)
+            Vec4::new(
+                lut[t[0] as usize],
+                lut[t[1] as usize],
+                lut[t[2] as usize],
+                a,
+            )
         } else {
             Vec4::new(t[0] as f32, t[1] as f32, t[2] as f32, t[3] as f32) / 255.0
         }
@@ -154,8 +159,12 @@ impl Texture {
                 let (x0, y0) = (x.floor(), y.floor());
                 let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
                 let (x0, y0) = (x0 as i64, y0 as i64);
-                let a = self.fetch(x0, y0, srgb).lerp(self.fetch(x0 + 1, y0, srgb), fx);
-                let b = self.fetch(x0, y0 + 1, srgb).lerp(self.fetch(x0 + 1, y0 + 1, srgb), fx);
+                let a = self
+                    .fetch(x0, y0, srgb)
+                    .lerp(self.fetch(x0 + 1, y0, srgb), fx);
+                let b = self
+                    .fetch(x0, y0 + 1, srgb)
+                    .lerp(self.fetch(x0 + 1, y0 + 1, srgb), fx);
                 a.lerp(b, fy)
             }
         }
@@ -170,7 +179,12 @@ mod tests {
         Texture {
             width: 2,
             height: 2,
-            texels: vec![[0, 0, 0, 255], [255, 255, 255, 255], [255, 255, 255, 255], [0, 0, 0, 255]],
+            texels: vec![
+                [0, 0, 0, 255],
+                [255, 255, 255, 255],
+                [255, 255, 255, 255],
+                [0, 0, 0, 255],
+            ],
             wrap_s: Wrap::Repeat,
             wrap_t: Wrap::Repeat,
             filter: Filter::Nearest,
@@ -210,7 +224,11 @@ mod tests {
 
     #[test]
     fn texture_transform_matches_the_extension_matrix() {
-        let t = UvTransform { offset: Vec2::new(0.5, 0.0), rotation: std::f32::consts::FRAC_PI_2, scale: Vec2::splat(2.0) };
+        let t = UvTransform {
+            offset: Vec2::new(0.5, 0.0),
+            rotation: std::f32::consts::FRAC_PI_2,
+            scale: Vec2::splat(2.0),
+        };
         // Scale (1,0) -> (2,0); rotate by +90° in the spec's matrix -> (0,-2); offset -> (0.5,-2).
         let r = t.apply(Vec2::new(1.0, 0.0));
         assert!((r - Vec2::new(0.5, -2.0)).length() < 1e-5, "{r}");

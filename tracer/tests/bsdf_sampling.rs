@@ -5,7 +5,7 @@
 //! beside the maths, in `src/bsdf/tests.rs`.)
 
 use glam::{Vec2, Vec3};
-use tracer::bsdf::{Bsdf, SurfaceParams};
+use tracer::bsdf::{precompute_tables, Bsdf, SurfaceParams};
 
 /// A small deterministic generator (xorshift64*).
 struct Rng(u64);
@@ -39,6 +39,7 @@ fn wo(deg: f32, below: bool) -> Vec3 {
 
 #[test]
 fn samples_agree_with_eval_and_pdf() {
+    precompute_tables(true);
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     for p in [
         params(1.0, 0.4, 1.5, 0.0),

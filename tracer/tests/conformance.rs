@@ -385,17 +385,37 @@ fn every_model_renders_one_sample_without_nan() {
     }
     for file in files {
         let scene = loader::load_path(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
-        let options = FrameOptions { width: 64, height: 64, ..Default::default() };
+        let options = FrameOptions {
+            width: 64,
+            height: 64,
+            ..Default::default()
+        };
         let frame = prepare_frame(Arc::new(scene), &options)
             .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
         let rect = TileRect::new(0, 0, 64, 64);
-        let tile = render_region(&frame, &RenderSettings::default(), rect, SampleRange::new(0, 1), 16, &|_| {});
+        let tile = render_region(
+            &frame,
+            &RenderSettings::default(),
+            rect,
+            SampleRange::new(0, 1),
+            16,
+            &|_| {},
+        );
         let layers = tile.resolve();
         let name = file.display();
-        assert!(layers.beauty.iter().all(|b| b.is_finite()), "{name}: non-finite pixel");
-        assert!(layers.depth.iter().all(|d| d.is_finite()), "{name}: non-finite depth");
+        assert!(
+            layers.beauty.iter().all(|b| b.is_finite()),
+            "{name}: non-finite pixel"
+        );
+        assert!(
+            layers.depth.iter().all(|d| d.is_finite()),
+            "{name}: non-finite depth"
+        );
         // Every model is framed by its camera or the default one, so something is seen.
-        assert!(layers.beauty.iter().any(|b| b.w > 0.0), "{name}: nothing visible");
+        assert!(
+            layers.beauty.iter().any(|b| b.w > 0.0),
+            "{name}: nothing visible"
+        );
         println!("{name}: {} samples dropped", tile.dropped);
     }
 }

@@ -9,12 +9,18 @@ use tracer::camera::Projection;
 use tracer::film::{Layers, SampleRange, TileBuffer, TileRect};
 use tracer::light::{Environment, PunctualLight};
 use tracer::material::Material;
-use tracer::render::{prepare_frame, render_region, render_tile, FrameOptions, PreparedFrame, RenderSettings};
+use tracer::render::{
+    prepare_frame, render_region, render_tile, FrameOptions, PreparedFrame, RenderSettings,
+};
 use tracer::scene::{CameraDef, Scene, SceneBuilder};
 use tracer::shapes::{quad, uv_sphere};
 
 fn frame(scene: Scene, width: u32, height: u32) -> PreparedFrame {
-    let options = FrameOptions { width, height, ..Default::default() };
+    let options = FrameOptions {
+        width,
+        height,
+        ..Default::default()
+    };
     prepare_frame(Arc::new(scene), &options).expect("scene prepares")
 }
 
@@ -30,7 +36,11 @@ fn furnace(material: Material) -> Scene {
     b.mesh("sphere", vec![uv_sphere(m, 64, 128)], DMat4::IDENTITY);
     let camera = CameraDef {
         name: None,
-        projection: Projection::Perspective { yfov: 0.6, aspect_ratio: None, znear: 0.01 },
+        projection: Projection::Perspective {
+            yfov: 0.6,
+            aspect_ratio: None,
+            znear: 0.01,
+        },
     };
     b.camera(camera, DMat4::from_translation(DVec3::new(0.0, 0.0, 4.0)));
     b.environment(Environment::Constant(Vec3::ONE));
@@ -56,20 +66,55 @@ fn furnace_means(layers: &Layers) -> (f64, f64) {
 
 #[test]
 fn white_furnace_conserves_energy() {
-    let white = Material { base_color: Vec4::ONE, double_sided: true, ..Default::default() };
+    let white = Material {
+        base_color: Vec4::ONE,
+        double_sided: true,
+        ..Default::default()
+    };
     let cases = [
-        ("diffuse albedo 1", Material { metallic: 0.0, specular: 0.0, ..white.clone() }),
-        ("rough dielectric", Material { metallic: 0.0, roughness: 0.4, transmission: 1.0, ..white.clone() }),
-        ("metal F0 = 1", Material { metallic: 1.0, roughness: 0.3, ..white.clone() }),
+        (
+            "diffuse albedo 1",
+            Material {
+                metallic: 0.0,
+                specular: 0.0,
+                ..white.clone()
+            },
+        ),
+        (
+            "rough dielectric",
+            Material {
+                metallic: 0.0,
+                roughness: 0.4,
+                transmission: 1.0,
+                ..white.clone()
+            },
+        ),
+        (
+            "metal F0 = 1",
+            Material {
+                metallic: 1.0,
+                roughness: 0.3,
+                ..white.clone()
+            },
+        ),
     ];
     for (name, material) in cases {
         let f = frame(furnace(material), 40, 40);
-        let settings = RenderSettings { max_depth: 64, seed: 0 };
+        let settings = RenderSettings {
+            max_depth: 64,
+            seed: 0,
+        };
         let layers = render(&f, &settings, 64).resolve();
         let (sphere, background) = furnace_means(&layers);
         println!("{name}: sphere {sphere:.4}, background {background:.4}");
-        assert!((background - 1.0).abs() < 1e-6, "{name}: background {background}");
-        assert!((sphere - 1.0).abs() < 0.01, "{name}: sphere {sphere}, expected 1 ± 1%");
+        assert!(
+            (background - 1.0).abs() < 1e-6,
+            "{name}: background {background}"
+        );
+        assert!(
+            (sphere - 1.0).abs() < 0.01,
+            "{name}: sphere {sphere}, expected 1 ± 1%"
+        );
     }
 }
 
@@ -86,7 +131,12 @@ fn lit_floor(light: PunctualLight, light_at: DMat4) -> Scene {
     });
     let s = 100.0;
     let floor = quad(
-        [Vec3::new(-s, 0.0, s), Vec3::new(s, 0.0, s), Vec3::new(s, 0.0, -s), Vec3::new(-s, 0.0, -s)],
+        [
+            Vec3::new(-s, 0.0, s),
+            Vec3::new(s, 0.0, s),
+            Vec3::new(s, 0.0, -s),
+            Vec3::new(-s, 0.0, -s),
+        ],
         white,
     );
     b.mesh("floor", vec![floor], DMat4::IDENTITY);
@@ -96,7 +146,11 @@ fn lit_floor(light: PunctualLight, light_at: DMat4) -> Scene {
     );
     let camera = CameraDef {
         name: None,
-        projection: Projection::Orthographic { xmag: 1e-3, ymag: 1e-3, znear: 0.0 },
+        projection: Projection::Orthographic {
+            xmag: 1e-3,
+            ymag: 1e-3,
+            znear: 0.0,
+        },
     };
     b.camera(camera, down);
     b.light(light, light_at);
@@ -111,23 +165,50 @@ fn mean_radiance(layers: &Layers) -> f64 {
 fn point_light_on_a_plane_matches_closed_form_irradiance() {
     // E = I cosθ / d², and a white Lambertian surface reflects L = E / π.
     let (intensity, height) = (10.0f32, 2.0f64);
-    let light = PunctualLight::Point { intensity: Vec3::splat(intensity), range: None };
+    let light = PunctualLight::Point {
+        intensity: Vec3::splat(intensity),
+        range: None,
+    };
     let scene = lit_floor(light, DMat4::from_translation(DVec3::new(0.0, height, 0.0)));
-    let layers = render(&frame(scene, 8, 8), &RenderSettings { max_depth: 1, seed: 0 }, 4).resolve();
+    let layers = render(
+        &frame(scene, 8, 8),
+        &RenderSettings {
+            max_depth: 1,
+            seed: 0,
+        },
+        4,
+    )
+    .resolve();
     let expected = intensity as f64 / (std::f64::consts::PI * height * height);
     let got = mean_radiance(&layers);
-    assert!((got / expected - 1.0).abs() < 0.01, "got {got}, expected {expected}");
+    assert!(
+        (got / expected - 1.0).abs() < 0.01,
+        "got {got}, expected {expected}"
+    );
 }
 
 #[test]
 fn directional_light_on_a_plane_matches_closed_form_irradiance() {
     // 1 lux arriving 60° from the normal: E = cos 60° = 0.5, L = 0.5 / π.
-    let light = PunctualLight::Directional { illuminance: Vec3::ONE };
+    let light = PunctualLight::Directional {
+        illuminance: Vec3::ONE,
+    };
     let tilt = DMat4::from_rotation_x(-std::f64::consts::FRAC_PI_2 + std::f64::consts::FRAC_PI_3);
-    let layers = render(&frame(lit_floor(light, tilt), 8, 8), &RenderSettings { max_depth: 1, seed: 0 }, 4).resolve();
+    let layers = render(
+        &frame(lit_floor(light, tilt), 8, 8),
+        &RenderSettings {
+            max_depth: 1,
+            seed: 0,
+        },
+        4,
+    )
+    .resolve();
     let expected = (std::f64::consts::FRAC_PI_3).cos().abs() / std::f64::consts::PI;
     let got = mean_radiance(&layers);
-    assert!((got / expected - 1.0).abs() < 0.01, "got {got}, expected {expected}");
+    assert!(
+        (got / expected - 1.0).abs() < 0.01,
+        "got {got}, expected {expected}"
+    );
 }
 
 fn demo_frame() -> PreparedFrame {
@@ -143,12 +224,20 @@ fn any_tile_split_is_bit_identical_to_the_whole_frame() {
     let whole = render_tile(&f, &settings, rect, samples);
     for tile_size in [1, 5, 7, 16] {
         let split = render_region(&f, &settings, rect, samples, tile_size, &|_| {});
-        assert!(whole == split, "tiles of {tile_size} differ from the whole frame");
+        assert!(
+            whole == split,
+            "tiles of {tile_size} differ from the whole frame"
+        );
     }
     // One-pixel-wide columns too.
     let mut columns = TileBuffer::new(rect);
     for x in 0..24 {
-        columns.paste(&render_tile(&f, &settings, TileRect::new(x, 0, 1, 24), samples));
+        columns.paste(&render_tile(
+            &f,
+            &settings,
+            TileRect::new(x, 0, 1, 24),
+            samples,
+        ));
     }
     assert!(whole == columns, "one-pixel columns differ");
     assert_eq!(whole.dropped, 0);
@@ -164,7 +253,10 @@ fn sample_ranges_merge_to_the_whole_range() {
     merged.merge(&render_tile(&f, &settings, rect, SampleRange::new(4, 9)));
     let merged = merged.resolve();
     for (a, b) in whole.beauty.iter().zip(&merged.beauty) {
-        assert!((*a - *b).abs().max_element() <= 1e-5 * a.abs().max_element().max(1.0), "{a} vs {b}");
+        assert!(
+            (*a - *b).abs().max_element() <= 1e-5 * a.abs().max_element().max(1.0),
+            "{a} vs {b}"
+        );
     }
 }
 
@@ -184,7 +276,10 @@ fn the_demo_scene_renders_finite_plausible_pixels() {
     let tile = render(&f, &RenderSettings::default(), 16);
     assert_eq!(tile.dropped, 0, "no sample was NaN or infinite");
     let layers = tile.resolve();
-    assert!(layers.beauty.iter().all(|b| b.is_finite() && b.min_element() >= 0.0));
+    assert!(layers
+        .beauty
+        .iter()
+        .all(|b| b.is_finite() && b.min_element() >= 0.0));
     // The square view sees only the inside of the closed box, so every camera ray hits.
     assert!(layers.beauty.iter().all(|b| b.w == 1.0));
     let mean = mean_radiance(&layers);
