@@ -20,7 +20,7 @@ pub struct BenchArgs {
     /// Scene to measure; the built-in demo scene when left out.
     scene: Option<PathBuf>,
     /// Image size for the measurements.
-    #[arg(long, default_value = "128x128", value_parser = parse_size)]
+    #[arg(long, default_value = "64x64", value_parser = parse_size)]
     size: (u32, u32),
     /// Samples per pixel of the reference image that errors are measured against.
     #[arg(long, default_value_t = 4096)]
@@ -70,7 +70,7 @@ fn camera_rays_per_second(frame: &PreparedFrame) -> f64 {
 }
 
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
-    let (width, height) = if args.quick { (64, 64) } else { args.size };
+    let (width, height) = if args.quick { (32, 32) } else { args.size };
     let reference_spp = if args.quick {
         args.reference_spp.min(512)
     } else {

@@ -88,11 +88,6 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
             ns = m;
             shading = Frame::from_normal_tangent(ns, tf.x);
         }
-    } else if sample.normal_map.is_none() && !prim.tangents.is_empty() {
-        let tangent = inst
-            .to_world
-            .transform_vector3(prim.tangents[i0].truncate());
-        shading = Frame::from_normal_tangent(ns, tangent);
     }
 
     // Opaque surfaces are shaded from the side the ray came from; transmissive ones keep

@@ -8,11 +8,11 @@
 
 use std::sync::Arc;
 
-use glam::{Affine3A, DAffine3, DMat3, DMat4, DVec3, Vec3};
+use glam::{Affine3A, DMat3, DMat4, DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::bvh::{Instance, SceneBvh};
-use crate::camera::{Camera, Projection};
+use crate::camera::Camera;
 use crate::film::{SampleRange, TileBuffer, TileRect};
 use crate::geometry::{Aabb, Ray};
 use crate::integrator;
@@ -375,16 +375,6 @@ impl PreparedFrame {
     /// World-space bounds of everything in the frame, relative to the camera.
     pub fn bounds(&self) -> Aabb {
         self.bvh.bounds()
-    }
-
-    /// Converts a camera-relative point back to the scene's world space.
-    pub fn to_scene_world(&self, p: Vec3) -> DVec3 {
-        DAffine3::from_translation(self.camera_origin).transform_point3(p.as_dvec3())
-    }
-
-    /// The projection in use.
-    pub fn projection(&self) -> Projection {
-        self.camera.projection
     }
 }
 

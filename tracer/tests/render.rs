@@ -286,3 +286,36 @@ fn the_demo_scene_renders_finite_plausible_pixels() {
     assert!(mean > 0.05 && mean < 5.0, "mean red radiance {mean}");
     assert!(layers.depth.iter().all(|d| *d > 0.0 && *d < 10.0));
 }
+
+#[test]
+fn an_importance_sampled_environment_map_lights_a_furnace_like_a_constant_one() {
+    // A map that is 1 everywhere but for a bright patch: the importance sampler sends most
+    // light samples to the patch, yet a white diffuse sphere must still see the map's mean
+    // irradiance, i.e. the estimate stays unbiased. With uniform radiance 1 it is exactly
+    // the furnace; here we compare against a constant environment of the same mean.
+    let (w, h) = (64, 32);
+    let mut pixels = vec![Vec3::ONE; w * h];
+    for y in 8..12 {
+        for x in 20..26 {
+            pixels[y * w + x] = Vec3::splat(50.0);
+        }
+    }
+    let map = tracer::light::EnvironmentMap::from_pixels(w, h, pixels).unwrap();
+    let white = Material { base_color: Vec4::ONE, metallic: 0.0, specular: 0.0, double_sided: true, ..Default::default() };
+    let uniform = tracer::light::EnvironmentMap::from_pixels(w, h, vec![Vec3::ONE; w * h]).unwrap();
+    let render_with = |env: Environment, spp: u32, seed: u32| {
+        let options = FrameOptions { width: 24, height: 24, environment: Some(env), ..Default::default() };
+        let f = prepare_frame(Arc::new(furnace(white.clone())), &options).unwrap();
+        render(&f, &RenderSettings { max_depth: 8, seed }, spp).resolve()
+    };
+    let (sphere, _) = furnace_means(&render_with(Environment::Map(uniform), 64, 0));
+    assert!((sphere - 1.0).abs() < 0.01, "uniform map furnace {sphere}");
+
+    // The patched map against a reference with many more samples and another seed.
+    let mapped = render_with(Environment::Map(map.clone()), 64, 1);
+    let reference = render_with(Environment::Map(map), 1024, 2);
+    let (a, _) = furnace_means(&mapped);
+    let (b, _) = furnace_means(&reference);
+    assert!((a / b - 1.0).abs() < 0.02, "64 spp {a} vs 1024 spp {b}");
+    assert!(b > 1.0, "the bright patch adds light: {b}");
+}

@@ -57,13 +57,34 @@ impl BoxRay {
         let hi = (node.max - self.origin) * self.inv_dir;
         let near = Vec3::select(self.neg, hi, lo);
         let far = Vec3::select(self.neg, lo, hi);
-        // 0 · inf = NaN arises when the ray lies in a slab's plane; f32::max and f32::min
-        // return the other operand for NaN, so that axis simply does not constrain the
-        // interval (Ize 2013's max/min formulation). glam's vector min/max do not promise
-        // this NaN behaviour, hence the scalar calls.
-        let t0 = near.x.max(near.y).max(near.z).max(0.0);
-        let t1 = (far.x.min(far.y).min(far.z) * FAR_SCALE).min(t_max);
+        // 0 · inf = NaN arises when the ray lies in a slab's plane; such an axis must not
+        // constrain the interval (Ize 2013). `max_or_acc`/`min_or_acc` keep the accumulator
+        // when the candidate is NaN, and compile to single maxss/minss instructions, where
+        // f32::max/min need four each to implement IEEE maxNum.
+        let t0 = max_or_acc(max_or_acc(max_or_acc(0.0, near.x), near.y), near.z);
+        let far = far * FAR_SCALE;
+        let t1 = min_or_acc(min_or_acc(min_or_acc(t_max, far.x), far.y), far.z);
         (t0 <= t1).then_some(t0)
+    }
+}
+
+/// `max(acc, x)`, keeping `acc` when `x` is NaN.
+#[inline(always)]
+fn max_or_acc(acc: f32, x: f32) -> f32 {
+    if x > acc {
+        x
+    } else {
+        acc
+    }
+}
+
+/// `min(acc, x)`, keeping `acc` when `x` is NaN.
+#[inline(always)]
+fn min_or_acc(acc: f32, x: f32) -> f32 {
+    if x < acc {
+        x
+    } else {
+        acc
     }
 }
 
