@@ -301,10 +301,21 @@ fn an_importance_sampled_environment_map_lights_a_furnace_like_a_constant_one() 
         }
     }
     let map = tracer::light::EnvironmentMap::from_pixels(w, h, pixels).unwrap();
-    let white = Material { base_color: Vec4::ONE, metallic: 0.0, specular: 0.0, double_sided: true, ..Default::default() };
+    let white = Material {
+        base_color: Vec4::ONE,
+        metallic: 0.0,
+        specular: 0.0,
+        double_sided: true,
+        ..Default::default()
+    };
     let uniform = tracer::light::EnvironmentMap::from_pixels(w, h, vec![Vec3::ONE; w * h]).unwrap();
     let render_with = |env: Environment, spp: u32, seed: u32| {
-        let options = FrameOptions { width: 24, height: 24, environment: Some(env), ..Default::default() };
+        let options = FrameOptions {
+            width: 24,
+            height: 24,
+            environment: Some(env),
+            ..Default::default()
+        };
         let f = prepare_frame(Arc::new(furnace(white.clone())), &options).unwrap();
         render(&f, &RenderSettings { max_depth: 8, seed }, spp).resolve()
     };
