@@ -39,9 +39,7 @@ mod meshes;
 mod tangents;
 
 pub use error::{Element, SceneError};
-pub use framing::{
-    for_each_node_instance, framing_camera, mesh_bounds, mesh_instances, scene_bounds,
-};
+pub use framing::{framing_camera, mesh_bounds, mesh_instances, scene_bounds};
 
 use crate::scene::{Features, Scene};
 use container::Resolver;

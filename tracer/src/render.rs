@@ -125,28 +125,6 @@ pub struct PreparedFrame {
     pub warnings: Vec<String>,
 }
 
-/// Composes world transforms of every node reachable from the roots, in double precision.
-fn world_transforms(scene: &Scene) -> Vec<(u32, DMat4)> {
-    let mut out = Vec::new();
-    let mut stack: Vec<(u32, DMat4, usize)> = scene
-        .roots
-        .iter()
-        .rev()
-        .map(|&r| (r, DMat4::IDENTITY, 0))
-        .collect();
-    while let Some((node, parent, depth)) = stack.pop() {
-        // The loader rejects cycles; the depth bound keeps a hand-built scene from looping.
-        if depth > scene.nodes.len() {
-            continue;
-        }
-        let n = &scene.nodes[node as usize];
-        let world = parent * n.local;
-        out.push((node, world));
-        stack.extend(n.children.iter().rev().map(|&c| (c, world, depth + 1)));
-    }
-    out
-}
-
 /// Removes scale and shear from a camera's placement: only position and orientation count.
 fn rigid(m: &DMat4) -> (DVec3, DMat3) {
     let (_, rotation, translation) = m.to_scale_rotation_translation();
@@ -168,7 +146,8 @@ pub fn prepare_frame(
         return Err(RenderError::EmptyImage(options.width, options.height));
     }
     let aspect = options.width as f32 / options.height as f32;
-    let nodes = world_transforms(&scene);
+    let mut nodes = Vec::new();
+    scene.for_each_node_instance(|node, world| nodes.push((node, *world)));
     let mut warnings = Vec::new();
 
     // Camera: find the node placing the requested camera.

@@ -40,6 +40,36 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
+impl Scene {
+    /// Calls `visit(node, world)` for every node instance reachable from [`Scene::roots`],
+    /// parents before children, with the node's local-to-world transform composed in double
+    /// precision. A node reached along two paths is visited twice (instancing). Child indices
+    /// out of range are skipped, and a hand-built scene with a cycle stops descending after
+    /// as many levels as it has nodes (the loader refuses cycles outright).
+    pub fn for_each_node_instance(&self, mut visit: impl FnMut(u32, &DMat4)) {
+        let n = self.nodes.len();
+        let mut stack: Vec<(u32, DMat4, usize)> = self
+            .roots
+            .iter()
+            .rev()
+            .map(|&r| (r, DMat4::IDENTITY, 0))
+            .collect();
+        while let Some((i, parent, depth)) = stack.pop() {
+            let Some(node) = self.nodes.get(i as usize) else {
+                continue;
+            };
+            if depth > n {
+                continue;
+            }
+            let world = parent * node.local;
+            visit(i, &world);
+            for &c in node.children.iter().rev() {
+                stack.push((c, world, depth + 1));
+            }
+        }
+    }
+}
+
 /// A glTF node: a local transform and what hangs from it.
 #[derive(Clone, Debug)]
 pub struct Node {

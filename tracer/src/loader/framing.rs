@@ -14,39 +14,11 @@ pub const FRAMING_YFOV: f32 = 40.0 * std::f32::consts::PI / 180.0;
 /// little right, above and in front, so boxes show three faces.
 pub const FRAMING_DIRECTION: DVec3 = DVec3::new(0.5, 0.35, 1.0);
 
-/// Calls `visit(node, world)` for every node instance reachable from [`Scene::roots`],
-/// parents before children, with the node's local-to-world transform composed in double
-/// precision. A node reached along two paths is visited twice (instancing). Child indices
-/// out of range are skipped, and a hand-built scene with a cycle stops descending after
-/// as many levels as it has nodes (the loader refuses cycles outright).
-pub fn for_each_node_instance(scene: &Scene, mut visit: impl FnMut(u32, &DMat4)) {
-    let n = scene.nodes.len();
-    let mut stack: Vec<(u32, DMat4, usize)> = scene
-        .roots
-        .iter()
-        .rev()
-        .map(|&r| (r, DMat4::IDENTITY, 0))
-        .collect();
-    while let Some((i, parent, depth)) = stack.pop() {
-        let Some(node) = scene.nodes.get(i as usize) else {
-            continue;
-        };
-        if depth > n {
-            continue;
-        }
-        let world = parent * node.local;
-        visit(i, &world);
-        for &c in node.children.iter().rev() {
-            stack.push((c, world, depth + 1));
-        }
-    }
-}
-
 /// Every mesh instance of the default scene: (index into [`Scene::meshes`], world
 /// transform), in traversal order.
 pub fn mesh_instances(scene: &Scene) -> Vec<(u32, DMat4)> {
     let mut out = Vec::new();
-    for_each_node_instance(scene, |i, world| {
+    scene.for_each_node_instance(|i, world| {
         if let Some(m) = scene.nodes[i as usize].mesh {
             if (m as usize) < scene.meshes.len() {
                 out.push((m, *world));

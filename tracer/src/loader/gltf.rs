@@ -11,7 +11,6 @@ use rayon::prelude::*;
 use super::accessor::view_bytes;
 use super::container::Resolver;
 use super::error::{Element, SceneError};
-use super::framing::for_each_node_instance;
 use super::materials::{convert_material, TextureTable};
 use super::meshes::{convert_mesh, MeshOut};
 use super::SUPPORTED_EXTENSIONS;
@@ -102,7 +101,7 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
     };
     scene.features = features(&scene);
     let mut drawn = 0u64;
-    for_each_node_instance(&scene, |i, _| {
+    scene.for_each_node_instance(|i, _| {
         if let Some(m) = scene.nodes[i as usize].mesh {
             drawn += scene.meshes[m as usize].triangle_count() as u64;
         }
@@ -367,7 +366,7 @@ fn convert_light(
 fn features(scene: &Scene) -> Features {
     let mut f = Features::default();
     let mut seen_mesh = vec![false; scene.meshes.len()];
-    for_each_node_instance(scene, |i, _| {
+    scene.for_each_node_instance(|i, _| {
         let node = &scene.nodes[i as usize];
         if node.light.is_some() {
             f.punctual_lights = true;
