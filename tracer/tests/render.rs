@@ -330,3 +330,65 @@ fn an_importance_sampled_environment_map_lights_a_furnace_like_a_constant_one() 
     assert!((a / b - 1.0).abs() < 0.02, "64 spp {a} vs 1024 spp {b}");
     assert!(b > 1.0, "the bright patch adds light: {b}");
 }
+
+#[test]
+fn alpha_masked_cut_outs_let_light_through_for_shadow_rays_too() {
+    // A masked sheet between the point light and the floor: below the cutoff it is cut
+    // away (the floor gets the full closed-form irradiance), above it the floor is in shadow.
+    let (intensity, height) = (10.0f32, 2.0f64);
+    let floor_radiance = |alpha: f32| {
+        let light = PunctualLight::Point {
+            intensity: Vec3::splat(intensity),
+            range: None,
+        };
+        let mut scene = lit_floor(light, DMat4::from_translation(DVec3::new(0.0, height, 0.0)));
+        let sheet_material = Material {
+            base_color: Vec4::new(1.0, 1.0, 1.0, alpha),
+            alpha_mode: tracer::material::AlphaMode::Mask { cutoff: 0.5 },
+            double_sided: true,
+            ..Default::default()
+        };
+        scene.materials.push(sheet_material);
+        let m = scene.materials.len() as u32 - 1;
+        let s = 0.5;
+        let sheet = quad(
+            [
+                Vec3::new(-s, 1.5, s),
+                Vec3::new(s, 1.5, s),
+                Vec3::new(s, 1.5, -s),
+                Vec3::new(-s, 1.5, -s),
+            ],
+            m,
+        );
+        scene
+            .meshes
+            .push(tracer::scene::Mesh::new(None, vec![sheet]));
+        scene.nodes.push(tracer::scene::Node {
+            mesh: Some(scene.meshes.len() as u32 - 1),
+            ..Default::default()
+        });
+        scene.roots.push(scene.nodes.len() as u32 - 1);
+        scene.features.alpha_mask = true;
+        let layers = render(
+            &frame(scene, 8, 8),
+            &RenderSettings {
+                max_depth: 1,
+                seed: 0,
+            },
+            4,
+        )
+        .resolve();
+        mean_radiance(&layers)
+    };
+    let lit = intensity as f64 / (std::f64::consts::PI * height * height);
+    let cut_away = floor_radiance(0.2);
+    assert!(
+        (cut_away / lit - 1.0).abs() < 0.01,
+        "cut-out sheet: {cut_away}, expected {lit}"
+    );
+    let solid = floor_radiance(0.8);
+    assert_eq!(
+        solid, 0.0,
+        "an opaque part of the sheet casts a full shadow"
+    );
+}
