@@ -197,6 +197,33 @@ impl SceneBvh {
         meshes: &[Mesh],
         ray: &Ray,
         t_max: f32,
+        accept: impl FnMut(u32, u32, f32, f32) -> bool,
+    ) -> Option<Hit> {
+        self.search::<false>(meshes, ray, t_max, accept)
+    }
+
+    /// Whether anything with `0 < t < t_max` accepted by `accept(instance, triangle, b1,
+    /// b2)` lies on the ray; stops at the first such hit (shadow rays).
+    ///
+    /// # Panics
+    /// If an instance names a mesh outside `meshes`.
+    pub fn occluded(
+        &self,
+        meshes: &[Mesh],
+        ray: &Ray,
+        t_max: f32,
+        accept: impl FnMut(u32, u32, f32, f32) -> bool,
+    ) -> bool {
+        self.search::<true>(meshes, ray, t_max, accept).is_some()
+    }
+
+    /// The closest accepted hit, or with `ANY_HIT` the first one found.
+    #[inline(always)]
+    fn search<const ANY_HIT: bool>(
+        &self,
+        meshes: &[Mesh],
+        ray: &Ray,
+        t_max: f32,
         mut accept: impl FnMut(u32, u32, f32, f32) -> bool,
     ) -> Option<Hit> {
         if !ray_is_valid(ray, t_max) {
@@ -212,9 +239,10 @@ impl SceneBvh {
                 for &instance in &self.order[start as usize..(start + count) as usize] {
                     let inst = &self.instances[instance as usize];
                     let bvh = &meshes[inst.mesh as usize].bvh;
-                    let hit = bvh.intersect(&inst.object_ray(ray), *t_max, |tri, b1, b2| {
-                        accept(instance, tri, b1, b2)
-                    });
+                    let hit =
+                        bvh.search::<ANY_HIT>(&inst.object_ray(ray), *t_max, |tri, b1, b2| {
+                            accept(instance, tri, b1, b2)
+                        });
                     if let Some((t, triangle, b1, b2)) = hit {
                         *t_max = t;
                         best = Some(Hit {
@@ -224,50 +252,15 @@ impl SceneBvh {
                             b1,
                             b2,
                         });
+                        if ANY_HIT {
+                            return true;
+                        }
                     }
                 }
                 false
             },
         );
         best
-    }
-
-    /// Whether anything with `0 < t < t_max` accepted by `accept(instance, triangle, b1,
-    /// b2)` lies on the ray; stops at the first such hit (shadow rays).
-    ///
-    /// # Panics
-    /// If an instance names a mesh outside `meshes`.
-    pub fn occluded(
-        &self,
-        meshes: &[Mesh],
-        ray: &Ray,
-        t_max: f32,
-        mut accept: impl FnMut(u32, u32, f32, f32) -> bool,
-    ) -> bool {
-        if !ray_is_valid(ray, t_max) {
-            return false;
-        }
-        let mut t_max = t_max;
-        let mut found = false;
-        traverse(
-            &self.nodes,
-            &BoxRay::new(ray),
-            &mut t_max,
-            |start, count, t_max| {
-                for &instance in &self.order[start as usize..(start + count) as usize] {
-                    let inst = &self.instances[instance as usize];
-                    let bvh = &meshes[inst.mesh as usize].bvh;
-                    if bvh.occluded(&inst.object_ray(ray), *t_max, |tri, b1, b2| {
-                        accept(instance, tri, b1, b2)
-                    }) {
-                        found = true;
-                        return true;
-                    }
-                }
-                false
-            },
-        );
-        found
     }
 }
 

@@ -118,6 +118,29 @@ impl MeshBvh {
         &self,
         ray: &Ray,
         t_max: f32,
+        accept: impl FnMut(u32, f32, f32) -> bool,
+    ) -> Option<(f32, u32, f32, f32)> {
+        self.search::<false>(ray, t_max, accept)
+    }
+
+    /// Whether any triangle with `0 < t < t_max` is hit and accepted by
+    /// `accept(triangle, b1, b2)`; stops at the first such hit.
+    pub fn occluded(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        accept: impl FnMut(u32, f32, f32) -> bool,
+    ) -> bool {
+        self.search::<true>(ray, t_max, accept).is_some()
+    }
+
+    /// The closest accepted hit, or with `ANY_HIT` the first one found (traversal stops
+    /// there). A const parameter, so each query compiles to its own loop.
+    #[inline(always)]
+    pub(super) fn search<const ANY_HIT: bool>(
+        &self,
+        ray: &Ray,
+        t_max: f32,
         mut accept: impl FnMut(u32, f32, f32) -> bool,
     ) -> Option<(f32, u32, f32, f32)> {
         if !ray_is_valid(ray, t_max) {
@@ -139,6 +162,9 @@ impl MeshBvh {
                         if accept(id, b1, b2) {
                             *t_max = t;
                             best = Some((t, id, b1, b2));
+                            if ANY_HIT {
+                                return true;
+                            }
                         }
                     }
                 }
@@ -146,42 +172,6 @@ impl MeshBvh {
             },
         );
         best
-    }
-
-    /// Whether any triangle with `0 < t < t_max` is hit and accepted by
-    /// `accept(triangle, b1, b2)`; stops at the first such hit.
-    pub fn occluded(
-        &self,
-        ray: &Ray,
-        t_max: f32,
-        mut accept: impl FnMut(u32, f32, f32) -> bool,
-    ) -> bool {
-        if !ray_is_valid(ray, t_max) {
-            return false;
-        }
-        let pre = RayPrecomputed::new(ray);
-        let mut t_max = t_max;
-        let mut found = false;
-        traverse(
-            &self.nodes,
-            &BoxRay::new(ray),
-            &mut t_max,
-            |start, count, t_max| {
-                let range = start as usize..(start + count) as usize;
-                for (tri, &id) in self.triangles[range.clone()].iter().zip(&self.ids[range]) {
-                    if let Some((_, b1, b2)) =
-                        intersect_triangle(&pre, tri[0], tri[1], tri[2], *t_max)
-                    {
-                        if accept(id, b1, b2) {
-                            found = true;
-                            return true;
-                        }
-                    }
-                }
-                false
-            },
-        );
-        found
     }
 }
 
