@@ -45,5 +45,7 @@ pub mod render;
 pub mod sampler;
 pub mod scene;
 pub mod shapes;
+#[cfg(test)]
+mod test_rng;
 pub mod texture;
 pub mod triangle;

@@ -12,27 +12,8 @@ use tracer::light::{
     PunctualLight,
 };
 
-/// SplitMix64: small, deterministic, good enough for Monte Carlo tests.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn vec2(&mut self) -> Vec2 {
-        Vec2::new(self.f32(), self.f32())
-    }
-}
+mod common;
+use common::Rng;
 
 /// Direction of a cell of an `n` × `n` jittered grid over the sphere, equal-area in
 /// (z, φ): each cell has solid angle 4π / n².

@@ -7,43 +7,8 @@ use tracer::geometry::{barycentric, offset_ray_origin, Ray};
 use tracer::scene::{Mesh, Primitive};
 use tracer::triangle::{intersect_triangle, RayPrecomputed};
 
-/// SplitMix64: small, deterministic, good enough for test geometry.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn f(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in [-1, 1)^3.
-    fn cube(&mut self) -> Vec3 {
-        Vec3::new(self.f(), self.f(), self.f()) * 2.0 - 1.0
-    }
-
-    /// Uniform on the unit sphere.
-    fn dir(&mut self) -> Vec3 {
-        loop {
-            let v = self.cube();
-            let l2 = v.length_squared();
-            if l2 > 1e-4 && l2 <= 1.0 {
-                return v / l2.sqrt();
-            }
-        }
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
+mod common;
+use common::Rng;
 
 /// A mesh with one primitive holding `triangles` as a soup.
 fn soup_mesh(triangles: &[[Vec3; 3]]) -> Mesh {
@@ -74,11 +39,11 @@ fn random_triangles(rng: &mut Rng, n: usize, scale: f32, offset: Vec3) -> Vec<[V
 /// A random rigid-plus-scale transform; `mirror` flips one axis (negative determinant).
 fn random_transform(rng: &mut Rng, translation: f32, mirror: bool) -> Affine3A {
     let axis = rng.dir();
-    let rotation = Quat::from_axis_angle(axis, rng.f() * std::f32::consts::TAU);
+    let rotation = Quat::from_axis_angle(axis, rng.f32() * std::f32::consts::TAU);
     let mut scale = Vec3::new(
-        0.5 + rng.f() * 2.0,
-        0.5 + rng.f() * 2.0,
-        0.5 + rng.f() * 2.0,
+        0.5 + rng.f32() * 2.0,
+        0.5 + rng.f32() * 2.0,
+        0.5 + rng.f32() * 2.0,
     );
     if mirror {
         scale.x = -scale.x;
@@ -89,7 +54,7 @@ fn random_transform(rng: &mut Rng, translation: f32, mirror: bool) -> Affine3A {
 /// Barycentrics for a point on the triangle: mostly inside, some exactly on an edge or at
 /// a vertex (where neighbours and rounding make self-intersection most likely).
 fn random_barycentrics(rng: &mut Rng) -> (f32, f32) {
-    let (mut u, mut v) = (rng.f(), rng.f());
+    let (mut u, mut v) = (rng.f32(), rng.f32());
     if u + v > 1.0 {
         (u, v) = (1.0 - u, 1.0 - v);
     }
@@ -113,7 +78,7 @@ fn random_direction_on_side(rng: &mut Rng, n: Vec3) -> Vec3 {
         d = -d;
     }
     // Direction lengths vary: rays need not be unit length.
-    d * (0.25 + 4.0 * rng.f())
+    d * (0.25 + 4.0 * rng.f32())
 }
 
 /// Rays leaving random points of random triangles, with origins offset by
@@ -299,7 +264,7 @@ fn surface_targets(rng: &mut Rng, verts: &[Vec3], faces: &[[u32; 3]]) -> Vec<Vec
             verts[f[rng.below(3)] as usize],
             verts[f[rng.below(3)] as usize],
         );
-        targets.push(a + (b - a) * rng.f());
+        targets.push(a + (b - a) * rng.f32());
     }
     for _ in 0..verts.len() {
         let [a, b, c] = faces[rng.below(faces.len())].map(|i| verts[i as usize]);
@@ -426,7 +391,7 @@ fn brute_mesh(
 
 fn random_ray(rng: &mut Rng, extent: f32) -> Ray {
     let o = rng.cube() * extent;
-    let mut d = rng.dir() * (0.1 + 3.0 * rng.f());
+    let mut d = rng.dir() * (0.1 + 3.0 * rng.f32());
     // Some rays along axes or planes: zero direction components exercise the slab test's
     // infinities.
     match rng.below(8) {
@@ -459,7 +424,7 @@ fn mesh_bvh_matches_brute_force() {
     for i in 0..8_000 {
         let ray = random_ray(&mut rng, 12.0);
         let t_max = if i % 4 == 0 {
-            0.5 + rng.f() * 10.0
+            0.5 + rng.f32() * 10.0
         } else {
             f32::INFINITY
         };
@@ -532,7 +497,7 @@ fn scene_bvh_matches_brute_force_over_instances() {
     for i in 0..4_000 {
         let ray = random_ray(&mut rng, 14.0);
         let t_max = if i % 4 == 0 {
-            1.0 + rng.f() * 10.0
+            1.0 + rng.f32() * 10.0
         } else {
             f32::INFINITY
         };

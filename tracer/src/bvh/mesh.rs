@@ -179,25 +179,17 @@ impl MeshBvh {
 mod tests {
     use super::*;
 
-    /// xorshift64, so that the tests need no dependency.
-    struct Rng(u64);
-    impl Rng {
-        fn f(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-        fn v(&mut self) -> Vec3 {
-            Vec3::new(self.f(), self.f(), self.f())
-        }
-    }
+    use crate::test_rng::Rng;
 
     fn soup(rng: &mut Rng, n: usize) -> Vec<[Vec3; 3]> {
         (0..n)
             .map(|_| {
-                let c = rng.v() * 10.0;
-                [c + rng.v() - 0.5, c + rng.v() - 0.5, c + rng.v() - 0.5]
+                let c = rng.vec3() * 10.0;
+                [
+                    c + rng.vec3() - 0.5,
+                    c + rng.vec3() - 0.5,
+                    c + rng.vec3() - 0.5,
+                ]
             })
             .collect()
     }
@@ -277,8 +269,8 @@ mod tests {
         let bvh = MeshBvh::build(&tris);
         assert_eq!(bvh.triangle_count(), 3000);
         for i in 0..3000 {
-            let o = rng.v() * 14.0 - 2.0;
-            let d = rng.v() - 0.5;
+            let o = rng.vec3() * 14.0 - 2.0;
+            let d = rng.vec3() - 0.5;
             let t_max = if i % 3 == 0 { 4.0 } else { f32::INFINITY };
             let ray = Ray::new(o, d);
             let expect = brute(&tris, &ray, t_max);

@@ -278,18 +278,7 @@ impl AliasTable {
 mod tests {
     use super::*;
 
-    struct Rng(u64);
-    impl Rng {
-        fn next_f32(&mut self) -> f32 {
-            // SplitMix64.
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            (z >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
+    use crate::test_rng::Rng;
 
     #[test]
     fn one_d_samples_follow_the_function_and_skip_zero_bins() {

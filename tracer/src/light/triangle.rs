@@ -230,20 +230,7 @@ fn angle_between(v1: Vec3, v2: Vec3) -> f32 {
 mod tests {
     use super::*;
 
-    struct Rng(u64);
-    impl Rng {
-        fn next_f32(&mut self) -> f32 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            (z >> 40) as f32 / (1u64 << 24) as f32
-        }
-        fn vec2(&mut self) -> Vec2 {
-            Vec2::new(self.next_f32(), self.next_f32())
-        }
-    }
+    use crate::test_rng::Rng;
 
     fn light(p: [Vec3; 3]) -> TriangleLight {
         TriangleLight::new(&EmissiveTriangle {

@@ -1,0 +1,54 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)] // each test binary uses its own subset
+
+use glam::{Vec2, Vec3};
+
+/// SplitMix64: small, deterministic, good enough for Monte Carlo tests and test geometry.
+pub struct Rng(pub u64);
+
+impl Rng {
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in [0, 1), double precision.
+    pub fn f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in [0, 1)².
+    pub fn vec2(&mut self) -> Vec2 {
+        Vec2::new(self.f32(), self.f32())
+    }
+
+    /// Uniform in [-1, 1)³.
+    pub fn cube(&mut self) -> Vec3 {
+        Vec3::new(self.f32(), self.f32(), self.f32()) * 2.0 - 1.0
+    }
+
+    /// Uniform on the unit sphere.
+    pub fn dir(&mut self) -> Vec3 {
+        loop {
+            let v = self.cube();
+            let l2 = v.length_squared();
+            if l2 > 1e-4 && l2 <= 1.0 {
+                return v / l2.sqrt();
+            }
+        }
+    }
+
+    /// Uniform in 0..n.
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+}
