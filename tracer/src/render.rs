@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use crate::bvh::{Instance, SceneBvh};
 use crate::camera::Camera;
 use crate::film::{SampleRange, TileBuffer, TileRect};
-use crate::geometry::{Aabb, Ray};
+use crate::geometry::Ray;
 use crate::integrator;
 use crate::light::{EmissiveTriangle, Environment, LightSet};
 use crate::loader::framing_camera;
@@ -349,11 +349,6 @@ impl PreparedFrame {
         } else {
             self.bvh.occluded(meshes, ray, t_max, |_, _, _, _| true)
         }
-    }
-
-    /// World-space bounds of everything in the frame, relative to the camera.
-    pub fn bounds(&self) -> Aabb {
-        self.bvh.bounds()
     }
 }
 

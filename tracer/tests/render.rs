@@ -120,7 +120,12 @@ fn white_furnace_conserves_energy() {
 
 /// A white Lambertian floor (y = 0), seen from above by an orthographic camera so narrow
 /// that each pixel sees practically one point.
-fn lit_floor(light: PunctualLight, light_at: DMat4) -> Scene {
+/// `extra` adds more to the scene before it is finished.
+fn lit_floor(
+    light: PunctualLight,
+    light_at: DMat4,
+    extra: impl FnOnce(&mut SceneBuilder),
+) -> Scene {
     let mut b = SceneBuilder::default();
     let white = b.material(Material {
         base_color: Vec4::ONE,
@@ -154,11 +159,21 @@ fn lit_floor(light: PunctualLight, light_at: DMat4) -> Scene {
     };
     b.camera(camera, down);
     b.light(light, light_at);
+    extra(&mut b);
     b.finish()
 }
 
 fn mean_radiance(layers: &Layers) -> f64 {
     layers.beauty.iter().map(|b| b.x as f64).sum::<f64>() / layers.beauty.len() as f64
+}
+
+/// Mean radiance of a [`lit_floor`] scene under direct light only.
+fn direct_floor_radiance(scene: Scene) -> f64 {
+    let settings = RenderSettings {
+        max_depth: 1,
+        seed: 0,
+    };
+    mean_radiance(&render(&frame(scene, 8, 8), &settings, 4).resolve())
 }
 
 #[test]
@@ -169,18 +184,13 @@ fn point_light_on_a_plane_matches_closed_form_irradiance() {
         intensity: Vec3::splat(intensity),
         range: None,
     };
-    let scene = lit_floor(light, DMat4::from_translation(DVec3::new(0.0, height, 0.0)));
-    let layers = render(
-        &frame(scene, 8, 8),
-        &RenderSettings {
-            max_depth: 1,
-            seed: 0,
-        },
-        4,
-    )
-    .resolve();
+    let scene = lit_floor(
+        light,
+        DMat4::from_translation(DVec3::new(0.0, height, 0.0)),
+        |_| {},
+    );
     let expected = intensity as f64 / (std::f64::consts::PI * height * height);
-    let got = mean_radiance(&layers);
+    let got = direct_floor_radiance(scene);
     assert!(
         (got / expected - 1.0).abs() < 0.01,
         "got {got}, expected {expected}"
@@ -194,17 +204,8 @@ fn directional_light_on_a_plane_matches_closed_form_irradiance() {
         illuminance: Vec3::ONE,
     };
     let tilt = DMat4::from_rotation_x(-std::f64::consts::FRAC_PI_2 + std::f64::consts::FRAC_PI_3);
-    let layers = render(
-        &frame(lit_floor(light, tilt), 8, 8),
-        &RenderSettings {
-            max_depth: 1,
-            seed: 0,
-        },
-        4,
-    )
-    .resolve();
     let expected = (std::f64::consts::FRAC_PI_3).cos().abs() / std::f64::consts::PI;
-    let got = mean_radiance(&layers);
+    let got = direct_floor_radiance(lit_floor(light, tilt, |_| {}));
     assert!(
         (got / expected - 1.0).abs() < 0.01,
         "got {got}, expected {expected}"
@@ -341,44 +342,24 @@ fn alpha_masked_cut_outs_let_light_through_for_shadow_rays_too() {
             intensity: Vec3::splat(intensity),
             range: None,
         };
-        let mut scene = lit_floor(light, DMat4::from_translation(DVec3::new(0.0, height, 0.0)));
-        let sheet_material = Material {
-            base_color: Vec4::new(1.0, 1.0, 1.0, alpha),
-            alpha_mode: tracer::material::AlphaMode::Mask { cutoff: 0.5 },
-            double_sided: true,
-            ..Default::default()
-        };
-        scene.materials.push(sheet_material);
-        let m = scene.materials.len() as u32 - 1;
-        let s = 0.5;
-        let sheet = quad(
-            [
+        let sheet = |b: &mut SceneBuilder| {
+            let m = b.material(Material {
+                base_color: Vec4::new(1.0, 1.0, 1.0, alpha),
+                alpha_mode: tracer::material::AlphaMode::Mask { cutoff: 0.5 },
+                double_sided: true,
+                ..Default::default()
+            });
+            let s = 0.5;
+            let corners = [
                 Vec3::new(-s, 1.5, s),
                 Vec3::new(s, 1.5, s),
                 Vec3::new(s, 1.5, -s),
                 Vec3::new(-s, 1.5, -s),
-            ],
-            m,
-        );
-        scene
-            .meshes
-            .push(tracer::scene::Mesh::new(None, vec![sheet]));
-        scene.nodes.push(tracer::scene::Node {
-            mesh: Some(scene.meshes.len() as u32 - 1),
-            ..Default::default()
-        });
-        scene.roots.push(scene.nodes.len() as u32 - 1);
-        scene.features.alpha_mask = true;
-        let layers = render(
-            &frame(scene, 8, 8),
-            &RenderSettings {
-                max_depth: 1,
-                seed: 0,
-            },
-            4,
-        )
-        .resolve();
-        mean_radiance(&layers)
+            ];
+            b.mesh("sheet", vec![quad(corners, m)], DMat4::IDENTITY);
+        };
+        let at = DMat4::from_translation(DVec3::new(0.0, height, 0.0));
+        direct_floor_radiance(lit_floor(light, at, sheet))
     };
     let lit = intensity as f64 / (std::f64::consts::PI * height * height);
     let cut_away = floor_radiance(0.2);
