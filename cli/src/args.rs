@@ -2,11 +2,33 @@
 
 use anyhow::{bail, Context};
 
+use tracer::animation::AnimationChoice;
 use tracer::film::TileRect;
+use tracer::motion::Shutter;
 use tracer::render::CameraChoice;
 
 /// Largest image side we accept, as the farm does.
 pub const MAX_SIDE: u32 = 16384;
+/// Most frames one sequence may hold, as the farm accepts.
+pub const MAX_FRAMES: usize = 100_000;
+
+/// Frames `start..=end` every `step`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameRange {
+    pub start: i32,
+    pub end: i32,
+    pub step: u32,
+}
+
+impl FrameRange {
+    pub fn frames(&self) -> impl Iterator<Item = i32> {
+        (self.start..=self.end).step_by(self.step as usize)
+    }
+
+    pub fn len(&self) -> usize {
+        ((self.end - self.start) as usize) / self.step as usize + 1
+    }
+}
 
 /// `WxH`, e.g. `1280x720`.
 pub fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
@@ -37,6 +59,70 @@ pub fn parse_region(s: &str) -> anyhow::Result<TileRect> {
     Ok(TileRect::new(x, y, w, h))
 }
 
+/// `A-B`, `A-B:STEP` or a single frame `A` (A may be negative: `-5-3`).
+pub fn parse_frames(s: &str) -> anyhow::Result<FrameRange> {
+    let (range, step) = match s.split_once(':') {
+        Some((r, st)) => (
+            r,
+            st.trim()
+                .parse::<u32>()
+                .context("step is not a whole number")?,
+        ),
+        None => (s, 1),
+    };
+    if step == 0 {
+        bail!("frames {s}: the step must be at least 1");
+    }
+    let range = range.trim();
+    // The separating '-' is the first one after the start's own sign.
+    let split = range
+        .char_indices()
+        .skip(1)
+        .find(|&(_, c)| c == '-')
+        .map(|(i, _)| i);
+    let (start, end) = match split {
+        Some(i) => (&range[..i], &range[i + 1..]),
+        None => (range, range),
+    };
+    let number = |x: &str| {
+        x.trim()
+            .parse::<i32>()
+            .with_context(|| format!("frames {s}: expected A-B, A-B:STEP or A"))
+    };
+    let (start, end) = (number(start)?, number(end)?);
+    if end < start {
+        bail!("frames {s}: the range ends before it starts");
+    }
+    let range = FrameRange { start, end, step };
+    if range.len() > MAX_FRAMES {
+        bail!("frames {s}: {} frames, at most {MAX_FRAMES}", range.len());
+    }
+    Ok(range)
+}
+
+/// `OPEN,CLOSE` in frames relative to each frame's time, e.g. `-0.25,0.25`.
+pub fn parse_shutter(s: &str) -> anyhow::Result<Shutter> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .context("expected OPEN,CLOSE in frames, e.g. -0.25,0.25")?;
+    let [open, close] = v[..] else {
+        bail!("expected two numbers OPEN,CLOSE")
+    };
+    let shutter = Shutter { open, close };
+    shutter.validate().map_err(anyhow::Error::msg)?;
+    Ok(shutter)
+}
+
+/// An animation by index or name.
+pub fn parse_animation(s: &str) -> anyhow::Result<AnimationChoice> {
+    Ok(match s.parse::<usize>() {
+        Ok(i) => AnimationChoice::Index(i),
+        Err(_) => AnimationChoice::Name(s.to_string()),
+    })
+}
+
 /// A camera by index or name.
 pub fn parse_camera(s: &str) -> anyhow::Result<CameraChoice> {
     Ok(match s.parse::<usize>() {
@@ -62,6 +148,30 @@ mod tests {
         assert_eq!(
             parse_camera("Main").unwrap(),
             CameraChoice::Name("Main".into())
+        );
+    }
+
+    #[test]
+    fn frame_ranges_and_shutters_parse_with_limits() {
+        let r = parse_frames("1-48").unwrap();
+        assert_eq!((r.start, r.end, r.step, r.len()), (1, 48, 1, 48));
+        let r = parse_frames("0-10:5").unwrap();
+        assert_eq!(r.frames().collect::<Vec<_>>(), [0, 5, 10]);
+        let r = parse_frames("-5--3").unwrap();
+        assert_eq!(r.frames().collect::<Vec<_>>(), [-5, -4, -3]);
+        assert_eq!(parse_frames("7").unwrap().len(), 1);
+        for bad in ["5-1", "1-4:0", "a-b", "1-200000", ""] {
+            assert!(parse_frames(bad).is_err(), "{bad}");
+        }
+        let s = parse_shutter("-0.25,0.25").unwrap();
+        assert_eq!((s.open, s.close), (-0.25, 0.25));
+        for bad in ["0.5,0", "1", "nan,1", "0,1e9"] {
+            assert!(parse_shutter(bad).is_err(), "{bad}");
+        }
+        assert_eq!(parse_animation("1").unwrap(), AnimationChoice::Index(1));
+        assert_eq!(
+            parse_animation("Walk").unwrap(),
+            AnimationChoice::Name("Walk".into())
         );
     }
 }

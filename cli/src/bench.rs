@@ -53,7 +53,7 @@ fn camera_rays_per_second(frame: &PreparedFrame) -> f64 {
                 ((i % w) as f32 + 0.5) / w as f32,
                 ((i / w) as f32 + 0.5) / h as f32,
             );
-            frame.camera.generate_ray(film)
+            frame.camera.generate_ray(film, 0.0)
         })
         .collect();
     let passes = 8;
@@ -76,7 +76,8 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     } else {
         args.reference_spp
     };
-    let scene = Arc::new(load_scene(args.scene.as_ref())?);
+    // The still demo: benchmark figures stay comparable from one build to the next.
+    let scene = Arc::new(load_scene(args.scene.as_ref(), tracer::demo::demo_scene)?);
     let frame = prepare_frame(
         scene,
         &FrameOptions {

@@ -1,6 +1,7 @@
-//! `tessera render`: one frame of a scene, straight from the tracer to an EXR and a PNG.
+//! `tessera render`: a frame or a sequence of a scene, straight from the tracer to EXRs and
+//! PNG previews, without the farm.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -8,13 +9,18 @@ use anyhow::{bail, Context};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
+use tracer::animation::AnimationChoice;
 use tracer::film::{SampleRange, TileRect};
 use tracer::light::{Environment, EnvironmentMap};
+use tracer::motion::Shutter;
 use tracer::output::{self, ExrMetadata};
 use tracer::render::{prepare_frame, render_region, CameraChoice, FrameOptions, RenderSettings};
 use tracer::scene::Scene;
 
-use crate::args::{parse_camera, parse_region, parse_size};
+use crate::args::{
+    parse_animation, parse_camera, parse_frames, parse_region, parse_shutter, parse_size,
+    FrameRange,
+};
 
 /// Most samples per pixel a single render accepts.
 const MAX_SPP: u32 = 1_000_000;
@@ -23,15 +29,30 @@ const MAX_DEPTH: u32 = 1024;
 
 #[derive(Args)]
 pub struct RenderArgs {
-    /// A .gltf (with its .bin and images beside it) or .glb; the built-in demo scene when
-    /// left out.
+    /// A .gltf (with its .bin and images beside it) or .glb; the built-in animated demo
+    /// scene when left out.
     scene: Option<PathBuf>,
     /// Frame number; it sets the time (frame / fps) and keys the random numbers.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, conflicts_with = "frames")]
     frame: i32,
+    /// A sequence instead of one frame: A-B or A-B:STEP. `--out` is then a folder that
+    /// receives frame_0001.exr, frame_0001.png, ...
+    #[arg(long, value_parser = parse_frames)]
+    frames: Option<FrameRange>,
     /// Frames per second.
     #[arg(long, default_value_t = 24.0)]
     fps: f64,
+    /// Shutter OPEN,CLOSE in frames relative to each frame's time (e.g. -0.25,0.25 for a
+    /// 180° shutter); 0,0 renders without motion blur.
+    #[arg(long, default_value = "0,0", value_parser = parse_shutter, allow_hyphen_values = true)]
+    shutter: Shutter,
+    /// Motion steps across an open shutter (1..=64); by default chosen from how much the
+    /// scene moves inside it.
+    #[arg(long)]
+    motion_steps: Option<u32>,
+    /// Play only this animation (glTF index or name); all play together by default.
+    #[arg(long, value_parser = parse_animation)]
+    animation: Option<AnimationChoice>,
     /// Samples per pixel.
     #[arg(long, default_value_t = 64)]
     spp: u32,
@@ -59,9 +80,15 @@ pub struct RenderArgs {
     /// Worker threads (all cores by default).
     #[arg(long)]
     threads: Option<usize>,
-    /// The EXR to write; a tone-mapped PNG preview is written beside it.
-    #[arg(long, default_value = "out.exr")]
-    out: PathBuf,
+    /// The EXR to write (a tone-mapped PNG preview is written beside it); with --frames,
+    /// the folder to write the sequence into.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+/// Name of frame `frame`'s file in a sequence folder: four digits, zero padded.
+pub fn frame_file(dir: &Path, frame: i32, extension: &str) -> PathBuf {
+    dir.join(format!("frame_{frame:04}.{extension}"))
 }
 
 /// Parses `--environment`.
@@ -86,11 +113,11 @@ fn parse_environment(s: &str) -> anyhow::Result<Environment> {
     Ok(Environment::Map(map))
 }
 
-/// Loads the scene named on the command line, or the demo.
-pub fn load_scene(path: Option<&PathBuf>) -> anyhow::Result<Scene> {
+/// Loads the scene named on the command line, or `demo` when none is named.
+pub fn load_scene(path: Option<&PathBuf>, demo: fn() -> Scene) -> anyhow::Result<Scene> {
     match path {
         Some(p) => tracer::loader::load_path(p).with_context(|| format!("loading {}", p.display())),
-        None => Ok(tracer::demo::demo_scene()),
+        None => Ok(demo()),
     }
 }
 
@@ -107,6 +134,14 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
         bail!("--fps {}: must be in (0, 1000]", args.fps);
     }
+    if let Some(n) = args.motion_steps {
+        if !(1..=tracer::motion::MAX_MOTION_STEPS).contains(&n) {
+            bail!(
+                "--motion-steps {n}: must be 1..={}",
+                tracer::motion::MAX_MOTION_STEPS
+            );
+        }
+    }
     if let Some(n) = args.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n.max(1))
@@ -117,9 +152,25 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     if !region.fits_in(width, height) {
         bail!("--region {region:?} does not fit in the {width}x{height} frame");
     }
+    // One frame to a file, or a sequence into a folder.
+    let (frames, out): (Vec<i32>, Output) = match args.frames {
+        Some(range) => {
+            let dir = args.out.clone().unwrap_or_else(|| PathBuf::from("out"));
+            std::fs::create_dir_all(&dir)
+                .with_context(|| format!("creating the output folder {}", dir.display()))?;
+            (range.frames().collect(), Output::Folder(dir))
+        }
+        None => (
+            vec![args.frame],
+            Output::File(args.out.clone().unwrap_or_else(|| "out.exr".into())),
+        ),
+    };
 
     let t_load = Instant::now();
-    let scene = load_scene(args.scene.as_ref())?;
+    let scene = Arc::new(load_scene(
+        args.scene.as_ref(),
+        tracer::demo::animated_demo_scene,
+    )?);
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
@@ -128,66 +179,112 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         .as_deref()
         .map(parse_environment)
         .transpose()?;
-    let options = FrameOptions {
-        frame: args.frame,
-        fps: args.fps,
-        width,
-        height,
-        camera: args.camera.clone().unwrap_or_default(),
-        environment,
-    };
-    let frame = prepare_frame(Arc::new(scene), &options)?;
-    for w in &frame.warnings {
-        eprintln!("note: {w}");
-    }
     let load_time = t_load.elapsed();
-
     let settings = RenderSettings {
         max_depth: args.max_depth,
         seed: args.seed,
     };
-    let samples = SampleRange::new(0, args.spp);
-    let bar = ProgressBar::new(region.area() as u64);
+
+    let bar = ProgressBar::new(region.area() as u64 * frames.len() as u64);
     bar.set_style(
         ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}",
+            "{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta} {msg}",
         )
         .expect("valid template"),
     );
-    let t_render = Instant::now();
-    let tile = render_region(&frame, &settings, region, samples, 32, &|t| {
-        bar.inc(t.rect.area() as u64)
-    });
+    let t_all = Instant::now();
+    for &frame_number in &frames {
+        let options = FrameOptions {
+            frame: frame_number,
+            fps: args.fps,
+            shutter: args.shutter,
+            motion_steps: args.motion_steps,
+            animation: args.animation.clone().unwrap_or_default(),
+            width,
+            height,
+            camera: args.camera.clone().unwrap_or_default(),
+            environment: environment.clone(),
+        };
+        let t_prepare = Instant::now();
+        let frame = prepare_frame(scene.clone(), &options)
+            .with_context(|| format!("frame {frame_number}"))?;
+        let prepare_time = t_prepare.elapsed().as_secs_f64();
+        if frame_number == frames[0] {
+            for w in &frame.warnings {
+                bar.suspend(|| eprintln!("note: {w}"));
+            }
+        }
+        bar.set_message(format!("frame {frame_number}"));
+        let t_render = Instant::now();
+        let tile = render_region(
+            &frame,
+            &settings,
+            region,
+            SampleRange::new(0, args.spp),
+            32,
+            &|t| bar.inc(t.rect.area() as u64),
+        );
+        let render_time = t_render.elapsed().as_secs_f64();
+
+        let layers = tile.resolve();
+        let meta = ExrMetadata::new()
+            .with("tessera/version", env!("CARGO_PKG_VERSION"))
+            .with("tessera/spp", args.spp.to_string())
+            .with("tessera/max-depth", args.max_depth.to_string())
+            .with("tessera/frame", frame_number.to_string())
+            .with("tessera/fps", args.fps.to_string())
+            .with(
+                "tessera/shutter",
+                format!("{},{}", args.shutter.open, args.shutter.close),
+            )
+            .with("tessera/motion-steps", frame.motion_steps.to_string())
+            .with("tessera/seed", args.seed.to_string())
+            .with("tessera/features", frame.features.names().join(","));
+        let exr = match &out {
+            Output::File(path) => path.clone(),
+            Output::Folder(dir) => frame_file(dir, frame_number, "exr"),
+        };
+        output::write_exr(&exr, (width, height), &layers, &meta)
+            .with_context(|| format!("writing {}", exr.display()))?;
+        let png = exr.with_extension("png");
+        output::write_preview_png(&png, (width, height), &layers, 1.0)
+            .with_context(|| format!("writing {}", png.display()))?;
+
+        let paths = region.area() as f64 * args.spp as f64;
+        let line = format!(
+            "frame {frame_number}: {}x{} ({} px) at {} spp, {} motion step(s), in {:.2} s \
+             (prepare {:.2} s): {:.2} M samples/s, {:.2} M rays/s, {} NaN/inf samples dropped",
+            region.width,
+            region.height,
+            region.area(),
+            args.spp,
+            frame.motion_steps,
+            render_time,
+            prepare_time,
+            paths / render_time / 1e6,
+            tile.rays as f64 / render_time / 1e6,
+            tile.dropped
+        );
+        bar.suspend(|| println!("{line}"));
+        if let Output::File(_) = out {
+            bar.suspend(|| println!("wrote {} and {}", exr.display(), png.display()));
+        }
+    }
     bar.finish_and_clear();
-    let render_time = t_render.elapsed().as_secs_f64();
-
-    let layers = tile.resolve();
-    let meta = ExrMetadata::new()
-        .with("tessera/version", env!("CARGO_PKG_VERSION"))
-        .with("tessera/spp", args.spp.to_string())
-        .with("tessera/max-depth", args.max_depth.to_string())
-        .with("tessera/frame", args.frame.to_string())
-        .with("tessera/seed", args.seed.to_string())
-        .with("tessera/features", frame.features.names().join(","));
-    output::write_exr(&args.out, (width, height), &layers, &meta)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    let png = args.out.with_extension("png");
-    output::write_preview_png(&png, (width, height), &layers, 1.0)
-        .with_context(|| format!("writing {}", png.display()))?;
-
-    let paths = region.area() as f64 * args.spp as f64;
-    println!(
-        "rendered {}x{} ({} px) at {} spp in {:.2} s (scene {:.2} s): {:.2} M samples/s, {:.2} M rays/s, {} NaN/inf samples dropped",
-        region.width,
-        region.height,
-        region.area(),
-        args.spp,
-        render_time,
-        load_time.as_secs_f64(),
-        paths / render_time / 1e6,
-        tile.rays as f64 / render_time / 1e6,
-        tile.dropped
-    );
-    println!("wrote {} and {}", args.out.display(), png.display());
+    if let Output::Folder(dir) = &out {
+        println!(
+            "wrote {} frame(s) to {} in {:.2} s (scene loaded in {:.2} s)",
+            frames.len(),
+            dir.display(),
+            t_all.elapsed().as_secs_f64(),
+            load_time.as_secs_f64()
+        );
+    }
     Ok(())
+}
+
+/// Where the EXRs go.
+enum Output {
+    File(PathBuf),
+    Folder(PathBuf),
 }

@@ -79,8 +79,12 @@ fn a_region_keeps_the_full_frame_as_display_window_and_matches_the_full_render()
 #[test]
 fn bad_arguments_are_refused_with_a_clear_message() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 9] = [
         (&["render", "--size", "0x10"], "each side must be"),
+        (&["render", "--frames", "5-1"], "ends before it starts"),
+        (&["render", "--shutter", "0.5,0"], "after it closes"),
+        (&["render", "--motion-steps", "0"], "--motion-steps 0"),
+        (&["render", "--animation", "walk"], "animation"),
         (&["render", "--spp", "0"], "--spp 0"),
         (
             &["render", "--region", "30,0,10,10", "--size", "32x24"],
@@ -94,4 +98,56 @@ fn bad_arguments_are_refused_with_a_clear_message() {
         assert!(!o.status.success(), "{args:?} should fail");
         assert!(stderr(&o).contains(message), "{args:?}: {}", stderr(&o));
     }
+}
+
+#[test]
+fn a_sequence_of_the_animated_demo_moves_and_blurs() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = tessera(
+        &[
+            "render",
+            "--frames",
+            "1-3",
+            "--fps",
+            "24",
+            "--shutter",
+            "-0.25,0.25",
+            "--size",
+            "24x24",
+            "--spp",
+            "2",
+            "--out",
+            "seq",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("wrote 3 frame(s)"), "{stdout}");
+    let frames: Vec<_> = (1..=3)
+        .map(|f| {
+            let exr = dir.path().join(format!("seq/frame_{f:04}.exr"));
+            assert!(
+                exr.with_extension("png").is_file(),
+                "no preview for frame {f}"
+            );
+            read_exr(&exr).unwrap()
+        })
+        .collect();
+    for (f, img) in (1..=3).zip(&frames) {
+        assert_eq!(img.attribute("tessera/frame"), Some(f.to_string().as_str()));
+        assert_eq!(img.attribute("tessera/shutter"), Some("-0.25,0.25"));
+        let steps: u32 = img
+            .attribute("tessera/motion-steps")
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(steps >= 2, "frame {f}: {steps} motion steps");
+        assert!(img
+            .attribute("tessera/features")
+            .unwrap()
+            .contains("animation"));
+        assert!(img.layers.beauty.iter().all(|b| b.is_finite()));
+    }
+    assert!(frames[0].layers.beauty != frames[2].layers.beauty);
 }

@@ -1,5 +1,6 @@
-//! Criterion benchmarks of the tracer's hot kernels: BVH build, closest-hit camera rays,
-//! and whole paths through the demo scene. Run with `cargo bench -p tracer`.
+//! Criterion benchmarks of the tracer's hot kernels: BVH build, closest hits in one mesh
+//! BVH (static and deforming), closest-hit camera rays, and whole paths through the demo
+//! scene. Run with `cargo bench -p tracer`.
 
 use std::sync::Arc;
 
@@ -8,6 +9,7 @@ use glam::{Vec2, Vec3};
 
 use tracer::bvh::MeshBvh;
 use tracer::film::{SampleRange, TileRect};
+use tracer::geometry::Ray;
 use tracer::render::{prepare_frame, render_tile, FrameOptions, PreparedFrame, RenderSettings};
 
 /// A bumpy grid of `n`×`n` quads: a mesh whose size we control.
@@ -48,13 +50,55 @@ fn bvh_build(c: &mut Criterion) {
     g.finish();
 }
 
+/// Rays from above the grid towards it, spread over its whole area, at shutter times
+/// spread over [0, 1] (static BVHs ignore the time).
+fn grid_rays(count: usize) -> Vec<Ray> {
+    (0..count)
+        .map(|i| {
+            let (u, v) = ((i % 64) as f32 / 64.0, (i / 64 % 64) as f32 / 64.0);
+            let origin = Vec3::new(0.5, 2.0, 0.5);
+            let mut ray = Ray::new(origin, Vec3::new(u, 0.0, v) - origin);
+            ray.time = ((i * 37) % count) as f32 / count as f32;
+            ray
+        })
+        .collect()
+}
+
+fn bvh_rays(c: &mut Criterion) {
+    let tris = grid(256);
+    let rays = grid_rays(64 * 64);
+    let bvh = MeshBvh::build(&tris);
+    // The same grid deforming over the shutter: a wave that rises and moves sideways.
+    let waved: Vec<[Vec3; 3]> = tris
+        .iter()
+        .map(|t| t.map(|v| v + Vec3::new(0.02, 0.1 * (9.0 * v.x + 7.0 * v.z).sin(), 0.0)))
+        .collect();
+    let moving = MeshBvh::build_motion(&[tris.clone(), waved]);
+    let mut g = c.benchmark_group("bvh_rays");
+    g.throughput(Throughput::Elements(rays.len() as u64));
+    for (name, bvh) in [
+        ("static_closest_hit", &bvh),
+        ("motion_2_steps_closest_hit", &moving),
+    ] {
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                rays.iter()
+                    .filter(|r| bvh.intersect(r, f32::INFINITY, |_, _, _| true).is_some())
+                    .count()
+            })
+        });
+    }
+    g.finish();
+}
+
 fn camera_rays(c: &mut Criterion) {
     let frame = demo_frame(64);
     let rays: Vec<_> = (0..64 * 64)
         .map(|i| {
-            frame
-                .camera
-                .generate_ray(Vec2::new((i % 64) as f32 / 64.0, (i / 64) as f32 / 64.0))
+            frame.camera.generate_ray(
+                Vec2::new((i % 64) as f32 / 64.0, (i / 64) as f32 / 64.0),
+                0.0,
+            )
         })
         .collect();
     let mut g = c.benchmark_group("camera_rays");
@@ -82,5 +126,5 @@ fn paths(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bvh_build, camera_rays, paths);
+criterion_group!(benches, bvh_build, bvh_rays, camera_rays, paths);
 criterion_main!(benches);

@@ -1,23 +1,37 @@
 //! Bounding volume hierarchies: a binned-SAH BVH per mesh (built once, shared by every
-//! instance) and a top-level BVH over the instances of a prepared frame.
+//! instance) and a top-level BVH over the instances of a prepared frame, both with motion
+//! blur where the scene moves.
 //!
 //! | module | what it holds |
 //! |---|---|
 //! | `build` | the binned SAH builder shared by both levels (Wald 2007) |
-//! | `node` | the 32-byte node, the robust slab test (Ize 2013) and the ordered traversal |
-//! | `mesh` | [`MeshBvh`]: triangles in object space, reordered into the BVH's own array |
-//! | `instance` | [`Instance`] and [`SceneBvh`]: placed meshes and the BVH over them |
+//! | `node` | the 32-byte node, per-step boxes, the slab test (Ize 2013), the traversal |
+//! | `mesh` | [`MeshBvh`]: object-space triangles in the BVH's own order, at 1..S steps |
+//! | `instance` | [`Instance`], [`Placement`], [`SceneBvh`]: placed meshes, the BVH over them |
+//! | `motion` | the shutter-time convention; [`MotionTransform`] (lerp, slerp, lerp) |
 //!
 //! Both levels share one flat node layout in which a node's two children are adjacent and
-//! always stored after it. That keeps the door open for what motion blur and skinning will
-//! need: refitting is one reverse pass over the nodes, and an instance with several
-//! transforms over the shutter only changes how [`Instance::object_ray`] and
-//! [`Instance::bounds`] are computed, not the traversal.
+//! always stored after it (refitting would be one reverse pass over the nodes).
+//!
+//! Motion blur: time is the normalised shutter position in [0, 1], and motion is given at
+//! `S` evenly spaced steps (step `k` at `k / (S - 1)`).
+//! - A deforming mesh ([`MeshBvh::build_motion`]) keeps its vertices at every step and
+//!   every node's box at every step, beside the 32-byte nodes; a ray sees triangles and
+//!   boxes linearly interpolated between the two steps around its time.
+//! - A moving instance ([`Instance::moving`]) carries a [`MotionTransform`]: translation,
+//!   rotation and stretch interpolated separately (lerp, slerp, lerp). Its bounds cover the
+//!   whole shutter, so the top level is an ordinary static BVH; rays enter the mesh through
+//!   the placement at their time ([`Instance::placement`]).
+//! - Whether anything moves is decided when the hierarchy is built ([`SceneBvh::has_motion`],
+//!   [`MeshBvh::has_motion`]) and picks, once per query, one of two loops monomorphised by a
+//!   const parameter: a static scene runs the same loop as if motion did not exist.
 
 mod build;
 mod instance;
 mod mesh;
+mod motion;
 mod node;
 
-pub use instance::{Instance, SceneBvh};
+pub use instance::{Instance, Placement, SceneBvh};
 pub use mesh::MeshBvh;
+pub use motion::{MotionTransform, Segment};

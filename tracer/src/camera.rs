@@ -1,8 +1,11 @@
 //! Cameras: glTF perspective and orthographic projections placed in the prepared frame,
 //! and the primary rays they generate.
 
-use glam::{Affine3A, Vec2, Vec3};
+use std::sync::Arc;
 
+use glam::{Affine3A, Quat, Vec2, Vec3};
+
+use crate::bvh::Segment;
 use crate::geometry::Ray;
 
 /// A glTF camera projection.
@@ -29,7 +32,7 @@ pub enum Projection {
 }
 
 /// A camera placed in the prepared frame: glTF looks down its local -Z with +Y up.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct Camera {
     /// The projection.
     pub projection: Projection,
@@ -39,11 +42,48 @@ pub struct Camera {
     pub to_world: Affine3A,
     /// Image width over height.
     pub aspect: f32,
+    /// Where the camera is at evenly spaced motion steps over the shutter, when it moves
+    /// inside it; `None` for a still camera (then `to_world` holds at every time).
+    pub motion: Option<Arc<[RigidStep]>>,
+}
+
+/// A camera placement at one motion step: position and orientation, no scale.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RigidStep {
+    /// Position in the prepared frame.
+    pub position: Vec3,
+    /// Orientation.
+    pub rotation: Quat,
+}
+
+impl RigidStep {
+    fn affine(&self) -> Affine3A {
+        Affine3A::from_rotation_translation(self.rotation, self.position)
+    }
 }
 
 impl Camera {
-    /// The primary ray through film position `film` in [0,1]² (x right, y down).
-    pub fn generate_ray(&self, film: Vec2) -> Ray {
+    /// Camera space to the prepared frame at shutter time `time` in [0, 1]: the two
+    /// bracketing steps' positions interpolated linearly, their rotations by slerp.
+    #[inline]
+    pub fn to_world_at(&self, time: f32) -> Affine3A {
+        match self.motion.as_deref() {
+            Some([only]) => only.affine(),
+            Some(steps @ [_, _, ..]) => {
+                let s = Segment::new(time, steps.len());
+                let (a, b) = (&steps[s.index], &steps[s.index + 1]);
+                Affine3A::from_rotation_translation(
+                    a.rotation.slerp(b.rotation, s.w1),
+                    s.lerp(a.position, b.position),
+                )
+            }
+            _ => self.to_world,
+        }
+    }
+
+    /// The primary ray through film position `film` in [0,1]² (x right, y down) at
+    /// shutter time `time` in [0, 1] (ignored by a still camera).
+    pub fn generate_ray(&self, film: Vec2, time: f32) -> Ray {
         let ndc = Vec2::new(2.0 * film.x - 1.0, 1.0 - 2.0 * film.y);
         let (origin, dir) = match self.projection {
             Projection::Perspective { yfov, .. } => {
@@ -58,8 +98,9 @@ impl Camera {
                 Vec3::NEG_Z,
             ),
         };
-        let origin = self.to_world.transform_point3(origin);
-        let dir = self.to_world.transform_vector3(dir).normalize();
-        Ray::new(origin, dir)
+        let to_world = self.to_world_at(time);
+        let origin = to_world.transform_point3(origin);
+        let dir = to_world.transform_vector3(dir).normalize();
+        Ray { origin, dir, time }
     }
 }

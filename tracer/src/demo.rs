@@ -1,13 +1,14 @@
-//! The built-in demo scene, authored in code: a Cornell box (after the published Cornell
+//! The built-in demo scenes, authored in code: a Cornell box (after the published Cornell
 //! measurements, scaled to a 2 m box) with an area light, a diffuse box, a metal sphere and
-//! a glass sphere.
+//! a glass sphere; still, or animated for the farm's demo.
 
 use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
 
+use crate::animation::{Animation, Channel, Interpolation, Sampler, Target};
 use crate::camera::Projection;
 use crate::light::Environment;
 use crate::material::Material;
-use crate::scene::{CameraDef, Scene, SceneBuilder};
+use crate::scene::{CameraDef, Scene, SceneBuilder, Trs};
 use crate::shapes::{cube, quad, uv_sphere};
 
 /// Cornell box wall reflectances (approximations of the measured spectra).
@@ -128,11 +129,9 @@ pub fn cornell_box() -> Scene {
     b.finish()
 }
 
-/// The demo: the Cornell box with a diffuse box, a polished metal sphere and a glass
-/// sphere.
-pub fn demo_scene() -> Scene {
-    let mut b = SceneBuilder::default();
-    cornell_shell(&mut b);
+/// The demo's objects: a diffuse box, a polished metal sphere and a glass sphere, each
+/// placed by a [`Trs`] so that animations can drive them. Returns their nodes.
+fn demo_objects(b: &mut SceneBuilder) -> [u32; 3] {
     let block = b.material(diffuse("block", Vec3::new(0.75, 0.7, 0.6)));
     let metal = b.material(Material {
         name: Some("metal".into()),
@@ -151,28 +150,113 @@ pub fn demo_scene() -> Scene {
         ior: 1.5,
         ..Default::default()
     });
-    let boxy = DMat4::from_scale_rotation_translation(
-        DVec3::new(0.55, 1.1, 0.55),
-        DQuat::from_rotation_y(0.35),
-        DVec3::new(-0.4, 0.55, -0.35),
-    );
-    b.mesh("box", vec![cube(block)], boxy);
-    let sphere_at = |r: f64, x: f64, z: f64| {
-        DMat4::from_scale_rotation_translation(
-            DVec3::splat(r),
-            DQuat::IDENTITY,
-            DVec3::new(x, r, z),
-        )
+    let boxy = Trs {
+        translation: DVec3::new(-0.4, 0.55, -0.35),
+        rotation: DQuat::from_rotation_y(0.35),
+        scale: DVec3::new(0.55, 1.1, 0.55),
     };
-    b.mesh(
-        "metal sphere",
-        vec![uv_sphere(metal, 48, 96)],
-        sphere_at(0.35, 0.45, -0.45),
-    );
-    b.mesh(
-        "glass sphere",
-        vec![uv_sphere(glass, 48, 96)],
-        sphere_at(0.32, 0.15, 0.45),
-    );
+    let sphere_at = |r: f64, x: f64, z: f64| Trs {
+        translation: DVec3::new(x, r, z),
+        scale: DVec3::splat(r),
+        ..Trs::default()
+    };
+    [
+        b.mesh_trs("box", vec![cube(block)], boxy),
+        b.mesh_trs(
+            "metal sphere",
+            vec![uv_sphere(metal, 48, 96)],
+            sphere_at(METAL_RADIUS, 0.45, -0.45),
+        ),
+        b.mesh_trs(
+            "glass sphere",
+            vec![uv_sphere(glass, 48, 96)],
+            sphere_at(0.32, 0.15, 0.45),
+        ),
+    ]
+}
+
+const METAL_RADIUS: f64 = 0.35;
+
+/// The demo: the Cornell box with a diffuse box, a polished metal sphere and a glass
+/// sphere, standing still.
+pub fn demo_scene() -> Scene {
+    let mut b = SceneBuilder::default();
+    cornell_shell(&mut b);
+    demo_objects(&mut b);
+    b.finish()
+}
+
+/// Seconds one loop of the animated demo lasts: 48 frames at 24 fps.
+pub const ANIMATED_DEMO_SECONDS: f64 = 2.0;
+
+/// The demo scene in motion, looping every [`ANIMATED_DEMO_SECONDS`]: the metal sphere
+/// bounces twice (a cubic spline whose keys and tangents trace exact parabolas), the box
+/// turns half a revolution (rotation keys, slerped), the glass sphere slides left and back
+/// (linear keys). Rendered with an open shutter, all three blur.
+pub fn animated_demo_scene() -> Scene {
+    let mut b = SceneBuilder::default();
+    cornell_shell(&mut b);
+    let [boxy, metal, glass] = demo_objects(&mut b);
+
+    // Bounce: y(s) = r + 4h·s(1 - s) over each one-second hop, so the speed leaving and
+    // reaching the floor is 4h m/s and the top is reached with zero speed.
+    let (r, h) = (METAL_RADIUS as f32, 0.6f32);
+    let v = 4.0 * h;
+    let key = |in_v: f32, y: f32, out_v: f32| [0.0, in_v, 0.0, 0.45, y, -0.45, 0.0, out_v, 0.0];
+    let bounce: Vec<f32> = [
+        key(-v, r, v),
+        key(0.0, r + h, 0.0),
+        key(-v, r, v),
+        key(0.0, r + h, 0.0),
+        key(-v, r, v),
+    ]
+    .concat();
+    let turn: Vec<f32> = (0..=4)
+        .flat_map(|k| {
+            let angle = 0.35 + std::f32::consts::FRAC_PI_4 * k as f32;
+            let q = glam::Quat::from_rotation_y(angle);
+            [q.x, q.y, q.z, q.w]
+        })
+        .collect();
+    let slide = vec![0.15, 0.32, 0.45, -0.35, 0.32, 0.45, 0.15, 0.32, 0.45];
+    let channel = |node, target, interpolation, times: Vec<f32>, values, width| Channel {
+        node,
+        target,
+        sampler: Sampler {
+            interpolation,
+            times,
+            values,
+            width,
+        },
+    };
+    b.animation(Animation {
+        name: Some("demo".into()),
+        channels: vec![
+            channel(
+                metal,
+                Target::Translation,
+                Interpolation::CubicSpline,
+                vec![0.0, 0.5, 1.0, 1.5, 2.0],
+                bounce,
+                3,
+            ),
+            channel(
+                boxy,
+                Target::Rotation,
+                Interpolation::Linear,
+                vec![0.0, 0.5, 1.0, 1.5, 2.0],
+                turn,
+                4,
+            ),
+            channel(
+                glass,
+                Target::Translation,
+                Interpolation::Linear,
+                vec![0.0, 1.0, 2.0],
+                slide,
+                3,
+            ),
+        ],
+    });
     b.finish()
 }

@@ -9,7 +9,8 @@ pub struct Ray {
     pub origin: Vec3,
     /// Direction; not necessarily normalised (object-space rays keep the instance's scale).
     pub dir: Vec3,
-    /// Time in frames, within the shutter; unused by static scenes.
+    /// Shutter position in [0, 1] (0: the shutter opens, 1: it closes); unused when
+    /// nothing in the frame moves.
     pub time: f32,
 }
 

@@ -12,8 +12,9 @@ use crate::sampler::PixelSampler;
 
 /// Bounces before Russian roulette may end a path.
 const RR_START_DEPTH: u32 = 3;
-/// Sampler dimensions used by the camera (pixel position), before the first bounce.
-const CAMERA_DIMENSIONS: u32 = 2;
+/// Sampler dimensions used by the camera before the first bounce: pixel position, then
+/// the shutter time (drawn only when something moves, so a still frame skips it).
+const CAMERA_DIMENSIONS: u32 = 3;
 /// Sampler dimensions consumed by each bounce: light choice, light point, lobe choice,
 /// direction, Russian roulette.
 const BOUNCE_DIMENSIONS: u32 = 5;
@@ -34,20 +35,20 @@ pub(crate) struct SurfacePoint {
     pub single_sided: bool,
 }
 
-/// Builds the surface point of `hit` on `ray`.
+/// Builds the surface point of `hit` on `ray`, with the hit instance where it is at the
+/// ray's time.
 pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> SurfacePoint {
     let scene = &*frame.scene;
-    let inst = &frame.bvh.instances()[hit.instance as usize];
-    let mesh = &scene.meshes[inst.mesh as usize];
-    let (p_index, t) = mesh.locate(hit.triangle);
-    let prim = &mesh.primitives[p_index];
-    let [i0, i1, i2] = prim.triangle(t);
+    let tri = frame.triangle_at(hit.instance, hit.triangle, ray.time);
+    let (prim, t) = (tri.prim, tri.t);
     let (b1, b2) = (hit.b1, hit.b2);
 
     // Position from barycentrics in object space, then to world: more precise than o + t d.
-    let [a, b, c] = [i0, i1, i2].map(|i| prim.positions[i]);
-    let p = inst.to_world.transform_point3(barycentric(a, b, c, b1, b2));
-    let ng_raw = front_normal(inst, prim, t);
+    let [a, b, c] = tri.positions;
+    let p = tri
+        .to_world()
+        .transform_point3(barycentric(a, b, c, b1, b2));
+    let ng_raw = tri.front_normal();
     let ng = if ng_raw == Vec3::ZERO {
         -ray.dir.normalize()
     } else {
@@ -60,27 +61,21 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     let sample = material.sample(&scene.textures, uvs, color);
 
     // Interpolated shading normal; missing or degenerate normals fall back to the face.
-    let mut ns = if prim.normals.is_empty() {
-        ng
-    } else {
-        let n = barycentric(prim.normals[i0], prim.normals[i1], prim.normals[i2], b1, b2);
-        let n = (inst.normal_to_world * n).normalize_or_zero();
-        if n == Vec3::ZERO || !n.is_finite() {
-            ng
-        } else {
-            n
+    let mut ns = match tri.normals() {
+        None => ng,
+        Some([n0, n1, n2]) => {
+            let n = (*tri.normal_to_world() * barycentric(n0, n1, n2, b1, b2)).normalize_or_zero();
+            if n == Vec3::ZERO || !n.is_finite() {
+                ng
+            } else {
+                n
+            }
         }
     };
     let mut shading = Frame::from_normal(ns);
-    if let (Some(nm), false) = (sample.normal_map, prim.tangents.is_empty()) {
-        let t4 = barycentric(
-            prim.tangents[i0],
-            prim.tangents[i1],
-            prim.tangents[i2],
-            b1,
-            b2,
-        );
-        let tangent = inst.to_world.transform_vector3(t4.truncate());
+    if let (Some(nm), Some([t0, t1, t2])) = (sample.normal_map, tri.tangents()) {
+        let t4 = barycentric(t0, t1, t2, b1, b2);
+        let tangent = tri.to_world().transform_vector3(t4.truncate());
         let tf = Frame::from_normal_tangent(ns, tangent);
         let sign = if t4.w < 0.0 { -1.0 } else { 1.0 };
         let mapped = tf.x * nm.x + tf.y * (nm.y * sign) + tf.z * nm.z;
@@ -156,10 +151,12 @@ pub fn trace_sample(
         (x as f32 + jitter.x) / frame.width as f32,
         (y as f32 + jitter.y) / frame.height as f32,
     );
-    let mut ray = frame.camera.generate_ray(film);
+    // Owen-scrambled Sobol points stratify this dimension over the pixel's samples too.
+    let time = if frame.motion { sampler.next_1d() } else { 0.0 };
+    let mut ray = frame.camera.generate_ray(film, time);
     let view_axis = frame
         .camera
-        .to_world
+        .to_world_at(time)
         .transform_vector3(Vec3::NEG_Z)
         .normalize();
 
@@ -243,7 +240,7 @@ pub fn trace_sample(
                             b1,
                             b2,
                             ..
-                        } => emitted_toward(frame, instance, triangle, b1, b2, ls.wi),
+                        } => emitted_toward(frame, instance, triangle, b1, b2, ls.wi, ray.time),
                     };
                     if le != Vec3::ZERO {
                         let shadow = spawn(sp.p, sp.ng, ls.wi, ray.time);
@@ -302,13 +299,6 @@ pub fn trace_sample(
     out
 }
 
-/// World-space unit normal of the front face of triangle `t`. The inverse transpose keeps
-/// the front face right for mirrored instances too (glTF flips the winding when the
-/// determinant is negative). Zero for a degenerate triangle.
-fn front_normal(inst: &crate::bvh::Instance, prim: &crate::scene::Primitive, t: usize) -> Vec3 {
-    (inst.normal_to_world * prim.face_normal(t)).normalize_or_zero()
-}
-
 /// Radiance leaving emissive triangle `triangle` of `instance` at barycentrics (b1, b2)
 /// towards a point in direction `-wi` from it, honouring one-sided emission.
 fn emitted_toward(
@@ -318,19 +308,17 @@ fn emitted_toward(
     b1: f32,
     b2: f32,
     wi: Vec3,
+    time: f32,
 ) -> Vec3 {
     let scene = &*frame.scene;
-    let inst = &frame.bvh.instances()[instance as usize];
-    let mesh = &scene.meshes[inst.mesh as usize];
-    let (p, t) = mesh.locate(triangle);
-    let prim = &mesh.primitives[p];
-    let material = &scene.materials[prim.material as usize];
-    if !material.double_sided && front_normal(inst, prim, t).dot(wi) >= 0.0 {
+    let tri = frame.triangle_at(instance, triangle, time);
+    let material = &scene.materials[tri.prim.material as usize];
+    if !material.double_sided && tri.front_normal().dot(wi) >= 0.0 {
         return Vec3::ZERO;
     }
     if material.emissive_texture.is_none() {
         return material.emissive;
     }
-    let uvs = prim.uvs_at(t, b1, b2);
+    let uvs = tri.prim.uvs_at(tri.t, b1, b2);
     material.sample(&scene.textures, uvs, Vec4::ONE).emission
 }

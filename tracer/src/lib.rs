@@ -2,7 +2,9 @@
 //!
 //! | module | what it holds |
 //! |---|---|
-//! | [`scene`] | the loaded scene: nodes, meshes, materials, cameras, lights |
+//! | [`scene`] | the loaded scene: nodes, meshes, materials, cameras, lights, skins |
+//! | [`animation`] | glTF animation samplers evaluated into a pose at any time |
+//! | [`deform`] | morph targets and linear blend skinning of a primitive for one pose |
 //! | [`loader`] | glTF 2.0 (.gltf/.glb) into a [`scene::Scene`], with errors naming the element |
 //! | [`demo`] | the built-in demo scene, authored in code |
 //! | [`shapes`] | quads, cubes and spheres as triangle primitives |
@@ -17,7 +19,9 @@
 //! | [`sampler`] | random numbers as a pure function of (pixel, sample, dimension, frame, seed) |
 //! | [`integrator`] | unidirectional path tracing with NEE and MIS |
 //! | [`film`] | tile buffers: beauty, albedo, normal, depth |
-//! | [`render`] | `prepare_frame` and the one entry point, [`render::render_tile`] |
+//! | [`motion`] | the shutter, motion steps, meshes deformed for one frame |
+//! | `prepare` | [`render::prepare_frame`]: the scene posed, placed and built for one frame |
+//! | [`render`] | the prepared frame and the one entry point, [`render::render_tile`] |
 //! | [`output`] | multi-layer EXR files and ACES-tone-mapped PNG previews |
 //!
 //! Units follow the glTF specs: emission in nits (cd/m²) is radiance, point and spot
@@ -30,9 +34,11 @@
 // rewriting it as `x <= 0.0` would let NaN through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod animation;
 pub mod bsdf;
 pub mod bvh;
 pub mod camera;
+pub mod deform;
 pub mod demo;
 pub mod film;
 pub mod geometry;
@@ -40,7 +46,9 @@ pub mod integrator;
 pub mod light;
 pub mod loader;
 pub mod material;
+pub mod motion;
 pub mod output;
+mod prepare;
 pub mod render;
 pub mod sampler;
 pub mod scene;

@@ -7,7 +7,8 @@
 //! | `accessor` | accessors into vectors, every byte range checked before allocating |
 //! | `gltf` | the document into a scene: nodes, default scene, cameras, lights, features |
 //! | `materials` | materials and the textures they use (each image decoded once) |
-//! | `meshes` | primitives into triangles: indices checked, normals repaired, tangents |
+//! | `meshes` | primitives into triangles: indices, normals, tangents, joints, morph targets |
+//! | `animation` | skins (joints, inverse bind matrices) and animation samplers, checked |
 //! | `images` | PNG/JPEG into RGBA8 |
 //! | `tangents` | MikkTSpace tangents for normal-mapped primitives without TANGENT |
 //! | [`framing`] | default-scene traversal, [`scene_bounds`], [`framing_camera`] |
@@ -22,13 +23,27 @@
 //! - A primitive without a material gets the glTF default material, appended once at the
 //!   end of [`Scene::materials`].
 //! - Mesh indices are the document's, so a mesh may have no primitives (all skipped).
-//! - Skins, animations and morph targets are not read yet; meshes are in bind pose.
+//! - Animations are read into [`Scene::animations`] (translation, rotation, scale and
+//!   morph weight channels; STEP, LINEAR, CUBICSPLINE), evaluated by
+//!   [`crate::animation::pose`]. Key times must be finite and never decrease, and an
+//!   animated node must not have a `matrix` (errors); keys at equal times are merged into
+//!   the later one (warning). Channels with a target the loader does not know
+//!   (KHR_animation_pointer) are skipped with a warning.
+//! - Skins are read into [`Scene::skins`] (inverse bind matrices default to identity), and
+//!   JOINTS_n/WEIGHTS_n pairs into [`crate::scene::Primitive::joint_sets`], each joint with
+//!   a non-zero weight checked against the skin of every node drawing the mesh. Morph
+//!   targets (POSITION, NORMAL, TANGENT displacements) go to
+//!   [`crate::scene::Primitive::targets`], and default weights to
+//!   [`crate::scene::Mesh::weights`] (zeros when the file has none); every primitive of a
+//!   mesh must have as many targets. Displacements of normals or tangents the loader
+//!   generated are dropped. Meshes stay in bind pose: [`crate::deform`] applies both.
 //! - A required extension outside [`SUPPORTED_EXTENSIONS`] is an error; an optional one
 //!   is a warning.
 
 use std::path::Path;
 
 mod accessor;
+mod animation;
 mod container;
 pub mod error;
 pub mod framing;
@@ -83,10 +98,18 @@ pub fn load_glb(bytes: &[u8]) -> Result<Scene, SceneError> {
 /// without one the scene must be self-contained.
 pub fn load_slice(bytes: &[u8], base_dir: Option<&Path>) -> Result<Scene, SceneError> {
     let container = container::split(bytes)?;
-    let mut root: ::gltf::json::Root = ::gltf::json::deserialize::from_slice(container.json)
-        .map_err(|e| SceneError::Json(e.to_string()))?;
-    let raw: ::gltf::json::Value = ::gltf::json::deserialize::from_slice(container.json)
-        .map_err(|e| SceneError::Json(e.to_string()))?;
+    let json_error = |e: ::gltf::json::Error| SceneError::Json(e.to_string());
+    let mut raw: ::gltf::json::Value =
+        ::gltf::json::deserialize::from_slice(container.json).map_err(json_error)?;
+    // Channels the typed parser would refuse (KHR_animation_pointer) go first; without any,
+    // parse the text itself so that errors keep their line and column.
+    let skipped = animation::strip_unsupported_channels(&mut raw);
+    let mut root: ::gltf::json::Root = if skipped.is_empty() {
+        ::gltf::json::deserialize::from_slice(container.json)
+    } else {
+        ::gltf::json::deserialize::from_value(raw.clone())
+    }
+    .map_err(json_error)?;
 
     // Required extensions are checked against what we implement, not what the `gltf`
     // crate parses: it knows some we do not render and lacks some we do.
@@ -114,12 +137,14 @@ pub fn load_slice(bytes: &[u8], base_dir: Option<&Path>) -> Result<Scene, SceneE
 
     let resolver = Resolver { base_dir };
     let buffers = container::load_buffers(&doc, container.bin, resolver)?;
-    self::gltf::build(&self::gltf::Input {
+    let mut scene = self::gltf::build(&self::gltf::Input {
         doc: &doc,
         raw: &raw,
         buffers: &buffers,
         resolver,
-    })
+    })?;
+    scene.warnings.extend(skipped);
+    Ok(scene)
 }
 
 /// `gltf-json` 1.4's validation indexes `accessors` with a primitive's POSITION before
@@ -151,7 +176,7 @@ pub fn pack_glb(path: &Path) -> Result<Vec<u8>, SceneError> {
 
 /// Counts that describe a loaded scene, for the server's answer to an upload and for
 /// conformance tests.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct SceneSummary {
     /// Triangles the default scene draws, once per mesh instance.
     pub triangles: u64,
@@ -171,10 +196,29 @@ pub struct SceneSummary {
     pub materials: usize,
     /// Decoded textures.
     pub textures: usize,
+    /// Animations in the document, in order.
+    pub animations: Vec<AnimationSummary>,
+    /// Skins in the document.
+    pub skins: usize,
+    /// Morph targets over all meshes, each mesh counted once.
+    pub morph_targets: usize,
     /// What the scene needs from the tracer.
     pub features: Features,
     /// Number of entries in [`Scene::warnings`].
     pub warnings: usize,
+}
+
+/// One animation as [`SceneSummary`] describes it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AnimationSummary {
+    /// Its name, if any.
+    pub name: Option<String>,
+    /// First key time over its channels, in seconds (0 without channels).
+    pub start: f64,
+    /// Last key time over its channels, in seconds (0 without channels).
+    pub end: f64,
+    /// Number of channels (skipped ones not counted).
+    pub channels: usize,
 }
 
 impl SceneSummary {
@@ -194,6 +238,21 @@ impl SceneSummary {
             lights: scene.lights.len(),
             materials: scene.materials.len(),
             textures: scene.textures.len(),
+            animations: scene
+                .animations
+                .iter()
+                .map(|a| {
+                    let (start, end) = a.time_range().unwrap_or((0.0, 0.0));
+                    AnimationSummary {
+                        name: a.name.clone(),
+                        start,
+                        end,
+                        channels: a.channels.len(),
+                    }
+                })
+                .collect(),
+            skins: scene.skins.len(),
+            morph_targets: scene.meshes.iter().map(|m| m.weights.len()).sum(),
             features: scene.features,
             warnings: scene.warnings.len(),
         }

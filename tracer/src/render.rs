@@ -1,26 +1,30 @@
-//! Preparing a scene for one frame, and the tracer's one entry point, [`render_tile`].
+//! A scene prepared for one frame, and the tracer's one entry point, [`render_tile`].
 //!
-//! [`prepare_frame`] walks the node graph once per frame, composing transforms in double
-//! precision and moving the world so the camera sits at the origin (camera-relative
-//! rendering: a scene far from the origin keeps its precision), then builds the top-level
-//! BVH and the light set. [`render_tile`] traces any rectangle and sample range of that
-//! frame; its result depends on nothing else.
+//! [`prepare_frame`] (in `prepare.rs`) poses the scene at the frame's time, moves it so the
+//! camera sits at the origin, and builds the top-level BVH and the light set.
+//! [`render_tile`] traces any rectangle and sample range of that frame; its result depends
+//! on nothing else.
 
 use std::sync::Arc;
 
-use glam::{Affine3A, DMat3, DMat4, DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
-use crate::bvh::{Instance, SceneBvh};
+use crate::animation::AnimationChoice;
+use glam::{Affine3A, Mat3A};
+
+use crate::bvh::{Instance, MeshBvh, Placement, SceneBvh};
 use crate::camera::Camera;
 use crate::film::{SampleRange, TileBuffer, TileRect};
 use crate::geometry::Ray;
 use crate::integrator;
-use crate::light::{EmissiveTriangle, Environment, LightSet};
-use crate::loader::framing_camera;
+use crate::light::{Environment, LightSet};
 use crate::material::AlphaMode;
+use crate::motion::{DeformedMesh, Shutter};
 use crate::sampler::hash_combine;
-use crate::scene::{Features, Scene};
+use crate::scene::{Features, Mesh, Primitive, Scene};
+
+pub use crate::prepare::prepare_frame;
 
 /// Which camera renders the frame.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -41,6 +45,13 @@ pub struct FrameOptions {
     pub frame: i32,
     /// Frames per second.
     pub fps: f64,
+    /// The shutter, relative to the frame's time; closed (no motion blur) by default.
+    pub shutter: Shutter,
+    /// Motion steps over an open shutter; `None` chooses from how much the scene moves
+    /// (see `motion.rs`). Ignored when nothing moves.
+    pub motion_steps: Option<u32>,
+    /// Which animations play.
+    pub animation: AnimationChoice,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
@@ -58,6 +69,9 @@ impl Default for FrameOptions {
         Self {
             frame: 0,
             fps: 24.0,
+            shutter: Shutter::default(),
+            motion_steps: None,
+            animation: AnimationChoice::All,
             width: 640,
             height: 360,
             camera: CameraChoice::Default,
@@ -93,6 +107,12 @@ pub enum RenderError {
     /// The image size is zero.
     #[error("image size {0}x{1} is empty")]
     EmptyImage(u32, u32),
+    /// The frame rate, shutter or motion steps are unusable.
+    #[error("{0}")]
+    Time(String),
+    /// The animation asked for does not exist.
+    #[error("animation {0}")]
+    Animation(String),
 }
 
 /// A scene flattened for one frame: instances in camera-relative world space, their BVH,
@@ -110,11 +130,18 @@ pub struct PreparedFrame {
     pub camera: Camera,
     /// Where the camera sits in the scene's world space.
     pub camera_origin: DVec3,
-    /// Top-level BVH over the instances.
+    /// Top-level BVH over the instances. An instance's `mesh` below the scene's mesh count
+    /// names a scene mesh; above it, an entry of `deformed`.
     pub bvh: SceneBvh,
+    /// Meshes that skinning or morphing deforms in this frame.
+    pub deformed: Vec<DeformedMesh>,
+    /// Motion steps over the shutter (1: the static path).
+    pub motion_steps: u32,
+    /// Whether anything (camera or geometry) moves inside the shutter, so rays need times.
+    pub motion: bool,
     /// Lights for next-event estimation.
     pub lights: LightSet,
-    /// Per mesh, per primitive: whether a hit must be checked by [`PreparedFrame::accepts`]
+    /// Per scene mesh, per primitive: whether a hit must be checked by [`PreparedFrame::accepts`]
     /// (alpha cut-outs, single-sided back faces). Meshes that need none pay nothing.
     pub(crate) hit_filter: Vec<Vec<bool>>,
     /// Whether any primitive needs the hit filter.
@@ -125,162 +152,137 @@ pub struct PreparedFrame {
     pub warnings: Vec<String>,
 }
 
-/// Removes scale and shear from a camera's placement: only position and orientation count.
-fn rigid(m: &DMat4) -> (DVec3, DMat3) {
-    let (_, rotation, translation) = m.to_scale_rotation_translation();
-    let r = DMat3::from_quat(rotation.normalize());
-    let r = if r.is_finite() { r } else { DMat3::IDENTITY };
-    (translation, r)
+/// One triangle of an instance at a ray's time: where its data lives, its vertex
+/// positions in object space (world space for deformed meshes), and the instance's
+/// transforms at that time.
+pub(crate) struct TriangleAt<'a> {
+    /// The primitive holding it (texture coordinates, colours, material).
+    pub prim: &'a Primitive,
+    /// Index of that primitive in its mesh.
+    pub prim_index: usize,
+    /// The triangle's index inside the primitive.
+    pub t: usize,
+    /// Its vertex indices.
+    pub v: [usize; 3],
+    /// Vertex positions (object space).
+    pub positions: [Vec3; 3],
+    /// The deformed mesh it belongs to, if any.
+    pub deformed: Option<&'a DeformedMesh>,
+    /// The instance.
+    inst: &'a Instance,
+    /// Its transforms at the ray's time when it moves; a still instance's are its own
+    /// (not copied: this is on every hit's path).
+    moved: Option<Placement>,
+    /// The ray's shutter time.
+    pub time: f32,
 }
 
-fn to_f32_affine(m: &DMat4) -> Affine3A {
-    Affine3A::from_mat4(m.as_mat4())
-}
-
-/// Flattens `scene` for one frame.
-pub fn prepare_frame(
-    scene: Arc<Scene>,
-    options: &FrameOptions,
-) -> Result<PreparedFrame, RenderError> {
-    if options.width == 0 || options.height == 0 {
-        return Err(RenderError::EmptyImage(options.width, options.height));
+impl TriangleAt<'_> {
+    /// Object space to world space.
+    #[inline(always)]
+    pub fn to_world(&self) -> &Affine3A {
+        self.moved
+            .as_ref()
+            .map_or(&self.inst.to_world, |p| &p.to_world)
     }
-    let aspect = options.width as f32 / options.height as f32;
-    let mut nodes = Vec::new();
-    scene.for_each_node_instance(|node, world| nodes.push((node, *world)));
-    let mut warnings = Vec::new();
 
-    // Camera: find the node placing the requested camera.
-    let wanted = match &options.camera {
-        CameraChoice::Default => (!scene.cameras.is_empty()).then_some(0),
-        CameraChoice::Index(i) if *i < scene.cameras.len() => Some(*i),
-        CameraChoice::Index(i) => {
-            return Err(RenderError::Camera(format!(
-                "{i} does not exist: the scene has {} camera(s)",
-                scene.cameras.len()
-            )))
-        }
-        CameraChoice::Name(name) => Some(
-            scene
-                .cameras
-                .iter()
-                .position(|c| c.name.as_deref() == Some(name.as_str()))
-                .ok_or_else(|| RenderError::Camera(format!("'{name}' does not exist")))?,
-        ),
-    };
-    let placed = wanted.and_then(|cam| {
-        nodes
-            .iter()
-            .find(|(n, _)| scene.nodes[*n as usize].camera == Some(cam as u32))
-            .map(|(_, m)| (scene.cameras[cam].projection, *m))
-    });
-    let (projection, camera_world) = match (wanted, placed) {
-        (Some(_), Some(p)) => p,
-        (Some(cam), None) if options.camera != CameraChoice::Default => {
-            return Err(RenderError::Camera(format!(
-                "{cam} is not placed by any node of the scene"
-            )))
-        }
-        _ => framing_camera(&scene, aspect),
-    };
-    let (camera_origin, camera_rotation) = rigid(&camera_world);
-    let camera = Camera {
-        projection,
-        to_world: Affine3A::from_mat3(camera_rotation.as_mat3()),
-        aspect,
-    };
-    // Everything moves by -camera_origin, in double precision, before rounding to f32.
-    let relative = DMat4::from_translation(-camera_origin);
+    /// World space to object space.
+    #[inline(always)]
+    pub fn to_object(&self) -> &Affine3A {
+        self.moved
+            .as_ref()
+            .map_or(&self.inst.to_object, |p| &p.to_object)
+    }
 
-    let mut instances = Vec::new();
-    let mut punctual = Vec::new();
-    for (node, world) in &nodes {
-        let n = &scene.nodes[*node as usize];
-        let to_world = to_f32_affine(&(relative * *world));
-        if let Some(mesh) = n.mesh {
-            let bounds = scene.meshes[mesh as usize].bvh.bounds();
-            instances.push(Instance::new(mesh, to_world, &bounds));
-        }
-        if let Some(light) = n.light {
-            punctual.push((scene.lights[light as usize], to_world));
+    /// The normal matrix (inverse transpose of `to_world`'s linear part).
+    #[inline(always)]
+    pub fn normal_to_world(&self) -> &Mat3A {
+        self.moved
+            .as_ref()
+            .map_or(&self.inst.normal_to_world, |p| &p.normal_to_world)
+    }
+
+    /// Object-space geometric normal by the winding (not normalised).
+    pub fn face_normal(&self) -> Vec3 {
+        let [a, b, c] = self.positions;
+        (b - a).cross(c - a)
+    }
+
+    /// World-space unit normal of the front face. The inverse transpose keeps the front
+    /// face right for mirrored instances too (glTF flips the winding when the determinant
+    /// is negative). Zero for a degenerate triangle.
+    pub fn front_normal(&self) -> Vec3 {
+        (*self.normal_to_world() * self.face_normal()).normalize_or_zero()
+    }
+
+    /// Object-space vertex normals, or `None` when the primitive has none.
+    pub fn normals(&self) -> Option<[Vec3; 3]> {
+        match self.deformed {
+            Some(d) => d.normals(self.prim_index, self.v, self.time),
+            None => (!self.prim.normals.is_empty()).then(|| self.v.map(|i| self.prim.normals[i])),
         }
     }
 
-    // Emissive triangles, in world space, for next-event estimation.
-    let mut triangles = Vec::new();
-    for (i, inst) in instances.iter().enumerate() {
-        let mesh = &scene.meshes[inst.mesh as usize];
-        for (p, prim) in mesh.primitives.iter().enumerate() {
-            let material = &scene.materials[prim.material as usize];
-            if !material.is_emissive() {
-                continue;
-            }
-            for (t, &[a, b, c]) in prim.indices.iter().enumerate() {
-                let [a, b, c] =
-                    [a, b, c].map(|v| inst.to_world.transform_point3(prim.positions[v as usize]));
-                triangles.push(EmissiveTriangle {
-                    p: [a, b, c],
-                    emission: material.emissive,
-                    double_sided: material.double_sided,
-                    instance: i as u32,
-                    triangle: mesh.first_triangle[p] + t as u32,
-                });
-            }
+    /// Object-space vertex tangents, or `None` when the primitive has none.
+    pub fn tangents(&self) -> Option<[Vec4; 3]> {
+        match self.deformed {
+            Some(d) => d.tangents(self.prim_index, self.v, self.time),
+            None => (!self.prim.tangents.is_empty()).then(|| self.v.map(|i| self.prim.tangents[i])),
         }
     }
-
-    // Build the BSDF's energy tables now rather than inside the first tile's threads.
-    crate::bsdf::precompute_tables(scene.features.transmission);
-    let bvh = SceneBvh::build(instances);
-    let mut features = scene.features;
-    let environment = match (&options.environment, &scene.environment) {
-        (Some(env), _) | (None, Some(env)) => env.clone(),
-        (None, None) if punctual.is_empty() => {
-            warnings.push(
-                "the scene defines no environment and no punctual light: using a uniform white \
-                 environment of radiance 1"
-                    .into(),
-            );
-            Environment::Constant(Vec3::ONE)
-        }
-        (None, None) => Environment::Black,
-    };
-    features.environment = !matches!(environment, Environment::Black);
-    let lights = LightSet::new(punctual, triangles, environment, bvh.bounds());
-
-    let hit_filter: Vec<Vec<bool>> = scene
-        .meshes
-        .iter()
-        .map(|m| {
-            m.primitives
-                .iter()
-                .map(|p| {
-                    let mat = &scene.materials[p.material as usize];
-                    mat.alpha_mode != AlphaMode::Opaque
-                        || (!mat.double_sided && mat.transmission == 0.0)
-                })
-                .collect()
-        })
-        .collect();
-    let any_hit_filter = hit_filter.iter().flatten().any(|&f| f);
-
-    Ok(PreparedFrame {
-        scene,
-        frame: options.frame,
-        width: options.width,
-        height: options.height,
-        camera,
-        camera_origin,
-        bvh,
-        lights,
-        hit_filter,
-        any_hit_filter,
-        features,
-        warnings,
-    })
 }
 
 impl PreparedFrame {
+    /// The deformed mesh behind instance mesh index `mesh`, if it is one.
+    #[inline]
+    pub(crate) fn deformed_mesh(&self, mesh: u32) -> Option<&DeformedMesh> {
+        (mesh as usize)
+            .checked_sub(self.scene.meshes.len())
+            .map(|k| &self.deformed[k])
+    }
+
+    /// The scene mesh drawn by instance mesh index `mesh` (the source of a deformed one).
+    #[inline]
+    pub(crate) fn source_mesh(&self, mesh: u32) -> &Mesh {
+        let source = self.deformed_mesh(mesh).map_or(mesh, |d| d.source);
+        &self.scene.meshes[source as usize]
+    }
+
+    /// The BVH of instance mesh index `mesh`.
+    #[inline]
+    pub(crate) fn mesh_bvh(&self, mesh: u32) -> &MeshBvh {
+        match self.deformed_mesh(mesh) {
+            Some(d) => &d.bvh,
+            None => &self.scene.meshes[mesh as usize].bvh,
+        }
+    }
+
+    /// Triangle `triangle` of instance `instance` at shutter time `time`.
+    #[inline(always)]
+    pub(crate) fn triangle_at(&self, instance: u32, triangle: u32, time: f32) -> TriangleAt<'_> {
+        let inst = &self.bvh.instances()[instance as usize];
+        let mesh = self.source_mesh(inst.mesh);
+        let (prim_index, t) = mesh.locate(triangle);
+        let prim = &mesh.primitives[prim_index];
+        let v = prim.triangle(t);
+        let deformed = self.deformed_mesh(inst.mesh);
+        let positions = match deformed {
+            Some(d) => d.positions(prim_index, v, time),
+            None => v.map(|i| prim.positions[i]),
+        };
+        TriangleAt {
+            prim,
+            prim_index,
+            t,
+            v,
+            positions,
+            deformed,
+            inst,
+            moved: inst.motion.is_some().then(|| inst.placement(time)),
+            time,
+        }
+    }
+
     /// Whether a candidate hit counts: alpha-masked or blended surfaces cut away where
     /// their coverage says so, and a single-sided opaque surface is invisible from behind
     /// (glTF's back-face culling; transmissive surfaces keep both sides, since refracted
@@ -294,17 +296,21 @@ impl PreparedFrame {
         b2: f32,
     ) -> bool {
         let inst = &self.bvh.instances()[instance as usize];
-        let mesh = &self.scene.meshes[inst.mesh as usize];
+        let mesh = self.source_mesh(inst.mesh);
         let (p, t) = mesh.locate(triangle);
-        if !self.hit_filter[inst.mesh as usize][p] {
+        let source = self
+            .deformed_mesh(inst.mesh)
+            .map_or(inst.mesh, |d| d.source);
+        if !self.hit_filter[source as usize][p] {
             return true;
         }
         let prim = &mesh.primitives[p];
         let mat = &self.scene.materials[prim.material as usize];
         if !mat.double_sided && mat.transmission == 0.0 {
-            let facing = prim
-                .face_normal(t)
-                .dot(inst.to_object.transform_vector3(ray.dir));
+            let tri = self.triangle_at(instance, triangle, ray.time);
+            let facing = tri
+                .face_normal()
+                .dot(tri.to_object().transform_vector3(ray.dir));
             if facing > 0.0 {
                 return false;
             }
@@ -329,7 +335,7 @@ impl PreparedFrame {
 
     /// The closest accepted hit along `ray` before `t_max`.
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<crate::geometry::Hit> {
-        let meshes = &self.scene.meshes;
+        let meshes = |m| self.mesh_bvh(m);
         if self.any_hit_filter {
             self.bvh.intersect(meshes, ray, t_max, |i, t, b1, b2| {
                 self.accepts(ray, i, t, b1, b2)
@@ -341,7 +347,7 @@ impl PreparedFrame {
 
     /// Whether anything accepted blocks `ray` before `t_max`.
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
-        let meshes = &self.scene.meshes;
+        let meshes = |m| self.mesh_bvh(m);
         if self.any_hit_filter {
             self.bvh.occluded(meshes, ray, t_max, |i, t, b1, b2| {
                 self.accepts(ray, i, t, b1, b2)

@@ -2,7 +2,9 @@
 //! converted once into the tracer's own types. A [`Scene`] is independent of time and
 //! camera; [`crate::render::PreparedFrame`] flattens it for one frame.
 
-use glam::{DMat4, Vec2, Vec3, Vec4};
+use glam::{DMat4, DQuat, DVec3, Vec2, Vec3, Vec4};
+
+use crate::animation::Animation;
 
 use crate::bvh::MeshBvh;
 use crate::camera::Projection;
@@ -33,6 +35,10 @@ pub struct Scene {
     /// environment, so loaded scenes leave this `None` and the renderer picks a default
     /// (see [`crate::render::FrameOptions::environment`]); built-in scenes set it.
     pub environment: Option<Environment>,
+    /// glTF animations (node transforms and morph weights over time), in document order.
+    pub animations: Vec<Animation>,
+    /// glTF skins: which nodes are joints and their inverse bind matrices.
+    pub skins: Vec<Skin>,
     /// What the scene needs from the tracer.
     pub features: Features,
     /// Problems that did not stop loading (an optional extension ignored, a degenerate
@@ -46,7 +52,17 @@ impl Scene {
     /// precision. A node reached along two paths is visited twice (instancing). Child indices
     /// out of range are skipped, and a hand-built scene with a cycle stops descending after
     /// as many levels as it has nodes (the loader refuses cycles outright).
-    pub fn for_each_node_instance(&self, mut visit: impl FnMut(u32, &DMat4)) {
+    pub fn for_each_node_instance(&self, visit: impl FnMut(u32, &DMat4)) {
+        self.for_each_node_instance_with(|i| self.nodes[i as usize].local, visit);
+    }
+
+    /// [`Scene::for_each_node_instance`] with each node's local transform given by
+    /// `local(node)` (an animation pose) instead of [`Node::local`].
+    pub fn for_each_node_instance_with(
+        &self,
+        local: impl Fn(u32) -> DMat4,
+        mut visit: impl FnMut(u32, &DMat4),
+    ) {
         let n = self.nodes.len();
         let mut stack: Vec<(u32, DMat4, usize)> = self
             .roots
@@ -61,7 +77,7 @@ impl Scene {
             if depth > n {
                 continue;
             }
-            let world = parent * node.local;
+            let world = parent * local(i);
             visit(i, &world);
             for &c in node.children.iter().rev() {
                 stack.push((c, world, depth + 1));
@@ -78,6 +94,9 @@ pub struct Node {
     /// Transform from this node's space to its parent's, in double precision so that
     /// scenes far from the origin keep their detail when composed.
     pub local: DMat4,
+    /// The same transform as translation, rotation and scale when the file gave it so
+    /// (the only form animation channels may target); `None` for a matrix node.
+    pub trs: Option<Trs>,
     /// Child nodes.
     pub children: Vec<u32>,
     /// Mesh drawn at this node.
@@ -86,6 +105,11 @@ pub struct Node {
     pub camera: Option<u32>,
     /// Punctual light placed at this node.
     pub light: Option<u32>,
+    /// Skin deforming this node's mesh; the node's own transform then does not apply to
+    /// the mesh (glTF: joints place the vertices).
+    pub skin: Option<u32>,
+    /// Morph weights overriding the mesh's default weights.
+    pub weights: Option<Vec<f32>>,
 }
 
 impl Default for Node {
@@ -93,12 +117,54 @@ impl Default for Node {
         Self {
             name: None,
             local: DMat4::IDENTITY,
+            trs: None,
             children: Vec::new(),
             mesh: None,
             camera: None,
             light: None,
+            skin: None,
+            weights: None,
         }
     }
+}
+
+/// A node transform in glTF's decomposed form.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trs {
+    /// Translation.
+    pub translation: DVec3,
+    /// Rotation, a unit quaternion.
+    pub rotation: DQuat,
+    /// Scale (may be zero or negative).
+    pub scale: DVec3,
+}
+
+impl Default for Trs {
+    fn default() -> Self {
+        Self {
+            translation: DVec3::ZERO,
+            rotation: DQuat::IDENTITY,
+            scale: DVec3::ONE,
+        }
+    }
+}
+
+impl Trs {
+    /// The matrix T · R · S.
+    pub fn matrix(&self) -> DMat4 {
+        DMat4::from_scale_rotation_translation(self.scale, self.rotation, self.translation)
+    }
+}
+
+/// A glTF skin.
+#[derive(Clone, Debug, Default)]
+pub struct Skin {
+    /// The skin's name, if any.
+    pub name: Option<String>,
+    /// Joint nodes; vertex JOINTS_n values index this list.
+    pub joints: Vec<u32>,
+    /// Per joint, mesh space to the joint's bind space (identity when the file has none).
+    pub inverse_bind: Vec<DMat4>,
 }
 
 /// A camera definition: a glTF camera without its placement.
@@ -121,6 +187,8 @@ pub struct Mesh {
     pub first_triangle: Vec<u32>,
     /// The acceleration structure over every triangle of the mesh.
     pub bvh: MeshBvh,
+    /// Default morph target weights (glTF `mesh.weights`); empty without morph targets.
+    pub weights: Vec<f32>,
 }
 
 /// One triangle primitive with its vertex attributes, all in the mesh's object space.
@@ -140,6 +208,31 @@ pub struct Primitive {
     pub indices: Vec<[u32; 3]>,
     /// Index into [`Scene::materials`].
     pub material: u32,
+    /// Skinning influences, one entry per JOINTS_n/WEIGHTS_n pair; empty when unskinned.
+    pub joint_sets: Vec<JointSet>,
+    /// Morph targets, in the order `weights` refer to them.
+    pub targets: Vec<MorphTarget>,
+}
+
+/// One JOINTS_n/WEIGHTS_n pair: four joint indices (into the skin's joint list) and their
+/// weights per vertex.
+#[derive(Clone, Debug, Default)]
+pub struct JointSet {
+    /// Joint indices per vertex.
+    pub joints: Vec<[u16; 4]>,
+    /// Weights per vertex.
+    pub weights: Vec<[f32; 4]>,
+}
+
+/// One morph target: per-vertex displacements; an attribute the target lacks is empty.
+#[derive(Clone, Debug, Default)]
+pub struct MorphTarget {
+    /// POSITION displacements.
+    pub positions: Vec<Vec3>,
+    /// NORMAL displacements.
+    pub normals: Vec<Vec3>,
+    /// TANGENT displacements (xyz only, as glTF defines).
+    pub tangents: Vec<Vec3>,
 }
 
 impl Mesh {
@@ -163,6 +256,7 @@ impl Mesh {
             primitives,
             first_triangle,
             bvh,
+            weights: Vec::new(),
         }
     }
 
@@ -195,6 +289,12 @@ pub struct Features {
     pub environment: bool,
     /// Any primitive uses a normal map.
     pub normal_maps: bool,
+    /// The scene has animations (in a prepared frame: something moves inside the shutter).
+    pub animation: bool,
+    /// A node draws a skinned mesh.
+    pub skinning: bool,
+    /// A mesh has morph targets.
+    pub morphing: bool,
 }
 
 impl Features {
@@ -208,6 +308,9 @@ impl Features {
             (self.punctual_lights, "punctual-lights"),
             (self.environment, "environment"),
             (self.normal_maps, "normal-maps"),
+            (self.animation, "animation"),
+            (self.skinning, "skinning"),
+            (self.morphing, "morphing"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }
@@ -279,6 +382,19 @@ impl SceneBuilder {
         })
     }
 
+    /// Adds a mesh and a root node drawing it, placed by `trs` (the form animations can
+    /// drive); returns the node.
+    pub fn mesh_trs(&mut self, name: &str, primitives: Vec<Primitive>, trs: Trs) -> u32 {
+        let node = self.mesh(name, primitives, trs.matrix());
+        self.scene.nodes[node as usize].trs = Some(trs);
+        node
+    }
+
+    /// Adds an animation.
+    pub fn animation(&mut self, animation: Animation) {
+        self.scene.animations.push(animation);
+    }
+
     /// Adds a camera placed by a root node with transform `local`; returns the node.
     pub fn camera(&mut self, camera: CameraDef, local: DMat4) -> u32 {
         let name = camera.name.clone();
@@ -322,6 +438,9 @@ impl SceneBuilder {
             punctual_lights: !s.lights.is_empty(),
             environment: s.environment.as_ref().is_some_and(|e| !e.is_black()),
             normal_maps: mats.iter().any(|m| m.normal_texture.is_some()),
+            animation: !s.animations.is_empty(),
+            skinning: s.nodes.iter().any(|n| n.skin.is_some()),
+            morphing: s.meshes.iter().any(|m| !m.weights.is_empty()),
         };
         self.scene
     }

@@ -419,3 +419,85 @@ fn every_model_renders_one_sample_without_nan() {
         println!("{name}: {} samples dropped", tile.dropped);
     }
 }
+
+/// Every animated model, at two times inside its animation, with motion blur: no NaN, and
+/// the two images differ. Both frames use the same frame number (the random numbers' key)
+/// and reach their times through different frame rates, so any difference comes from the
+/// animation, not from noise.
+#[test]
+fn every_animated_model_moves_between_frames_without_nan() {
+    use std::sync::Arc;
+    use tracer::animation::time_range;
+    use tracer::film::{SampleRange, TileRect};
+    use tracer::motion::Shutter;
+    use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
+
+    let files = scene_files();
+    if files.is_empty() {
+        return skip("animation rendering");
+    }
+    const FRAME: i32 = 10;
+    let mut animated = 0;
+    for file in files {
+        let name = file.display().to_string();
+        let scene = Arc::new(loader::load_path(&file).unwrap_or_else(|e| panic!("{name}: {e}")));
+        let all: Vec<usize> = (0..scene.animations.len()).collect();
+        let Some((start, end)) = time_range(&scene, &all).filter(|(s, e)| e > s) else {
+            continue;
+        };
+        animated += 1;
+        let render_at = |seconds: f64| {
+            let options = FrameOptions {
+                frame: FRAME,
+                fps: FRAME as f64 / seconds,
+                shutter: Shutter {
+                    open: -0.25,
+                    close: 0.25,
+                },
+                width: 48,
+                height: 48,
+                ..Default::default()
+            };
+            let frame = prepare_frame(scene.clone(), &options)
+                .unwrap_or_else(|e| panic!("{name} at {seconds} s: {e}"));
+            let tile = render_region(
+                &frame,
+                &RenderSettings::default(),
+                TileRect::new(0, 0, 48, 48),
+                SampleRange::new(0, 2),
+                16,
+                &|_| {},
+            );
+            (frame.motion_steps, tile.dropped, tile.resolve())
+        };
+        // Times strictly inside the animation, away from t = 0 (a frame rate needs t > 0).
+        let t1 = start + 0.3 * (end - start);
+        let t2 = start + 0.7 * (end - start);
+        let (t1, t2) = (t1.max(1e-3), t2.max(2e-3));
+        let (steps1, dropped1, a) = render_at(t1);
+        let (steps2, dropped2, b) = render_at(t2);
+        for (t, layers) in [(t1, &a), (t2, &b)] {
+            assert!(
+                layers.beauty.iter().all(|p| p.is_finite())
+                    && layers.depth.iter().all(|d| d.is_finite()),
+                "{name} at {t:.3} s: non-finite pixel"
+            );
+        }
+        assert_eq!((dropped1, dropped2), (0, 0), "{name}: NaN samples");
+        let changed = a
+            .beauty
+            .iter()
+            .zip(&b.beauty)
+            .filter(|(p, q)| p != q)
+            .count();
+        println!(
+            "{name}: {start:.3}..{end:.3} s, {steps1} and {steps2} motion steps, \
+             {changed} of 2304 pixels change between {t1:.3} s and {t2:.3} s"
+        );
+        assert!(
+            changed > 0,
+            "{name}: frames at {t1} s and {t2} s are identical"
+        );
+    }
+    assert!(animated >= 7, "only {animated} animated models found");
+}

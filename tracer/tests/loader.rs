@@ -14,137 +14,12 @@ use tracer::material::AlphaMode;
 use tracer::scene::Scene;
 use tracer::texture::{srgb_to_linear, Filter, Wrap};
 
+mod common;
+
+use common::gltf_doc::{base64, Doc};
+
 // ---------------------------------------------------------------------------------------
 // Building documents
-
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in bytes.chunks(3) {
-        let n = (c[0] as u32) << 16
-            | (*c.get(1).unwrap_or(&0) as u32) << 8
-            | *c.get(2).unwrap_or(&0) as u32;
-        for k in 0..4 {
-            if k <= c.len() {
-                out.push(A[(n >> (18 - 6 * k)) as usize & 63] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
-}
-
-/// One buffer's bytes with the buffer views and accessors that describe them.
-#[derive(Default)]
-struct Doc {
-    bin: Vec<u8>,
-    views: Vec<String>,
-    accessors: Vec<String>,
-}
-
-impl Doc {
-    fn view(&mut self, bytes: &[u8]) -> usize {
-        self.bin.resize(self.bin.len().next_multiple_of(4), 0);
-        self.views.push(format!(
-            r#"{{"buffer":0,"byteOffset":{},"byteLength":{}}}"#,
-            self.bin.len(),
-            bytes.len()
-        ));
-        self.bin.extend_from_slice(bytes);
-        self.views.len() - 1
-    }
-
-    fn accessor(
-        &mut self,
-        bytes: &[u8],
-        component: u32,
-        ty: &str,
-        count: usize,
-        extra: &str,
-    ) -> usize {
-        let view = self.view(bytes);
-        self.accessors.push(format!(
-            r#"{{"bufferView":{view},"componentType":{component},"type":"{ty}","count":{count}{extra}}}"#
-        ));
-        self.accessors.len() - 1
-    }
-
-    fn strided_accessor(
-        &mut self,
-        bytes: &[u8],
-        stride: usize,
-        component: u32,
-        ty: &str,
-        count: usize,
-        extra: &str,
-    ) -> usize {
-        let view = self.view(bytes);
-        let v = self.views.pop().unwrap();
-        self.views
-            .push(v.replacen('{', &format!(r#"{{"byteStride":{stride},"#), 1));
-        self.accessors.push(format!(
-            r#"{{"bufferView":{view},"componentType":{component},"type":"{ty}","count":{count}{extra}}}"#
-        ));
-        self.accessors.len() - 1
-    }
-
-    fn floats(&mut self, values: &[f32], ty: &str, per: usize) -> usize {
-        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-        self.accessor(&bytes, 5126, ty, values.len() / per, "")
-    }
-
-    fn vec3(&mut self, v: &[[f32; 3]]) -> usize {
-        let flat: Vec<f32> = v.iter().flatten().copied().collect();
-        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
-        for p in v {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-        let bytes: Vec<u8> = flat.iter().flat_map(|v| v.to_le_bytes()).collect();
-        self.accessor(
-            &bytes,
-            5126,
-            "VEC3",
-            v.len(),
-            &format!(r#","min":{lo:?},"max":{hi:?}"#),
-        )
-    }
-
-    fn vec2(&mut self, v: &[[f32; 2]]) -> usize {
-        self.floats(&v.iter().flatten().copied().collect::<Vec<_>>(), "VEC2", 2)
-    }
-
-    fn u16s(&mut self, v: &[u16]) -> usize {
-        let bytes: Vec<u8> = v.iter().flat_map(|v| v.to_le_bytes()).collect();
-        self.accessor(&bytes, 5123, "SCALAR", v.len(), "")
-    }
-
-    fn u32s(&mut self, v: &[u32]) -> usize {
-        let bytes: Vec<u8> = v.iter().flat_map(|v| v.to_le_bytes()).collect();
-        self.accessor(&bytes, 5125, "SCALAR", v.len(), "")
-    }
-
-    fn buffer_json(&self) -> String {
-        format!(
-            r#"[{{"byteLength":{},"uri":"data:application/octet-stream;base64,{}"}}]"#,
-            self.bin.len(),
-            base64(&self.bin)
-        )
-    }
-
-    /// The whole document: `rest` holds the other top-level properties, comma-led.
-    fn json(&self, rest: &str) -> String {
-        format!(
-            r#"{{"asset":{{"version":"2.0"}},"buffers":{},"bufferViews":[{}],"accessors":[{}]{rest}}}"#,
-            self.buffer_json(),
-            self.views.join(","),
-            self.accessors.join(",")
-        )
-    }
-}
 
 fn load(json: &str) -> Result<Scene, SceneError> {
     loader::load_slice(json.as_bytes(), None)
@@ -788,7 +663,7 @@ fn the_framing_camera_sees_the_whole_scene() {
         (Vec3::new(10.0, 0.0, -4.0), Vec3::new(11.0, 3.0, 0.0))
     );
     for aspect in [0.5f32, 1.0, 2.0] {
-        let (proj, to_world) = loader::framing_camera(&scene, aspect);
+        let (proj, to_world) = loader::framing_camera(&b, aspect);
         let Projection::Perspective { yfov, znear, .. } = proj else {
             panic!("{proj:?}")
         };

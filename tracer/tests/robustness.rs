@@ -105,7 +105,7 @@ fn offset_rays_never_rehit_their_triangle() {
         let m = Affine3A::from_rotation_translation(Quat::from_rotation_y(0.7), offset * 0.5);
         let inst = Instance::new(0, m, &mesh.bvh.bounds());
         let meshes = [mesh];
-        let scene = SceneBvh::build(vec![inst]);
+        let scene = SceneBvh::build(vec![inst.clone()], |m| &meshes[m as usize].bvh);
         let (mut rays, mut rehits_object, mut rehits_world) = (0, 0, 0);
         for _ in 0..10_000 {
             let src = rng.below(tris.len());
@@ -132,9 +132,12 @@ fn offset_rays_never_rehit_their_triangle() {
             let dir = random_direction_on_side(&mut rng, ngw);
             let n = if dir.dot(ngw) < 0.0 { -ngw } else { ngw };
             let ray = Ray::new(offset_ray_origin(pw, n), dir);
-            if scene.occluded(&meshes, &ray, f32::INFINITY, |i, tri, _, _| {
-                i == 0 && tri == src as u32
-            }) {
+            if scene.occluded(
+                |m| &meshes[m as usize].bvh,
+                &ray,
+                f32::INFINITY,
+                |i, tri, _, _| i == 0 && tri == src as u32,
+            ) {
                 rehits_world += 1;
             }
             rays += 1;
@@ -308,7 +311,7 @@ fn closed_meshes_do_not_leak() {
             Quat::from_rotation_z(0.4),
             Vec3::new(3.0, -2.0, 1.0) * size,
         );
-        let scene = SceneBvh::build(vec![Instance::new(0, m, &bvh.bounds())]);
+        let scene = SceneBvh::build(vec![Instance::new(0, m, &bvh.bounds())], |_| bvh);
 
         let targets = surface_targets(&mut rng, &verts, &faces);
         let inside: Vec<Vec3> = (0..4)
@@ -334,7 +337,12 @@ fn closed_meshes_do_not_leak() {
                     m.transform_point3(target) - m.transform_point3(q),
                 );
                 if scene
-                    .intersect(&meshes, &ray_w, f32::INFINITY, |_, _, _, _| true)
+                    .intersect(
+                        |m| &meshes[m as usize].bvh,
+                        &ray_w,
+                        f32::INFINITY,
+                        |_, _, _, _| true,
+                    )
                     .is_none()
                 {
                     escaped_world += 1;
@@ -474,7 +482,7 @@ fn scene_bvh_matches_brute_force_over_instances() {
             .count()
             > 5
     );
-    let scene = SceneBvh::build(instances.clone());
+    let scene = SceneBvh::build(instances.clone(), |m| &meshes[m as usize].bvh);
     assert_eq!(scene.instances(), instances.as_slice());
 
     let brute = |ray: &Ray, t_max: f32, filter: bool| {
@@ -504,7 +512,7 @@ fn scene_bvh_matches_brute_force_over_instances() {
         for filter in [false, true] {
             let expect = brute(&ray, t_max, filter);
             let accept = |inst: u32, tri: u32, _: f32, _: f32| !filter || cut_out(inst, tri);
-            let got = scene.intersect(&meshes, &ray, t_max, accept);
+            let got = scene.intersect(|m| &meshes[m as usize].bvh, &ray, t_max, accept);
             assert_eq!(
                 got.map(|h| (h.t, h.instance, h.triangle)),
                 expect,
@@ -522,7 +530,7 @@ fn scene_bvh_matches_brute_force_over_instances() {
                 hits += 1;
             }
             assert_eq!(
-                scene.occluded(&meshes, &ray, t_max, accept),
+                scene.occluded(|m| &meshes[m as usize].bvh, &ray, t_max, accept),
                 expect.is_some()
             );
         }

@@ -1,11 +1,15 @@
-//! Instances (a mesh placed by a transform) and the top-level BVH over them.
+//! Instances (a mesh placed by a transform, possibly moving over the shutter) and the
+//! top-level BVH over them.
 
-use glam::{Affine3A, Mat3A, Vec3};
+use std::sync::Arc;
+
+use glam::{Affine3A, DMat4, Mat3A, Vec3};
 
 use super::build::{self, BuildParams, BuildPrim};
-use super::node::{ray_is_valid, traverse, BoxRay, Node};
+use super::mesh::MeshBvh;
+use super::motion::MotionTransform;
+use super::node::{ray_is_valid, traverse, BoxRay, Node, StaticBoxes};
 use crate::geometry::{Aabb, Hit, Ray};
-use crate::scene::Mesh;
 use crate::triangle::gamma;
 
 /// SAH costs for instances: testing one means transforming the ray and entering a mesh
@@ -16,27 +20,76 @@ const PARAMS: BuildParams = BuildParams {
     intersect_cost: 3.0,
 };
 
-/// One mesh placed in the prepared frame's world space.
+/// One mesh placed in the prepared frame's world space, by one transform or by a
+/// [`MotionTransform`] over the shutter.
 ///
-/// Rays enter the mesh through [`Instance::object_ray`], which keeps the direction's length
-/// as the transform makes it, so `t` means the same point in both spaces. With motion blur
-/// an instance will carry several transforms over the shutter; `object_ray` (which already
-/// receives the ray's time) and `bounds` (then covering the whole shutter) are the places
-/// that will change.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Rays enter the mesh through [`Instance::object_ray`] (static) or the placement at the
+/// ray's time (moving), which keep the direction's length as the transform makes it, so
+/// `t` means the same point in both spaces. A moving instance's `bounds` cover the whole
+/// shutter, so the top level stays a static BVH; its matrices are those at time 0, and
+/// [`Instance::placement`] gives them at any time. Cloning is cheap: the motion is shared.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Instance {
     /// Index of the mesh in the scene's mesh list.
     pub mesh: u32,
-    /// Object space to world space.
+    /// Object space to world space (at time 0 for a moving instance).
     pub to_world: Affine3A,
     /// World space to object space; all zeros when `to_world` is singular.
     pub to_object: Affine3A,
     /// Inverse transpose of `to_world`'s linear part, for normals (not normalised: scale
     /// the result). All zeros when `to_world` is singular.
     pub normal_to_world: Mat3A,
-    /// World-space bounds, padded for the rounding of the transform; empty when the
-    /// instance can never be hit.
+    /// World-space bounds (over the whole shutter), padded for the rounding of the
+    /// transform; empty when the instance can never be hit.
     pub bounds: Aabb,
+    /// The transform over the shutter; None for a static instance.
+    pub motion: Option<Arc<MotionTransform>>,
+}
+
+/// An instance's matrices at one time: what shading a hit needs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement {
+    /// Object space to world space.
+    pub to_world: Affine3A,
+    /// World space to object space; all zeros when `to_world` is singular.
+    pub to_object: Affine3A,
+    /// Inverse transpose of `to_world`'s linear part, for normals (not normalised); all
+    /// zeros when `to_world` is singular.
+    pub normal_to_world: Mat3A,
+}
+
+impl Placement {
+    /// The matrices for `to_world`; zero inverses when it cannot be inverted (a zero
+    /// scale, a non-finite entry, or one so small that the inverse overflows).
+    fn new(to_world: Affine3A) -> Placement {
+        let det = to_world.matrix3.determinant();
+        let to_object = if to_world.is_finite() && det != 0.0 && det.is_finite() {
+            Some(to_world.inverse()).filter(|inv| inv.is_finite())
+        } else {
+            None
+        };
+        match to_object {
+            Some(to_object) => Placement {
+                to_world,
+                to_object,
+                normal_to_world: to_object.matrix3.transpose(),
+            },
+            None => Placement {
+                to_world,
+                to_object: Affine3A::ZERO,
+                normal_to_world: Mat3A::ZERO,
+            },
+        }
+    }
+
+    fn is_singular(&self) -> bool {
+        self.to_object == Affine3A::ZERO
+    }
+}
+
+/// The f32 affine transform of a (camera-relative, f64) matrix, as static instances use.
+fn to_f32_affine(m: &DMat4) -> Affine3A {
+    Affine3A::from_mat4(m.as_mat4())
 }
 
 impl Instance {
@@ -46,27 +99,59 @@ impl Instance {
     /// small that the inverse overflows) gives an instance with empty bounds and zero
     /// inverse matrices: it is never hit, and nothing derived from it is NaN.
     pub fn new(mesh: u32, to_world: Affine3A, mesh_bounds: &Aabb) -> Instance {
-        let det = to_world.matrix3.determinant();
-        let to_object = if to_world.is_finite() && det != 0.0 && det.is_finite() {
-            Some(to_world.inverse()).filter(|inv| inv.is_finite())
+        let p = Placement::new(to_world);
+        let bounds = if p.is_singular() {
+            Aabb::EMPTY
         } else {
-            None
+            transform_bounds(&to_world, mesh_bounds)
         };
-        match to_object {
-            Some(to_object) => Instance {
-                mesh,
-                to_world,
-                to_object,
-                normal_to_world: to_object.matrix3.transpose(),
-                bounds: transform_bounds(&to_world, mesh_bounds),
-            },
-            None => Instance {
-                mesh,
-                to_world,
-                to_object: Affine3A::ZERO,
-                normal_to_world: Mat3A::ZERO,
-                bounds: Aabb::EMPTY,
-            },
+        Instance {
+            mesh,
+            to_world,
+            to_object: p.to_object,
+            normal_to_world: p.normal_to_world,
+            bounds,
+            motion: None,
+        }
+    }
+
+    /// Places mesh `mesh` by `steps`, camera-relative world matrices at evenly spaced
+    /// motion steps over the shutter (see [`MotionTransform`]).
+    ///
+    /// When every step converts to the same f32 transform, bit for bit, this is the static
+    /// [`Instance::new`]; so it is when a step is not finite (then never hit, as a singular
+    /// static instance). Otherwise the instance moves: its matrices are those at time 0
+    /// and its bounds cover the mesh along the interpolated motion, rotation arcs included
+    /// (see `MotionTransform::bounds` for why they are conservative). Steps that are
+    /// singular at some times are fine: at those times the instance is not hit.
+    ///
+    /// # Panics
+    /// If `steps` is empty.
+    pub fn moving(mesh: u32, steps: &[DMat4], mesh_bounds: &Aabb) -> Instance {
+        assert!(
+            !steps.is_empty(),
+            "a moving instance needs at least one step"
+        );
+        let first = to_f32_affine(&steps[0]);
+        let bits = |m: &Affine3A| m.to_cols_array().map(f32::to_bits);
+        let same = steps[1..]
+            .iter()
+            .all(|m| bits(&to_f32_affine(m)) == bits(&first));
+        if same {
+            return Instance::new(mesh, first, mesh_bounds);
+        }
+        if let Some(bad) = steps.iter().map(to_f32_affine).find(|m| !m.is_finite()) {
+            return Instance::new(mesh, bad, mesh_bounds);
+        }
+        let motion = MotionTransform::new(steps);
+        let p = Placement::new(motion.at(0.0));
+        Instance {
+            mesh,
+            to_world: p.to_world,
+            to_object: p.to_object,
+            normal_to_world: p.normal_to_world,
+            bounds: motion.bounds(mesh_bounds),
+            motion: Some(Arc::new(motion)),
         }
     }
 
@@ -75,14 +160,51 @@ impl Instance {
         !self.bounds.is_empty()
     }
 
-    /// The world ray in the mesh's object space. The direction is transformed but not
-    /// renormalised, so ray parameters agree between the two spaces.
-    pub fn object_ray(&self, ray: &Ray) -> Ray {
-        Ray {
-            origin: self.to_object.transform_point3(ray.origin),
-            dir: self.to_object.transform_vector3(ray.dir),
-            time: ray.time,
+    /// Whether the instance moves over the shutter.
+    pub fn has_motion(&self) -> bool {
+        self.motion.is_some()
+    }
+
+    /// The matrices at normalised shutter time `time`: the stored ones for a static
+    /// instance, the interpolated ones for a moving instance (zero inverses at a time where
+    /// it is singular).
+    #[inline]
+    pub fn placement(&self, time: f32) -> Placement {
+        match &self.motion {
+            None => Placement {
+                to_world: self.to_world,
+                to_object: self.to_object,
+                normal_to_world: self.normal_to_world,
+            },
+            Some(motion) => Placement::new(motion.at(time)),
         }
+    }
+
+    /// The world ray in the mesh's object space, by the stored `to_object` (time 0 for a
+    /// moving instance). The direction is transformed but not renormalised, so ray
+    /// parameters agree between the two spaces.
+    pub fn object_ray(&self, ray: &Ray) -> Ray {
+        transform_ray(&self.to_object, ray)
+    }
+
+    /// The world ray in the mesh's object space where the instance is at `ray.time`.
+    #[inline]
+    fn object_ray_at_time(&self, ray: &Ray) -> Ray {
+        match &self.motion {
+            None => self.object_ray(ray),
+            // Only the inverse is needed here; a singular time gives a zero direction,
+            // which hits nothing.
+            Some(motion) => transform_ray(&Placement::new(motion.at(ray.time)).to_object, ray),
+        }
+    }
+}
+
+#[inline(always)]
+fn transform_ray(to_object: &Affine3A, ray: &Ray) -> Ray {
+    Ray {
+        origin: to_object.transform_point3(ray.origin),
+        dir: to_object.transform_vector3(ray.dir),
+        time: ray.time,
     }
 }
 
@@ -90,7 +212,7 @@ impl Instance {
 /// bound on the rounding of `m·p + t` (three products and three sums: gamma(3), taken as
 /// gamma(4) to cover the rounding of the bound itself), so that no world-space point of
 /// the mesh can fall outside the box the top level tests.
-fn transform_bounds(m: &Affine3A, b: &Aabb) -> Aabb {
+pub(super) fn transform_bounds(m: &Affine3A, b: &Aabb) -> Aabb {
     if b.is_empty() {
         return Aabb::EMPTY;
     }
@@ -107,14 +229,21 @@ fn transform_bounds(m: &Affine3A, b: &Aabb) -> Aabb {
 }
 
 /// The top-level BVH over a prepared frame's instances, built with a binned SAH over
-/// their world bounds. Hits name instances by their index in the list given to
-/// [`SceneBvh::build`], which [`SceneBvh::instances`] returns unchanged.
+/// their world bounds (over the whole shutter for moving ones). Hits name instances by
+/// their index in the list given to [`SceneBvh::build`], which [`SceneBvh::instances`]
+/// returns unchanged.
+///
+/// Whether anything moves is decided once, at build time ([`SceneBvh::has_motion`]); each
+/// query then runs one of two monomorphised loops, so a static scene's traversal is the
+/// same loop as without motion support.
 #[derive(Clone, Default)]
 pub struct SceneBvh {
     instances: Vec<Instance>,
     nodes: Vec<Node>,
     /// Instance indices in leaf order.
     order: Vec<u32>,
+    /// Whether an instance moves or a mesh it places deforms.
+    motion: bool,
 }
 
 impl std::fmt::Debug for SceneBvh {
@@ -122,22 +251,28 @@ impl std::fmt::Debug for SceneBvh {
         f.debug_struct("SceneBvh")
             .field("instances", &self.instances.len())
             .field("nodes", &self.nodes.len())
+            .field("motion", &self.motion)
             .field("bounds", &self.bounds())
             .finish()
     }
 }
 
 impl SceneBvh {
-    /// Builds the hierarchy over `instances`. Instances that cannot be hit (empty bounds)
-    /// stay in the list but not in the tree.
+    /// Builds the hierarchy over `instances`; `mesh(i)` is the BVH of mesh `i` (a lookup,
+    /// so that static and per-frame deformed meshes can be mixed), asked only whether it
+    /// deforms. Instances that cannot be hit (empty bounds) stay in the list but not in the
+    /// tree.
     ///
     /// # Panics
     /// If there are more than `u32::MAX` instances.
-    pub fn build(instances: Vec<Instance>) -> SceneBvh {
+    pub fn build<'m>(instances: Vec<Instance>, mesh: impl Fn(u32) -> &'m MeshBvh) -> SceneBvh {
         assert!(
             u32::try_from(instances.len()).is_ok(),
             "more than 2^32 - 1 instances"
         );
+        let motion = instances
+            .iter()
+            .any(|inst| inst.has_motion() || mesh(inst.mesh).has_motion());
         // Bounds that overflowed to infinity are clamped so that centroids stay finite.
         let limit = Vec3::splat(f32::MAX);
         let mut prims: Vec<BuildPrim> = instances
@@ -156,6 +291,7 @@ impl SceneBvh {
             instances,
             nodes,
             order,
+            motion,
         }
     }
 
@@ -164,7 +300,14 @@ impl SceneBvh {
         &self.instances
     }
 
-    /// World bounds of every hittable instance; empty when there is none.
+    /// Whether any instance moves or any mesh it places deforms over the shutter: then
+    /// queries interpolate at `ray.time`.
+    pub fn has_motion(&self) -> bool {
+        self.motion
+    }
+
+    /// World bounds of every hittable instance (over the whole shutter); empty when there
+    /// is none.
     pub fn bounds(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::EMPTY, |n| Aabb {
             min: n.min,
@@ -177,7 +320,8 @@ impl SceneBvh {
         self.nodes.len()
     }
 
-    /// Bytes held by the top level (not counting the meshes' BVHs).
+    /// Bytes held by the top level (not counting the meshes' BVHs, nor motion transforms
+    /// shared with other copies of the instances).
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(self.instances.as_slice())
@@ -186,42 +330,48 @@ impl SceneBvh {
     }
 
     /// Closest hit with `0 < t < t_max` for which `accept(instance, triangle, b1, b2)` is
-    /// true. `meshes` are the meshes the instances index; `ray.dir` need not be unit
-    /// length and `t` is in its units. A rejected hit (an alpha cut-out) is ignored and the
-    /// search goes on.
-    ///
-    /// # Panics
-    /// If an instance names a mesh outside `meshes`.
-    pub fn intersect(
+    /// true, with everything where it is at `ray.time`. `mesh(i)` is the BVH of mesh `i`
+    /// (the one given to [`SceneBvh::build`]); `ray.dir` need not be unit length and `t` is
+    /// in its units. A rejected hit (an alpha cut-out) is ignored and the search goes on.
+    pub fn intersect<'m>(
         &self,
-        meshes: &[Mesh],
+        mesh: impl Fn(u32) -> &'m MeshBvh,
         ray: &Ray,
         t_max: f32,
         accept: impl FnMut(u32, u32, f32, f32) -> bool,
     ) -> Option<Hit> {
-        self.search::<false>(meshes, ray, t_max, accept)
+        if self.motion {
+            self.search::<false, true, _>(mesh, ray, t_max, accept)
+        } else {
+            self.search::<false, false, _>(mesh, ray, t_max, accept)
+        }
     }
 
     /// Whether anything with `0 < t < t_max` accepted by `accept(instance, triangle, b1,
-    /// b2)` lies on the ray; stops at the first such hit (shadow rays).
-    ///
-    /// # Panics
-    /// If an instance names a mesh outside `meshes`.
-    pub fn occluded(
+    /// b2)` lies on the ray at `ray.time`; stops at the first such hit (shadow rays).
+    pub fn occluded<'m>(
         &self,
-        meshes: &[Mesh],
+        mesh: impl Fn(u32) -> &'m MeshBvh,
         ray: &Ray,
         t_max: f32,
         accept: impl FnMut(u32, u32, f32, f32) -> bool,
     ) -> bool {
-        self.search::<true>(meshes, ray, t_max, accept).is_some()
+        if self.motion {
+            self.search::<true, true, _>(mesh, ray, t_max, accept)
+                .is_some()
+        } else {
+            self.search::<true, false, _>(mesh, ray, t_max, accept)
+                .is_some()
+        }
     }
 
-    /// The closest accepted hit, or with `ANY_HIT` the first one found.
+    /// The closest accepted hit, or with `ANY_HIT` the first one found. With `MOTION`,
+    /// moving instances are placed and deforming meshes interpolated at `ray.time`; the
+    /// top level's boxes cover the shutter either way.
     #[inline(always)]
-    fn search<const ANY_HIT: bool>(
+    fn search<'m, const ANY_HIT: bool, const MOTION: bool, M: Fn(u32) -> &'m MeshBvh>(
         &self,
-        meshes: &[Mesh],
+        mesh: M,
         ray: &Ray,
         t_max: f32,
         mut accept: impl FnMut(u32, u32, f32, f32) -> bool,
@@ -233,16 +383,21 @@ impl SceneBvh {
         let mut best = None;
         traverse(
             &self.nodes,
+            &StaticBoxes,
             &BoxRay::new(ray),
             &mut t_max,
             |start, count, t_max| {
                 for &instance in &self.order[start as usize..(start + count) as usize] {
                     let inst = &self.instances[instance as usize];
-                    let bvh = &meshes[inst.mesh as usize].bvh;
-                    let hit =
-                        bvh.search::<ANY_HIT>(&inst.object_ray(ray), *t_max, |tri, b1, b2| {
-                            accept(instance, tri, b1, b2)
-                        });
+                    let bvh = mesh(inst.mesh);
+                    let object_ray = if MOTION {
+                        inst.object_ray_at_time(ray)
+                    } else {
+                        inst.object_ray(ray)
+                    };
+                    let hit = bvh.search::<ANY_HIT, MOTION>(&object_ray, *t_max, |tri, b1, b2| {
+                        accept(instance, tri, b1, b2)
+                    });
                     if let Some((t, triangle, b1, b2)) = hit {
                         *t_max = t;
                         best = Some(Hit {
@@ -267,21 +422,26 @@ impl SceneBvh {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Primitive;
-    use glam::Quat;
+    use crate::test_rng::Rng;
+    use glam::{DQuat, DVec3, Quat};
 
-    fn quad_mesh() -> Mesh {
-        let prim = Primitive {
-            positions: vec![
-                Vec3::new(-1.0, -1.0, 0.0),
-                Vec3::new(1.0, -1.0, 0.0),
-                Vec3::new(1.0, 1.0, 0.0),
-                Vec3::new(-1.0, 1.0, 0.0),
-            ],
-            indices: vec![[0, 1, 2], [0, 2, 3]],
-            ..Default::default()
-        };
-        Mesh::new(None, vec![prim])
+    /// The square [-1, 1]² at z = 0, as two triangles.
+    fn quad() -> Vec<[Vec3; 3]> {
+        let p = [
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ];
+        vec![[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
+    }
+
+    fn quad_mesh() -> MeshBvh {
+        MeshBvh::build(&quad())
+    }
+
+    fn trs(scale: DVec3, rotation: DQuat, translation: DVec3) -> DMat4 {
+        DMat4::from_scale_rotation_translation(scale, rotation, translation)
     }
 
     #[test]
@@ -293,32 +453,32 @@ mod tests {
             Affine3A::from_scale(Vec3::splat(1e-30)),
             Affine3A::from_translation(Vec3::new(f32::NAN, 0.0, 0.0)),
         ] {
-            let inst = Instance::new(0, m, &mesh.bvh.bounds());
+            let inst = Instance::new(0, m, &mesh.bounds());
             assert!(!inst.is_hittable());
             assert!(inst.to_object.is_finite() && !inst.normal_to_world.is_nan());
-            let scene = SceneBvh::build(vec![inst]);
+            let scene = SceneBvh::build(vec![inst], |_| &mesh);
             assert!(scene.bounds().is_empty());
             let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
             assert!(scene
-                .intersect(&[quad_mesh()], &ray, f32::INFINITY, |_, _, _, _| true)
+                .intersect(|_| &mesh, &ray, f32::INFINITY, |_, _, _, _| true)
                 .is_none());
         }
     }
 
     #[test]
     fn t_is_the_same_in_world_and_object_space() {
-        let meshes = [quad_mesh()];
+        let mesh = quad_mesh();
         let m = Affine3A::from_scale_rotation_translation(
             Vec3::splat(3.0),
             Quat::from_rotation_y(0.3),
             Vec3::new(1.0, 2.0, -4.0),
         );
-        let scene = SceneBvh::build(vec![Instance::new(0, m, &meshes[0].bvh.bounds())]);
+        let scene = SceneBvh::build(vec![Instance::new(0, m, &mesh.bounds())], |_| &mesh);
         let target = m.transform_point3(Vec3::new(0.2, 0.1, 0.0));
         let origin = Vec3::new(0.5, 2.5, 10.0);
         let hit = scene
             .intersect(
-                &meshes,
+                |_| &mesh,
                 &Ray::new(origin, (target - origin) * 0.5),
                 10.0,
                 |_, _, _, _| true,
@@ -347,12 +507,234 @@ mod tests {
 
     #[test]
     fn instance_bounds_hold_the_transformed_mesh() {
-        let mesh = quad_mesh();
         let m = Affine3A::from_rotation_translation(Quat::from_rotation_z(0.5), Vec3::splat(1e4));
-        let inst = Instance::new(0, m, &mesh.bvh.bounds());
-        for p in &mesh.primitives[0].positions {
+        let inst = Instance::new(0, m, &quad_mesh().bounds());
+        for p in quad().iter().flatten() {
             let w = m.transform_point3(*p);
             assert!(w.cmpge(inst.bounds.min).all() && w.cmple(inst.bounds.max).all());
         }
+    }
+
+    #[test]
+    fn equal_steps_give_a_static_instance_and_a_static_scene() {
+        let mesh = quad_mesh();
+        let m = trs(
+            DVec3::new(1.0, 2.0, 3.0),
+            DQuat::from_rotation_z(0.4),
+            DVec3::new(5.0, 6.0, 7.0),
+        );
+        let inst = Instance::moving(3, &[m, m, m], &mesh.bounds());
+        assert!(inst.motion.is_none() && !inst.has_motion());
+        assert_eq!(
+            inst,
+            Instance::new(3, Affine3A::from_mat4(m.as_mat4()), &mesh.bounds())
+        );
+        // Placements of a static instance are its matrices, at any time.
+        let p = inst.placement(0.7);
+        assert_eq!(
+            (p.to_world, p.to_object, p.normal_to_world),
+            (inst.to_world, inst.to_object, inst.normal_to_world)
+        );
+        let scene = SceneBvh::build(vec![inst.clone(), inst], |_| &mesh);
+        assert!(!scene.has_motion());
+
+        // One moving instance, or one deforming mesh, makes the scene move.
+        let moved = trs(DVec3::ONE, DQuat::IDENTITY, DVec3::X);
+        let moving = Instance::moving(0, &[m, moved], &mesh.bounds());
+        assert!(moving.has_motion());
+        let p = moving.placement(0.0);
+        assert_eq!(
+            (p.to_world, p.to_object, p.normal_to_world),
+            (moving.to_world, moving.to_object, moving.normal_to_world)
+        );
+        assert!(SceneBvh::build(vec![moving], |_| &mesh).has_motion());
+        let deforming = MeshBvh::build_motion(&[quad(), quad()]);
+        let still = Instance::new(0, Affine3A::IDENTITY, &deforming.bounds());
+        assert!(SceneBvh::build(vec![still], |_| &deforming).has_motion());
+    }
+
+    #[test]
+    fn non_finite_steps_give_an_unhittable_instance() {
+        let bad = DMat4::from_translation(DVec3::new(f64::NAN, 0.0, 0.0));
+        let inst = Instance::moving(0, &[DMat4::IDENTITY, bad], &quad_mesh().bounds());
+        assert!(!inst.is_hittable() && inst.motion.is_none());
+        assert!(inst.to_object.is_finite());
+    }
+
+    #[test]
+    fn moving_bounds_hold_the_mesh_at_random_times() {
+        let mut rng = Rng(0x5eed);
+        let points: Vec<Vec3> = (0..200).map(|_| rng.vec3() * 4.0 - 1.0).collect();
+        let mesh_bounds = points.iter().fold(Aabb::EMPTY, |mut b, p| {
+            b.grow(*p);
+            b
+        });
+        for case in 0..12 {
+            let n = 2 + case % 4;
+            let steps: Vec<DMat4> = (0..n)
+                .map(|k| {
+                    let axis = (rng.vec3() - 0.5).as_dvec3().normalize();
+                    let shear = DMat4::from_cols_array(&[
+                        1.0, 0.3, 0.0, 0.0, //
+                        0.0, 1.0, 0.0, 0.0, //
+                        -0.5, 0.0, 1.0, 0.0, //
+                        0.0, 0.0, 0.0, 1.0,
+                    ]);
+                    // Large turns, scales through zero and mirrors, translations far away.
+                    let scale = match (case, k) {
+                        (3, 1) => DVec3::ZERO,
+                        (5, _) => DVec3::new(-1.0, 1.0, 2.0),
+                        _ => (rng.vec3() * 3.0 + 0.2).as_dvec3(),
+                    };
+                    trs(
+                        scale,
+                        DQuat::from_axis_angle(axis, rng.next_f32() as f64 * 6.0),
+                        (rng.vec3() * 2000.0 - 1000.0).as_dvec3(),
+                    ) * if case % 2 == 0 {
+                        shear
+                    } else {
+                        DMat4::IDENTITY
+                    }
+                })
+                .collect();
+            let inst = Instance::moving(0, &steps, &mesh_bounds);
+            let motion = inst.motion.as_ref().expect("the steps differ");
+            let mut tight = Aabb::EMPTY;
+            for i in 0..1000 {
+                let t = if i < 10 {
+                    i as f32 / 9.0
+                } else {
+                    rng.next_f32()
+                };
+                let m = inst.placement(t).to_world;
+                assert_eq!(m, motion.at(t));
+                for p in &points {
+                    let w = m.transform_point3(*p);
+                    tight.grow(w);
+                    assert!(
+                        w.cmpge(inst.bounds.min).all() && w.cmple(inst.bounds.max).all(),
+                        "case {case}: {w} at {t} outside {:?}",
+                        inst.bounds
+                    );
+                }
+            }
+            // Conservative, but not wastefully so.
+            let (b, e) = (inst.bounds.extent(), tight.extent());
+            assert!(b.cmple(e * 1.2 + 1.0).all(), "case {case}: {b} for {e}");
+        }
+    }
+
+    #[test]
+    fn a_moving_instance_is_hit_where_it_is_at_the_ray_time() {
+        let mesh = quad_mesh();
+        let steps = [
+            DMat4::IDENTITY,
+            trs(DVec3::ONE, DQuat::IDENTITY, DVec3::new(10.0, 0.0, 0.0)),
+        ];
+        let slide = Instance::moving(0, &steps, &mesh.bounds());
+        // A quarter turn about Y, from the XY plane into the YZ plane.
+        let turn = [
+            trs(DVec3::ONE, DQuat::IDENTITY, DVec3::new(0.0, 10.0, 0.0)),
+            trs(
+                DVec3::ONE,
+                DQuat::from_rotation_y(std::f64::consts::FRAC_PI_2),
+                DVec3::new(0.0, 10.0, 0.0),
+            ),
+        ];
+        let turn = Instance::moving(0, &turn, &mesh.bounds());
+        let scene = SceneBvh::build(vec![slide, turn], |_| &mesh);
+        assert!(scene.has_motion());
+        let hit = |x: f32, y: f32, time: f32| {
+            let mut ray = Ray::new(Vec3::new(x, y, 5.0), -Vec3::Z);
+            ray.time = time;
+            let hit = scene.intersect(|_| &mesh, &ray, f32::INFINITY, |_, _, _, _| true);
+            let occluded = scene.occluded(|_| &mesh, &ray, f32::INFINITY, |_, _, _, _| true);
+            assert_eq!(hit.is_some(), occluded);
+            hit.map(|h| (h.instance, h.t))
+        };
+        // The sliding quad: at x = 0 when the shutter opens, x = 10 when it closes.
+        assert_eq!(hit(0.0, 0.0, 0.0), Some((0, 5.0)));
+        assert_eq!(hit(0.0, 0.0, 1.0), None);
+        assert_eq!(hit(10.0, 0.0, 1.0), Some((0, 5.0)));
+        assert_eq!(hit(10.0, 0.0, 0.0), None);
+        assert_eq!(hit(5.0, 0.0, 0.5), Some((0, 5.0)));
+        assert_eq!(hit(5.0, 0.0, 0.1), None);
+        // The turning quad: at 45° the point above x = 0.5 lies at z = -0.5; at 90° the
+        // quad is edge-on and x = 0.5 misses it.
+        assert_eq!(hit(0.5, 10.0, 0.0), Some((1, 5.0)));
+        let (i, t) = hit(0.5, 10.0, 0.5).unwrap();
+        assert!(i == 1 && (t - 5.5).abs() < 1e-5, "t = {t}");
+        assert_eq!(hit(0.5, 10.0, 1.0), None);
+    }
+
+    #[test]
+    fn motion_scene_matches_brute_force() {
+        let mut rng = Rng(0xfeed);
+        let soup: Vec<[Vec3; 3]> = (0..200)
+            .map(|_| {
+                let c = rng.vec3() * 4.0 - 2.0;
+                [
+                    c + rng.vec3() - 0.5,
+                    c + rng.vec3() - 0.5,
+                    c + rng.vec3() - 0.5,
+                ]
+            })
+            .collect();
+        let wobble: Vec<Vec<[Vec3; 3]>> = (0..3)
+            .map(|_| {
+                soup.iter()
+                    .map(|t| t.map(|v| v + (rng.vec3() - 0.5) * 0.8))
+                    .collect()
+            })
+            .collect();
+        let meshes = [MeshBvh::build(&soup), MeshBvh::build_motion(&wobble)];
+        let mut instances = Vec::new();
+        for i in 0..40 {
+            let mut place = || {
+                trs(
+                    DVec3::splat(0.5 + rng.next_f32() as f64),
+                    DQuat::from_axis_angle(
+                        (rng.vec3() - 0.5).as_dvec3().normalize(),
+                        rng.next_f32() as f64 * 3.0,
+                    ),
+                    (rng.vec3() * 30.0 - 15.0).as_dvec3(),
+                )
+            };
+            let mesh = i % 2;
+            let bounds = meshes[mesh as usize].bounds();
+            instances.push(if i % 3 == 0 {
+                Instance::new(mesh, Affine3A::from_mat4(place().as_mat4()), &bounds)
+            } else {
+                let steps: Vec<DMat4> = (0..1 + i % 3).map(|_| place()).collect();
+                Instance::moving(mesh, &steps, &bounds)
+            });
+        }
+        let mesh = |m: u32| &meshes[m as usize];
+        let scene = SceneBvh::build(instances.clone(), mesh);
+        assert!(scene.has_motion());
+        let mut hits = 0;
+        for _ in 0..3000 {
+            let mut ray = Ray::new(rng.vec3() * 40.0 - 20.0, rng.vec3() - 0.5);
+            ray.time = rng.next_f32();
+            let mut expect: Option<(f32, u32, u32)> = None;
+            for (i, inst) in instances.iter().enumerate() {
+                let to_object = inst.placement(ray.time).to_object;
+                let limit = expect.map_or(f32::INFINITY, |e| e.0);
+                let object_ray = transform_ray(&to_object, &ray);
+                if let Some((t, tri, ..)) =
+                    mesh(inst.mesh).intersect(&object_ray, limit, |_, _, _| true)
+                {
+                    expect = Some((t, i as u32, tri));
+                }
+            }
+            let got = scene
+                .intersect(mesh, &ray, f32::INFINITY, |_, _, _, _| true)
+                .map(|h| (h.t, h.instance, h.triangle));
+            assert_eq!(got, expect, "ray {ray:?}");
+            let occluded = scene.occluded(mesh, &ray, f32::INFINITY, |_, _, _, _| true);
+            assert_eq!(occluded, expect.is_some());
+            hits += expect.is_some() as u32;
+        }
+        assert!(hits > 200, "only {hits} hits");
     }
 }

@@ -1,9 +1,10 @@
-//! The per-mesh BVH over triangles in object space.
+//! The per-mesh BVH over triangles in object space, static or deforming over the shutter.
 
 use glam::{DVec3, Vec3};
 
 use super::build::{self, BuildParams, BuildPrim};
-use super::node::{ray_is_valid, traverse, BoxRay, Node};
+use super::motion::Segment;
+use super::node::{ray_is_valid, traverse, BoxRay, MotionBoxes, Node, StaticBoxes, StepBox};
 use crate::geometry::{Aabb, Ray};
 use crate::triangle::{intersect_triangle, RayPrecomputed};
 
@@ -21,35 +22,48 @@ const PARAMS: BuildParams = BuildParams {
 /// The BVH owns a copy of the vertex positions, reordered so that each leaf's triangles are
 /// contiguous: traversal reads nodes and positions only, never an index buffer. Triangles
 /// are reported by their index in the slice given to [`MeshBvh::build`].
+///
+/// A deforming mesh ([`MeshBvh::build_motion`]) keeps its positions at each of `S` motion
+/// steps, step-major (all triangles at step 0, then all at step 1, ...), so that step 0
+/// reads exactly like a static BVH, and each node's box at every step in a second array
+/// (`StepBox`, 24 bytes per node and step, next to the 32-byte `Node`, which then holds
+/// the union over the steps). A ray at time `t` sees each triangle and box interpolated
+/// linearly between the two bracketing steps.
 #[derive(Clone, Default)]
 pub struct MeshBvh {
     nodes: Vec<Node>,
-    /// Vertex positions in leaf order.
+    /// Vertex positions in leaf order; with motion, `steps` copies of that, step-major.
     triangles: Vec<[Vec3; 3]>,
-    /// `ids[i]` is the caller's index of `triangles[i]`.
+    /// `ids[i]` is the caller's index of `triangles[i]` (at every step).
     ids: Vec<u32>,
+    /// Number of motion steps: 1 for a static mesh (0 for the default, empty one).
+    steps: u32,
+    /// With motion, node `i`'s box at step `s` at `i·steps + s`; empty without.
+    step_boxes: Vec<StepBox>,
 }
 
 impl std::fmt::Debug for MeshBvh {
     // A summary: a scene's debug print should not list a million nodes.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MeshBvh")
-            .field("triangles", &self.triangles.len())
+            .field("triangles", &self.triangle_count())
             .field("nodes", &self.nodes.len())
+            .field("steps", &self.steps)
             .field("bounds", &self.bounds())
             .finish()
     }
 }
 
-/// Whether a triangle can ever be hit: finite vertices and a non-zero area. The area test
-/// is done in f64, where it is exact enough that only truly collinear vertices fail; such a
-/// triangle covers no area but could still produce sliver hits after the ray's shear.
-fn is_usable(t: &[Vec3; 3]) -> bool {
-    if !(t[0].is_finite() && t[1].is_finite() && t[2].is_finite()) {
-        return false;
-    }
+/// Whether a triangle has a non-zero area. The test is done in f64, where it is exact
+/// enough that only truly collinear vertices fail; such a triangle covers no area but could
+/// still produce sliver hits after the ray's shear.
+fn has_area(t: &[Vec3; 3]) -> bool {
     let [a, b, c] = t.map(|v| v.as_dvec3());
     (b - a).cross(c - a) != DVec3::ZERO
+}
+
+fn is_finite(t: &[Vec3; 3]) -> bool {
+    t[0].is_finite() && t[1].is_finite() && t[2].is_finite()
 }
 
 impl MeshBvh {
@@ -60,31 +74,85 @@ impl MeshBvh {
     /// # Panics
     /// If there are more than `u32::MAX` triangles (hits name triangles by `u32`).
     pub fn build(triangles: &[[Vec3; 3]]) -> Self {
+        Self::build_steps(&[triangles])
+    }
+
+    /// Builds the hierarchy of a deforming mesh: `steps[s][i]` is triangle `i` at motion
+    /// step `s`, the steps evenly spaced over the shutter (see [`super::MotionTransform`]
+    /// for the time convention). One step gives exactly [`MeshBvh::build`]. A triangle is
+    /// left out if any step has a non-finite vertex, or if it has zero area at every step.
+    ///
+    /// # Panics
+    /// If the steps differ in length, or hold more than `u32::MAX` triangles, or if there
+    /// are more than `u32::MAX` steps.
+    pub fn build_motion(steps: &[Vec<[Vec3; 3]>]) -> Self {
+        let steps: Vec<&[[Vec3; 3]]> = steps.iter().map(Vec::as_slice).collect();
+        Self::build_steps(&steps)
+    }
+
+    fn build_steps(steps: &[&[[Vec3; 3]]]) -> Self {
+        let Some(first) = steps.first() else {
+            return Self::build(&[]);
+        };
+        let n = first.len();
         assert!(
-            u32::try_from(triangles.len()).is_ok(),
+            steps.iter().all(|s| s.len() == n),
+            "motion steps of one mesh differ in triangle count"
+        );
+        assert!(
+            u32::try_from(n).is_ok(),
             "more than 2^32 - 1 triangles in one mesh"
         );
-        let mut prims: Vec<BuildPrim> = triangles
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| is_usable(t))
-            .map(|(i, t)| BuildPrim {
-                min: t[0].min(t[1]).min(t[2]),
-                max: t[0].max(t[1]).max(t[2]),
-                index: i as u32,
+        let step_count = u32::try_from(steps.len()).expect("more than 2^32 - 1 motion steps");
+        // Each triangle's box over all steps. The topology is built with the SAH over these
+        // unions rather than over one step's boxes: the union is what a node's box spans
+        // over the shutter, so SAH groups triangles that stay close *throughout* (the same
+        // limb), where mid-step boxes would pair triangles that only cross at mid-shutter
+        // and drift apart at both ends, blowing up the interpolated boxes near the steps.
+        // For small motion the two agree, and for one step both are the static build.
+        let mut prims: Vec<BuildPrim> = (0..n)
+            .filter(|&i| {
+                steps.iter().all(|s| is_finite(&s[i])) && steps.iter().any(|s| has_area(&s[i]))
+            })
+            .map(|i| {
+                let (mut min, mut max) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+                for t in steps.iter().map(|s| &s[i]) {
+                    min = min.min(t[0]).min(t[1]).min(t[2]);
+                    max = max.max(t[0]).max(t[1]).max(t[2]);
+                }
+                BuildPrim {
+                    min,
+                    max,
+                    index: i as u32,
+                }
             })
             .collect();
         let nodes = build::build(&mut prims, &PARAMS);
-        let triangles = prims.iter().map(|p| triangles[p.index as usize]).collect();
+        let triangles: Vec<[Vec3; 3]> = steps
+            .iter()
+            .flat_map(|s| prims.iter().map(|p| s[p.index as usize]))
+            .collect();
         let ids = prims.iter().map(|p| p.index).collect();
+        let step_boxes = if steps.len() > 1 {
+            step_boxes(&nodes, &triangles, prims.len(), steps.len())
+        } else {
+            Vec::new()
+        };
         Self {
             nodes,
             triangles,
             ids,
+            steps: step_count,
+            step_boxes,
         }
     }
 
-    /// Bounds of every usable triangle; empty for a mesh with none.
+    /// Whether the mesh deforms over the shutter (it was built from two or more steps).
+    pub fn has_motion(&self) -> bool {
+        self.steps > 1
+    }
+
+    /// Bounds of every usable triangle (over all motion steps); empty for a mesh with none.
     pub fn bounds(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::EMPTY, |n| Aabb {
             min: n.min,
@@ -94,7 +162,7 @@ impl MeshBvh {
 
     /// Number of triangles in the hierarchy (the usable ones).
     pub fn triangle_count(&self) -> usize {
-        self.triangles.len()
+        self.ids.len()
     }
 
     /// Number of nodes.
@@ -102,10 +170,12 @@ impl MeshBvh {
         self.nodes.len()
     }
 
-    /// Heap and inline bytes held: nodes, reordered positions and the index map.
+    /// Heap and inline bytes held: nodes, per-step boxes, reordered positions (at every
+    /// step) and the index map.
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.step_boxes.as_slice())
             + std::mem::size_of_val(self.triangles.as_slice())
             + std::mem::size_of_val(self.ids.as_slice())
     }
@@ -113,31 +183,44 @@ impl MeshBvh {
     /// Closest hit with `0 < t < t_max` for which `accept(triangle, b1, b2)` is true,
     /// as `(t, triangle, b1, b2)`. `accept` sees candidate hits in no particular order and
     /// is meant for alpha cut-outs: a rejected hit is ignored and the search goes on.
-    /// `ray.dir` need not be unit length; `t` is in its units.
+    /// `ray.dir` need not be unit length; `t` is in its units. A deforming mesh is
+    /// intersected as it is at `ray.time`.
     pub fn intersect(
         &self,
         ray: &Ray,
         t_max: f32,
         accept: impl FnMut(u32, f32, f32) -> bool,
     ) -> Option<(f32, u32, f32, f32)> {
-        self.search::<false>(ray, t_max, accept)
+        if self.has_motion() {
+            self.search::<false, true>(ray, t_max, accept)
+        } else {
+            self.search::<false, false>(ray, t_max, accept)
+        }
     }
 
     /// Whether any triangle with `0 < t < t_max` is hit and accepted by
-    /// `accept(triangle, b1, b2)`; stops at the first such hit.
+    /// `accept(triangle, b1, b2)`; stops at the first such hit. A deforming mesh is
+    /// intersected as it is at `ray.time`.
     pub fn occluded(
         &self,
         ray: &Ray,
         t_max: f32,
         accept: impl FnMut(u32, f32, f32) -> bool,
     ) -> bool {
-        self.search::<true>(ray, t_max, accept).is_some()
+        if self.has_motion() {
+            self.search::<true, true>(ray, t_max, accept).is_some()
+        } else {
+            self.search::<true, false>(ray, t_max, accept).is_some()
+        }
     }
 
     /// The closest accepted hit, or with `ANY_HIT` the first one found (traversal stops
-    /// there). A const parameter, so each query compiles to its own loop.
+    /// there). With `MOTION`, a deforming mesh is searched at `ray.time`; without, or for a
+    /// static mesh, the static loop runs (on a deforming mesh it would find the mesh at
+    /// time 0: step 0 comes first and the nodes' boxes span every step). Const parameters,
+    /// so each query compiles to its own loop and a static scene pays nothing for motion.
     #[inline(always)]
-    pub(super) fn search<const ANY_HIT: bool>(
+    pub(super) fn search<const ANY_HIT: bool, const MOTION: bool>(
         &self,
         ray: &Ray,
         t_max: f32,
@@ -147,11 +230,55 @@ impl MeshBvh {
             return None;
         }
         let pre = RayPrecomputed::new(ray);
+        let box_ray = BoxRay::new(ray);
         let mut t_max = t_max;
         let mut best = None;
+        if MOTION && self.has_motion() {
+            let steps = self.steps as usize;
+            let segment = Segment::new(ray.time, steps);
+            let n = self.ids.len();
+            let k = segment.index;
+            let (at_k, at_next) = (
+                &self.triangles[k * n..(k + 1) * n],
+                &self.triangles[(k + 1) * n..(k + 2) * n],
+            );
+            let boxes = MotionBoxes {
+                boxes: &self.step_boxes,
+                steps,
+                segment,
+            };
+            traverse(
+                &self.nodes,
+                &boxes,
+                &box_ray,
+                &mut t_max,
+                |start, count, t_max| {
+                    let range = start as usize..(start + count) as usize;
+                    for ((a, b), &id) in at_k[range.clone()]
+                        .iter()
+                        .zip(&at_next[range.clone()])
+                        .zip(&self.ids[range])
+                    {
+                        let [v0, v1, v2] = [0, 1, 2].map(|j| segment.lerp(a[j], b[j]));
+                        if let Some((t, b1, b2)) = intersect_triangle(&pre, v0, v1, v2, *t_max) {
+                            if accept(id, b1, b2) {
+                                *t_max = t;
+                                best = Some((t, id, b1, b2));
+                                if ANY_HIT {
+                                    return true;
+                                }
+                            }
+                        }
+                    }
+                    false
+                },
+            );
+            return best;
+        }
         traverse(
             &self.nodes,
-            &BoxRay::new(ray),
+            &StaticBoxes,
+            &box_ray,
             &mut t_max,
             |start, count, t_max| {
                 let range = start as usize..(start + count) as usize;
@@ -173,6 +300,36 @@ impl MeshBvh {
         );
         best
     }
+}
+
+/// Every node's box at every step (node-major; see `MotionBoxes`), from the step-major
+/// `triangles` (`n` per step), in one reverse pass: children come after their parents.
+fn step_boxes(nodes: &[Node], triangles: &[[Vec3; 3]], n: usize, steps: usize) -> Vec<StepBox> {
+    let empty = StepBox {
+        min: Vec3::INFINITY,
+        max: Vec3::NEG_INFINITY,
+    };
+    let mut boxes = vec![empty; nodes.len() * steps];
+    for (i, node) in nodes.iter().enumerate().rev() {
+        for s in 0..steps {
+            let mut b = empty;
+            if node.count > 0 {
+                let range = s * n + node.start as usize..s * n + (node.start + node.count) as usize;
+                for t in &triangles[range] {
+                    b.min = b.min.min(t[0]).min(t[1]).min(t[2]);
+                    b.max = b.max.max(t[0]).max(t[1]).max(t[2]);
+                }
+            } else {
+                for c in [node.start as usize, node.start as usize + 1] {
+                    let child = boxes[c * steps + s];
+                    b.min = b.min.min(child.min);
+                    b.max = b.max.max(child.max);
+                }
+            }
+            boxes[i * steps + s] = b;
+        }
+    }
+    boxes
 }
 
 #[cfg(test)]
@@ -310,9 +467,160 @@ mod tests {
         assert!(!bvh.occluded(&ray, 2.5, |tri, _, _| tri == 4));
     }
 
+    /// `steps` copies of a soup, each vertex moved by its own random offset per step
+    /// (up to about the triangles' size, so boxes overlap differently at each step).
+    fn moving_soup(rng: &mut Rng, n: usize, steps: usize) -> Vec<Vec<[Vec3; 3]>> {
+        let base = soup(rng, n);
+        (0..steps)
+            .map(|_| {
+                base.iter()
+                    .map(|t| t.map(|v| v + (rng.vec3() - 0.5) * 1.5))
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The closest hit among all triangles interpolated at `ray.time`, in index order.
+    fn brute_motion(steps: &[Vec<[Vec3; 3]>], ray: &Ray, t_max: f32) -> Option<(f32, u32)> {
+        if steps.len() == 1 {
+            return brute(&steps[0], ray, t_max);
+        }
+        let seg = Segment::new(ray.time, steps.len());
+        let at: Vec<[Vec3; 3]> = steps[seg.index]
+            .iter()
+            .zip(&steps[seg.index + 1])
+            .map(|(a, b)| [0, 1, 2].map(|j| a[j] * seg.w0 + b[j] * seg.w1))
+            .collect();
+        brute(&at, ray, t_max)
+    }
+
+    #[test]
+    fn motion_matches_brute_force_on_moving_soups() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        for steps in [1, 2, 5] {
+            let soups = moving_soup(&mut rng, 1500, steps);
+            let bvh = MeshBvh::build_motion(&soups);
+            assert_eq!(bvh.has_motion(), steps > 1);
+            assert_eq!(bvh.triangle_count(), 1500);
+            let mut hits = 0;
+            for i in 0..3000 {
+                let mut ray = Ray::new(rng.vec3() * 14.0 - 2.0, rng.vec3() - 0.5);
+                // Random times, the steps themselves, and out-of-range times (clamped).
+                ray.time = match i % 10 {
+                    0 => (i / 10 % steps) as f32 / (steps.max(2) - 1) as f32,
+                    1 => -0.5,
+                    2 => 1.5,
+                    _ => rng.next_f32(),
+                };
+                let t_max = if i % 3 == 0 { 4.0 } else { f32::INFINITY };
+                let expect = brute_motion(&soups, &ray, t_max);
+                let got = bvh
+                    .intersect(&ray, t_max, |_, _, _| true)
+                    .map(|h| (h.0, h.1));
+                assert_eq!(got, expect, "{steps} steps, ray {ray:?}");
+                assert_eq!(bvh.occluded(&ray, t_max, |_, _, _| true), expect.is_some());
+                hits += expect.is_some() as u32;
+            }
+            assert!(hits > 300, "only {hits} hits: the test rays miss too often");
+        }
+    }
+
+    #[test]
+    fn motion_with_equal_steps_hits_like_static() {
+        let mut rng = Rng(11);
+        let tris = soup(&mut rng, 2000);
+        let still = MeshBvh::build(&tris);
+        let moving = MeshBvh::build_motion(&[tris.clone(), tris.clone(), tris]);
+        assert!(moving.has_motion() && !still.has_motion());
+        assert_eq!(moving.bounds(), still.bounds());
+        for i in 0..2000 {
+            let mut ray = Ray::new(rng.vec3() * 14.0 - 2.0, rng.vec3() - 0.5);
+            let expect = still.intersect(&ray, f32::INFINITY, |_, _, _| true);
+            // At the steps and half way between them (weight 1/2) the interpolation
+            // `a·w0 + a·w1` is exact, and so are the hits; at other times the interpolated
+            // vertices may round by an ulp, and so may t.
+            ray.time = (i % 5) as f32 * 0.25;
+            let got = moving.intersect(&ray, f32::INFINITY, |_, _, _| true);
+            assert_eq!(got, expect, "time {}", ray.time);
+            ray.time = rng.next_f32();
+            let got = moving.intersect(&ray, f32::INFINITY, |_, _, _| true);
+            assert_eq!(got.map(|h| h.1), expect.map(|h| h.1), "time {}", ray.time);
+            if let (Some(got), Some(expect)) = (got, expect) {
+                assert!((got.0 - expect.0).abs() <= 1e-5 * expect.0);
+            }
+        }
+    }
+
+    #[test]
+    fn one_motion_step_is_the_static_build() {
+        let tris = soup(&mut Rng(5), 500);
+        let (a, b) = (MeshBvh::build(&tris), MeshBvh::build_motion(&[tris]));
+        assert!(!b.has_motion());
+        assert_eq!(a.nodes, b.nodes);
+        assert_eq!(a.triangles, b.triangles);
+        assert_eq!(a.ids, b.ids);
+        assert!(b.step_boxes.is_empty());
+        assert_eq!(a.memory_bytes(), b.memory_bytes());
+    }
+
+    #[test]
+    fn motion_leaves_out_non_finite_and_always_flat_triangles() {
+        let tri = |z: f32| {
+            [
+                Vec3::new(0.0, 0.0, z),
+                Vec3::new(1.0, 0.0, z),
+                Vec3::new(0.0, 1.0, z),
+            ]
+        };
+        let flat = [Vec3::ONE; 3];
+        let step0 = vec![tri(1.0), tri(1.0), flat, flat];
+        let step1 = vec![tri(2.0), [Vec3::NAN; 3], flat, tri(3.0)];
+        let bvh = MeshBvh::build_motion(&[step0, step1]);
+        // Triangle 1 is NaN at step 1, triangle 2 is flat throughout; triangle 3 is flat
+        // (a point) at step 0 only and is kept.
+        assert_eq!(bvh.triangle_count(), 2);
+        let mut ray = Ray::new(Vec3::new(0.2, 0.2, 0.0), Vec3::Z);
+        let hit = |ray: &Ray| bvh.intersect(ray, 10.0, |_, _, _| true).map(|h| (h.0, h.1));
+        assert_eq!(hit(&ray), Some((1.0, 0)));
+        ray.time = 1.0;
+        assert_eq!(hit(&ray), Some((2.0, 0)));
+        ray.time = 0.5;
+        let (t, id) = hit(&ray).unwrap();
+        assert!(id == 0 && (t - 1.5).abs() < 1e-6, "{t}");
+        // At t = 0.9 triangle 3 has grown from a point at (1, 1, 1) towards tri(3.0)
+        // enough to cover (0.2, 0.2) behind triangle 0.
+        ray.time = 0.9;
+        assert_eq!(
+            bvh.intersect(&ray, 10.0, |id, _, _| id == 3).map(|h| h.1),
+            Some(3)
+        );
+    }
+
+    #[test]
+    fn motion_node_boxes_hold_their_triangles_at_every_step() {
+        let soups = moving_soup(&mut Rng(17), 800, 3);
+        let bvh = MeshBvh::build_motion(&soups);
+        let n = bvh.triangle_count();
+        for (i, node) in bvh.nodes.iter().enumerate() {
+            for s in 0..3 {
+                let b = bvh.step_boxes[i * 3 + s];
+                assert!(b.min.cmpge(node.min).all() && b.max.cmple(node.max).all());
+                if node.count > 0 {
+                    let range =
+                        s * n + node.start as usize..s * n + (node.start + node.count) as usize;
+                    for v in bvh.triangles[range].iter().flatten() {
+                        assert!(v.cmpge(b.min).all() && v.cmple(b.max).all());
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn memory_is_reported() {
         let bvh = MeshBvh::build(&soup(&mut Rng(3), 1000));
         assert!(bvh.memory_bytes() >= 1000 * (36 + 4) + bvh.node_count() * 32);
+        let bvh = MeshBvh::build_motion(&moving_soup(&mut Rng(3), 1000, 3));
+        assert!(bvh.memory_bytes() >= 1000 * (3 * 36 + 4) + bvh.node_count() * (32 + 3 * 24));
     }
 }

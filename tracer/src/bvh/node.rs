@@ -1,8 +1,10 @@
 //! The flat BVH node, the robust ray/box slab test and the ordered stack traversal shared
-//! by the mesh and instance levels.
+//! by the mesh and instance levels, for static boxes and for boxes that move over the
+//! shutter.
 
 use glam::{BVec3, Vec3};
 
+use super::motion::Segment;
 use crate::geometry::Ray;
 use crate::triangle::gamma;
 
@@ -53,8 +55,15 @@ impl BoxRay {
     /// Distance at which the ray enters `node`'s box, if it does so within `[0, t_max]`.
     #[inline(always)]
     pub fn entry(&self, node: &Node, t_max: f32) -> Option<f32> {
-        let lo = (node.min - self.origin) * self.inv_dir;
-        let hi = (node.max - self.origin) * self.inv_dir;
+        self.entry_box(node.min, node.max, t_max)
+    }
+
+    /// Distance at which the ray enters the box `[min, max]`, if it does so within
+    /// `[0, t_max]`.
+    #[inline(always)]
+    pub fn entry_box(&self, min: Vec3, max: Vec3, t_max: f32) -> Option<f32> {
+        let lo = (min - self.origin) * self.inv_dir;
+        let hi = (max - self.origin) * self.inv_dir;
         let near = Vec3::select(self.neg, hi, lo);
         let far = Vec3::select(self.neg, lo, hi);
         // 0 · inf = NaN arises when the ray lies in a slab's plane; such an axis must not
@@ -94,19 +103,73 @@ pub(super) fn ray_is_valid(ray: &Ray, t_max: f32) -> bool {
     ray.origin.is_finite() && ray.dir.is_finite() && ray.dir != Vec3::ZERO && t_max > 0.0
 }
 
-/// Visits the leaves whose boxes the ray enters before `t_max`, nearest child first.
+/// Where traversal finds a node's box: in the node itself ([`StaticBoxes`]), or
+/// interpolated at the ray's time from per-step boxes ([`MotionBoxes`]). A type parameter,
+/// so that the static traversal compiles to the same loop as if it were the only one.
+pub(super) trait NodeBoxes {
+    /// Distance at which `ray` enters the box of `node` (number `index` in its array), if
+    /// it does so within `[0, t_max]`.
+    fn entry(&self, ray: &BoxRay, node: &Node, index: usize, t_max: f32) -> Option<f32>;
+}
+
+/// The node's own box.
+pub(super) struct StaticBoxes;
+
+impl NodeBoxes for StaticBoxes {
+    #[inline(always)]
+    fn entry(&self, ray: &BoxRay, node: &Node, _: usize, t_max: f32) -> Option<f32> {
+        ray.entry(node, t_max)
+    }
+}
+
+/// A node's box at one motion step (24 bytes).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct StepBox {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+/// Boxes of a motion BVH at one time: node `i`'s box at step `s` is `boxes[i·steps + s]`
+/// (node-major, so the two steps a ray needs are adjacent, and so are a sibling pair's),
+/// and the box at the ray's time is the lerp of the two bracketing steps' boxes.
+///
+/// That box is conservative: between two steps every vertex moves linearly, so at weight
+/// `w1` a vertex is `lerp(v_k, v_k+1)`, and `box_k ∋ v_k`, `box_k+1 ∋ v_k+1` give
+/// `lerp(box_k) ∋ lerp(v)`, also after rounding since [`Segment::lerp`] rounds
+/// monotonically and the triangle test interpolates vertices with the same weights. A
+/// parent's per-step boxes hold its children's, hence so do their lerps.
+pub(super) struct MotionBoxes<'a> {
+    pub boxes: &'a [StepBox],
+    pub steps: usize,
+    pub segment: Segment,
+}
+
+impl NodeBoxes for MotionBoxes<'_> {
+    #[inline(always)]
+    fn entry(&self, ray: &BoxRay, _: &Node, index: usize, t_max: f32) -> Option<f32> {
+        let i = index * self.steps + self.segment.index;
+        let (a, b) = (&self.boxes[i], &self.boxes[i + 1]);
+        let min = self.segment.lerp(a.min, b.min);
+        let max = self.segment.lerp(a.max, b.max);
+        ray.entry_box(min, max, t_max)
+    }
+}
+
+/// Visits the leaves whose boxes (as `boxes` sees them) the ray enters before `t_max`,
+/// nearest child first.
 ///
 /// `leaf(start, count, t_max)` handles one leaf and may lower `t_max` (a closer hit); it
 /// returns true to stop the traversal (an any-hit query that found one).
 #[inline(always)]
 pub(super) fn traverse(
     nodes: &[Node],
+    boxes: &impl NodeBoxes,
     ray: &BoxRay,
     t_max: &mut f32,
     mut leaf: impl FnMut(u32, u32, &mut f32) -> bool,
 ) {
     let Some(root) = nodes.first() else { return };
-    if ray.entry(root, *t_max).is_none() {
+    if boxes.entry(ray, root, 0, *t_max).is_none() {
         return;
     }
     let mut stack = [(0u32, 0.0f32); STACK_SIZE];
@@ -120,7 +183,10 @@ pub(super) fn traverse(
         } else {
             let l = node.start as usize;
             let (left, right) = (&nodes[l], &nodes[l + 1]);
-            match (ray.entry(left, *t_max), ray.entry(right, *t_max)) {
+            match (
+                boxes.entry(ray, left, l, *t_max),
+                boxes.entry(ray, right, l + 1, *t_max),
+            ) {
                 (Some(dl), Some(dr)) => {
                     // Visit the nearer child now, the farther one later (if still worth it).
                     let (near, far, d_far) = if dl <= dr {

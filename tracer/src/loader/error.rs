@@ -30,6 +30,10 @@ pub enum Element {
     Camera(usize),
     /// `KHR_lights_punctual.lights[i]`.
     Light(usize),
+    /// `skins[i]`.
+    Skin(usize),
+    /// `animations[i]`.
+    Animation(usize),
 }
 
 impl fmt::Display for Element {
@@ -46,6 +50,8 @@ impl fmt::Display for Element {
             Element::Scene(i) => ("scene", i),
             Element::Camera(i) => ("camera", i),
             Element::Light(i) => ("light", i),
+            Element::Skin(i) => ("skin", i),
+            Element::Animation(i) => ("animation", i),
         };
         write!(f, "{kind} {i}")
     }

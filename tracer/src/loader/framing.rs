@@ -61,12 +61,13 @@ pub fn scene_bounds(scene: &Scene) -> Aabb {
 }
 
 /// A perspective camera for a scene without one: [`FRAMING_YFOV`] vertical field of view,
-/// looking at the centre of [`scene_bounds`] from [`FRAMING_DIRECTION`], far enough that
-/// the bounding sphere fits the view at image aspect `aspect` (width over height). Returns
-/// the projection and the camera-to-world transform (glTF convention: the camera looks
-/// down its local -Z with +Y up). An empty scene is framed as a unit sphere at the origin.
-pub fn framing_camera(scene: &Scene, aspect: f32) -> (Projection, DMat4) {
-    let b = scene_bounds(scene);
+/// looking at the centre of `bounds` (for a still scene, [`scene_bounds`]) from
+/// [`FRAMING_DIRECTION`], far enough that the bounding sphere fits the view at image aspect
+/// `aspect` (width over height). Returns the projection and the camera-to-world transform
+/// (glTF convention: the camera looks down its local -Z with +Y up). Empty bounds are
+/// framed as a unit sphere at the origin.
+pub fn framing_camera(bounds: &Aabb, aspect: f32) -> (Projection, DMat4) {
+    let b = *bounds;
     let (center, radius) = if b.is_empty() || !b.min.is_finite() || !b.max.is_finite() {
         (DVec3::ZERO, 1.0)
     } else {

@@ -1,6 +1,6 @@
 //! A validated glTF document, with its buffers loaded, into a [`Scene`]: nodes, the default
-//! scene's roots, materials and the textures they use, meshes (triangles only), cameras,
-//! punctual lights, and the features the scene needs.
+//! scene's roots, materials and the textures they use, meshes (triangles only), skins,
+//! animations, cameras, punctual lights, and the features the scene needs.
 
 use std::borrow::Cow;
 
@@ -9,15 +9,16 @@ use gltf::json::Value;
 use rayon::prelude::*;
 
 use super::accessor::view_bytes;
+use super::animation::{convert_animations, convert_skins};
 use super::container::Resolver;
 use super::error::{Element, SceneError};
 use super::materials::{convert_material, TextureTable};
-use super::meshes::{convert_mesh, MeshOut};
+use super::meshes::{convert_mesh, fit_weights, MeshOut, SkinLimit};
 use super::SUPPORTED_EXTENSIONS;
 use crate::camera::Projection;
 use crate::light::PunctualLight;
 use crate::material::{AlphaMode, Material};
-use crate::scene::{CameraDef, Features, Node, Scene};
+use crate::scene::{CameraDef, Features, Mesh, Node, Scene, Skin, Trs};
 
 /// What the conversion reads from.
 pub(crate) struct Input<'a> {
@@ -47,8 +48,10 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         view_bytes(&view, input.buffers)?;
     }
 
-    let nodes = convert_nodes(doc, &mut warnings)?;
+    let mut nodes = convert_nodes(doc, &mut warnings)?;
     let roots = default_roots(doc, &nodes);
+    let skins = convert_skins(doc, input.buffers, nodes.len())?;
+    let skin_limits = skin_limits(doc.meshes().len(), &nodes, &skins);
 
     // Materials first: meshes need to know which primitives carry normal maps.
     let mut table = TextureTable::default();
@@ -62,7 +65,10 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
     let gltf_meshes: Vec<gltf::Mesh<'_>> = doc.meshes().collect();
     let built: Vec<Result<MeshOut, SceneError>> = gltf_meshes
         .par_iter()
-        .map(|m| convert_mesh(m, input.buffers, &materials, default_material))
+        .map(|m| {
+            let limit = skin_limits[m.index()];
+            convert_mesh(m, input.buffers, &materials, default_material, limit)
+        })
         .collect();
     let mut meshes = Vec::with_capacity(built.len());
     let mut uses_default = false;
@@ -75,6 +81,8 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
     if uses_default {
         materials.push(Material::default());
     }
+    check_node_deformers(&mut nodes, &meshes, &mut warnings);
+    let animations = convert_animations(doc, input.buffers, &nodes, &meshes, &mut warnings)?;
 
     let cameras = doc
         .cameras()
@@ -96,6 +104,8 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         cameras,
         lights,
         environment: None,
+        animations,
+        skins,
         features: Features::default(),
         warnings,
     };
@@ -124,6 +134,7 @@ fn convert_nodes(
     let mut nodes = Vec::with_capacity(doc.nodes().len());
     for n in doc.nodes() {
         let element = Element::Node(n.index());
+        let mut trs = None;
         let local = match n.transform() {
             gltf::scene::Transform::Matrix { matrix } => {
                 DMat4::from_cols_array_2d(&matrix.map(|c| c.map(f64::from)))
@@ -143,23 +154,34 @@ fn convert_nodes(
                         format!("rotation {r:?} is not a usable quaternion"),
                     ));
                 }
-                DMat4::from_scale_rotation_translation(
-                    DVec3::from_array(s.map(f64::from)),
-                    q / len,
-                    DVec3::from_array(t.map(f64::from)),
-                )
+                let decomposed = Trs {
+                    translation: DVec3::from_array(t.map(f64::from)),
+                    rotation: q / len,
+                    scale: DVec3::from_array(s.map(f64::from)),
+                };
+                trs = Some(decomposed);
+                decomposed.matrix()
             }
         };
         if !local.is_finite() {
             return Err(SceneError::at(element, "transform is not finite"));
         }
+        if let Some(bad) = n.weights().and_then(|w| w.iter().find(|w| !w.is_finite())) {
+            return Err(SceneError::at(
+                element,
+                format!("morph weight {bad} is not finite"),
+            ));
+        }
         nodes.push(Node {
             name: n.name().map(str::to_owned),
             local,
+            trs,
             children: n.children().map(|c| c.index() as u32).collect(),
             mesh: n.mesh().map(|m| m.index() as u32),
             camera: n.camera().map(|c| c.index() as u32),
             light: n.light().map(|l| l.index() as u32),
+            skin: n.skin().map(|s| s.index() as u32),
+            weights: n.weights().map(<[f32]>::to_vec),
         });
     }
     check_node_graph(&nodes, warnings)?;
@@ -216,6 +238,63 @@ fn check_node_graph(nodes: &[Node], warnings: &mut Vec<String>) -> Result<(), Sc
         }
     }
     Ok(())
+}
+
+/// Per mesh, the skin with the fewest joints among the nodes drawing it with a skin: its
+/// JOINTS_n values must stay below that count.
+fn skin_limits(meshes: usize, nodes: &[Node], skins: &[Skin]) -> Vec<Option<SkinLimit>> {
+    let mut limits: Vec<Option<SkinLimit>> = vec![None; meshes];
+    for (i, node) in nodes.iter().enumerate() {
+        let (Some(m), Some(s)) = (node.mesh, node.skin) else {
+            continue;
+        };
+        let (Some(limit), Some(skin)) = (limits.get_mut(m as usize), skins.get(s as usize)) else {
+            continue;
+        };
+        if limit.is_none_or(|l| skin.joints.len() < l.joints) {
+            *limit = Some(SkinLimit {
+                joints: skin.joints.len(),
+                skin: s as usize,
+                node: i,
+            });
+        }
+    }
+    limits
+}
+
+/// Fits node morph weights to their mesh's target count, and drops a skin whose node draws
+/// nothing it could deform, each with a warning: such files break a "MUST" of the spec, but
+/// they draw fine without the part that does not fit.
+fn check_node_deformers(nodes: &mut [Node], meshes: &[Mesh], warnings: &mut Vec<String>) {
+    for (i, node) in nodes.iter_mut().enumerate() {
+        let mesh = node.mesh.and_then(|m| meshes.get(m as usize));
+        let targets = mesh.map_or(0, |m| m.weights.len());
+        if let Some(w) = &mut node.weights {
+            if targets == 0 {
+                warnings.push(format!(
+                    "node {i} has morph weights but no mesh with morph targets; ignored"
+                ));
+                node.weights = None;
+            } else {
+                fit_weights(w, targets, &format!("node {i} has"), warnings);
+            }
+        }
+        if let Some(s) = node.skin {
+            let jointed =
+                mesh.is_some_and(|m| m.primitives.iter().any(|p| !p.joint_sets.is_empty()));
+            if !jointed {
+                warnings.push(format!(
+                    "node {i} has skin {s} but {}; the skin is ignored",
+                    if mesh.is_some() {
+                        "its mesh has no JOINTS_0/WEIGHTS_0"
+                    } else {
+                        "no mesh"
+                    }
+                ));
+                node.skin = None;
+            }
+        }
+    }
 }
 
 /// The `scene` property's scene, else scene 0, else every node without a parent.
@@ -360,11 +439,15 @@ fn convert_light(
 // ---------------------------------------------------------------------------------------
 // Features
 
-/// What the default scene needs: only materials and lights its node trees reach count.
-/// Alpha BLEND counts as `alpha_mask` too, since the tracer renders it as stochastic
-/// coverage, which needs the same any-hit alpha test.
+/// What the default scene needs: only materials, lights, skins and morph targets its node
+/// trees reach count; animation counts when any animation has a channel. Alpha BLEND counts
+/// as `alpha_mask` too, since the tracer renders it as stochastic coverage, which needs the
+/// same any-hit alpha test.
 fn features(scene: &Scene) -> Features {
-    let mut f = Features::default();
+    let mut f = Features {
+        animation: scene.animations.iter().any(|a| !a.channels.is_empty()),
+        ..Features::default()
+    };
     let mut seen_mesh = vec![false; scene.meshes.len()];
     scene.for_each_node_instance(|i, _| {
         let node = &scene.nodes[i as usize];
@@ -372,10 +455,15 @@ fn features(scene: &Scene) -> Features {
             f.punctual_lights = true;
         }
         let Some(m) = node.mesh else { return };
+        let mesh = &scene.meshes[m as usize];
+        if node.skin.is_some() && mesh.primitives.iter().any(|p| !p.joint_sets.is_empty()) {
+            f.skinning = true;
+        }
         if std::mem::replace(&mut seen_mesh[m as usize], true) {
             return;
         }
-        for prim in &scene.meshes[m as usize].primitives {
+        f.morphing |= mesh.primitives.iter().any(|p| !p.targets.is_empty());
+        for prim in &mesh.primitives {
             if prim.indices.is_empty() {
                 continue;
             }

@@ -1,10 +1,21 @@
 //! Meshes: each glTF primitive as triangles with its vertex attributes, checked against
-//! its vertex count, normals repaired, tangents generated where a normal map needs them.
+//! its vertex count, normals repaired, tangents generated where a normal map needs them;
+//! skinning influences (JOINTS_n/WEIGHTS_n) and morph targets read beside them.
+//!
+//! Vertices may be re-indexed after reading (flat-shaded primitives are unwelded, MikkTSpace
+//! splits vertices at seams); every per-vertex array, joint sets and morph targets
+//! included, is carried through, so they all stay one entry per vertex.
+//!
+//! Morph target NORMAL and TANGENT displacements are relative to the file's normals and
+//! tangents, so they are dropped where the loader replaces those: all normal displacements
+//! of a primitive whose normals are generated (no NORMAL: flat normals), the displacement of
+//! each vertex whose zero or non-finite normal was repaired, and all tangent displacements
+//! of a primitive whose tangents are generated (MikkTSpace) or absent.
 
 use std::borrow::Cow;
 
 use glam::{Vec2, Vec3, Vec4};
-use gltf::accessor::Dimensions as D;
+use gltf::accessor::{DataType, Dimensions as D};
 use gltf::mesh::Mode;
 use gltf::Semantic;
 
@@ -12,7 +23,7 @@ use super::accessor::{read_floats, read_indices, Floats};
 use super::error::{mesh_label, Element, SceneError};
 use super::tangents;
 use crate::material::Material;
-use crate::scene::{Mesh, Primitive};
+use crate::scene::{JointSet, Mesh, MorphTarget, Primitive};
 
 pub(crate) struct MeshOut {
     pub mesh: Mesh,
@@ -20,16 +31,54 @@ pub(crate) struct MeshOut {
     pub uses_default: bool,
 }
 
+/// The smallest skin among the nodes that draw a mesh: JOINTS_n values must stay below its
+/// joint count.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SkinLimit {
+    /// Joints in the skin.
+    pub joints: usize,
+    /// The skin.
+    pub skin: usize,
+    /// A node drawing the mesh with that skin.
+    pub node: usize,
+}
+
+/// The number of morph targets of `mesh`, the same for every primitive (an error naming the
+/// mesh otherwise, as the spec requires them to agree).
+fn morph_target_count(mesh: &gltf::Mesh<'_>) -> Result<usize, SceneError> {
+    let label = mesh_label(mesh.index(), mesh.name());
+    let mut first = None;
+    for (p, prim) in mesh.primitives().enumerate() {
+        let count = prim.morph_targets().count();
+        match first {
+            None => first = Some(count),
+            Some(f) if f != count => {
+                return Err(SceneError::at(
+                    Element::Mesh(mesh.index()),
+                    format!(
+                        "{label}: primitive {p} has {count} morph targets but primitive 0 has \
+                         {f}; glTF requires every primitive of a mesh to have the same number"
+                    ),
+                ))
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(first.unwrap_or(0))
+}
+
 pub(crate) fn convert_mesh(
     mesh: &gltf::Mesh<'_>,
     buffers: &[Cow<'_, [u8]>],
     materials: &[Material],
     default_material: u32,
+    skin: Option<SkinLimit>,
 ) -> Result<MeshOut, SceneError> {
     let label = mesh_label(mesh.index(), mesh.name());
     let mut warnings = Vec::new();
     let mut primitives = Vec::new();
     let mut uses_default = false;
+    let targets = morph_target_count(mesh)?;
     for (p, prim) in mesh.primitives().enumerate() {
         let where_ = format!("{label}, primitive {p}");
         let material = match prim.material().index() {
@@ -48,19 +97,69 @@ pub(crate) fn convert_mesh(
             buffers,
             material,
             normal_texcoord,
+            skin,
             &where_,
             &mut warnings,
         )? {
             primitives.push(out);
         }
     }
+    let weights = default_weights(mesh, targets, &label, &mut warnings)?;
     // Keep a primitive-less mesh anyway so that mesh indices stay the document's.
-    let mesh = Mesh::new(mesh.name().map(str::to_owned), primitives);
+    let name = mesh.name().map(str::to_owned);
+    let mut mesh = Mesh::new(name, primitives);
+    mesh.weights = weights;
     Ok(MeshOut {
         mesh,
         warnings,
         uses_default,
     })
+}
+
+/// The mesh's default morph weights: the file's, else zeros, one per target. A list of the
+/// wrong length is cut or padded with zeros (with a warning); a non-finite weight is an
+/// error.
+fn default_weights(
+    mesh: &gltf::Mesh<'_>,
+    targets: usize,
+    label: &str,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<f32>, SceneError> {
+    let Some(w) = mesh.weights() else {
+        return Ok(vec![0.0; targets]);
+    };
+    if let Some(bad) = w.iter().find(|w| !w.is_finite()) {
+        return Err(SceneError::at(
+            Element::Mesh(mesh.index()),
+            format!("{label}: default morph weight {bad} is not finite"),
+        ));
+    }
+    let mut w = w.to_vec();
+    fit_weights(&mut w, targets, &format!("{label}: default"), warnings);
+    Ok(w)
+}
+
+/// Cuts or pads `weights` to one per morph target, with a warning starting with `what`
+/// when their number was wrong (extra ones are ignored, missing ones are 0).
+pub(crate) fn fit_weights(
+    weights: &mut Vec<f32>,
+    targets: usize,
+    what: &str,
+    warnings: &mut Vec<String>,
+) {
+    if weights.len() == targets {
+        return;
+    }
+    warnings.push(format!(
+        "{what} {} morph weights for {targets} morph targets; {}",
+        weights.len(),
+        if weights.len() > targets {
+            "the extra ones ignored"
+        } else {
+            "the missing ones are 0"
+        }
+    ));
+    weights.resize(targets, 0.0);
 }
 
 fn vec3s(f: &Floats) -> Vec<Vec3> {
@@ -103,6 +202,7 @@ fn convert_primitive(
     buffers: &[Cow<'_, [u8]>],
     material: u32,
     normal_texcoord: Option<usize>,
+    skin: Option<SkinLimit>,
     where_: &str,
     warnings: &mut Vec<String>,
 ) -> Result<Option<Primitive>, SceneError> {
@@ -164,10 +264,19 @@ fn convert_primitive(
         material,
         ..Primitive::default()
     };
+    // Joints and targets before anything re-indexes the vertices, so that it carries them.
+    out.joint_sets = joint_sets(prim, buffers, n, skin, where_, warnings)?;
+    out.targets = morph_targets(prim, buffers, n, where_)?;
     if let Some(f) = attribute(prim, &Semantic::Normals, &[D::Vec3], buffers, n, where_)? {
         out.normals = vec3s(&f);
-        repair_normals(&mut out, where_, warnings);
+        let repaired = repair_normals(&mut out, where_, warnings);
+        for t in out.targets.iter_mut().filter(|t| !t.normals.is_empty()) {
+            for &v in &repaired {
+                t.normals[v] = Vec3::ZERO;
+            }
+        }
     }
+    let file_normals = !out.normals.is_empty();
     for set in 0..2 {
         if let Some(f) = attribute(
             prim,
@@ -227,7 +336,185 @@ fn convert_primitive(
             need_tangents(&mut out, set, where_, warnings);
         }
     }
+    drop_replaced_displacements(&mut out, file_normals, tangents_ok, where_, warnings);
     Ok(Some(out))
+}
+
+/// Drops morph NORMAL and TANGENT displacements whose base the loader generated (see the
+/// module docs); a warning when the file had some for generated normals or tangents.
+fn drop_replaced_displacements(
+    prim: &mut Primitive,
+    file_normals: bool,
+    file_tangents: bool,
+    where_: &str,
+    warnings: &mut Vec<String>,
+) {
+    let has = |f: fn(&MorphTarget) -> bool, prim: &Primitive| prim.targets.iter().any(f);
+    if !file_normals && has(|t| !t.normals.is_empty(), prim) {
+        if !prim.normals.is_empty() {
+            warnings.push(format!(
+                "{where_}: normals are generated (no NORMAL), so the morph targets' NORMAL \
+                 displacements are ignored"
+            ));
+        }
+        prim.targets.iter_mut().for_each(|t| t.normals.clear());
+    }
+    if !file_tangents && has(|t| !t.tangents.is_empty(), prim) {
+        if !prim.tangents.is_empty() {
+            warnings.push(format!(
+                "{where_}: tangents are generated, so the morph targets' TANGENT \
+                 displacements are ignored"
+            ));
+        }
+        prim.targets.iter_mut().for_each(|t| t.tangents.clear());
+    }
+}
+
+/// Reads the JOINTS_n/WEIGHTS_n pairs: joints unsigned byte or short, weights float or
+/// normalised unsigned byte or short, one per vertex, and every joint with a non-zero
+/// weight below the joint count of `skin` (the smallest skin drawing this mesh). A JOINTS_n
+/// or WEIGHTS_n without its partner is ignored with a warning. A joint index out of range
+/// whose weight is zero is kept: it influences nothing.
+fn joint_sets(
+    prim: &gltf::Primitive<'_>,
+    buffers: &[Cow<'_, [u8]>],
+    n: usize,
+    skin: Option<SkinLimit>,
+    where_: &str,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<JointSet>, SceneError> {
+    let mut sets: Vec<u32> = prim
+        .attributes()
+        .filter_map(|(sem, _)| match sem {
+            Semantic::Joints(k) | Semantic::Weights(k) => Some(k),
+            _ => None,
+        })
+        .collect();
+    sets.sort_unstable();
+    sets.dedup();
+    let mut out = Vec::new();
+    for k in sets {
+        let (Some(ja), Some(wa)) = (
+            prim.get(&Semantic::Joints(k)),
+            prim.get(&Semantic::Weights(k)),
+        ) else {
+            warnings.push(format!(
+                "{where_}: JOINTS_{k} and WEIGHTS_{k} must come together; the one present is \
+                 ignored"
+            ));
+            continue;
+        };
+        let (jt, wt) = (ja.data_type(), wa.data_type());
+        if !matches!(jt, DataType::U8 | DataType::U16) || ja.normalized() {
+            return Err(SceneError::at(
+                Element::Accessor(ja.index()),
+                format!("JOINTS_{k} in {where_} must be unsigned byte or short, not {jt:?}"),
+            ));
+        }
+        let weights_ok = match wt {
+            DataType::F32 => true,
+            DataType::U8 | DataType::U16 => wa.normalized(),
+            _ => false,
+        };
+        if !weights_ok {
+            return Err(SceneError::at(
+                Element::Accessor(wa.index()),
+                format!(
+                    "WEIGHTS_{k} in {where_} must be float or normalized unsigned byte or \
+                     short, not {wt:?}{}",
+                    if wa.normalized() {
+                        ""
+                    } else {
+                        " (not normalized)"
+                    }
+                ),
+            ));
+        }
+        let read = |sem| attribute(prim, &sem, &[D::Vec4], buffers, n, where_);
+        let (Some(jf), Some(wf)) = (read(Semantic::Joints(k))?, read(Semantic::Weights(k))?) else {
+            unreachable!("both accessors exist");
+        };
+        let joints: Vec<[u16; 4]> = jf
+            .values
+            .chunks_exact(4)
+            .map(|c| [c[0] as u16, c[1] as u16, c[2] as u16, c[3] as u16])
+            .collect();
+        let weights: Vec<[f32; 4]> = wf
+            .values
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        if let Some(v) = weights
+            .iter()
+            .position(|w| w.iter().any(|x| !x.is_finite()))
+        {
+            return Err(SceneError::at(
+                Element::Accessor(wa.index()),
+                format!(
+                    "WEIGHTS_{k} in {where_}: vertex {v} has non-finite weights {:?}",
+                    weights[v]
+                ),
+            ));
+        }
+        if let Some(limit) = skin {
+            for (v, (js, ws)) in joints.iter().zip(&weights).enumerate() {
+                if let Some(c) = (0..4).find(|&c| ws[c] != 0.0 && js[c] as usize >= limit.joints) {
+                    return Err(SceneError::at(
+                        Element::Accessor(ja.index()),
+                        format!(
+                            "JOINTS_{k} in {where_}: vertex {v} uses joint {} (weight {}), but \
+                             skin {} of node {} has only {} joints",
+                            js[c], ws[c], limit.skin, limit.node, limit.joints
+                        ),
+                    ));
+                }
+            }
+        }
+        out.push(JointSet { joints, weights });
+    }
+    Ok(out)
+}
+
+/// Reads the morph targets' POSITION, NORMAL and TANGENT displacements (VEC3, float or
+/// normalised integers, dense or sparse), each one per vertex and finite. Other target
+/// attributes (texture coordinates, colours) are not read.
+fn morph_targets(
+    prim: &gltf::Primitive<'_>,
+    buffers: &[Cow<'_, [u8]>],
+    n: usize,
+    where_: &str,
+) -> Result<Vec<MorphTarget>, SceneError> {
+    let mut out = Vec::new();
+    for (t, target) in prim.morph_targets().enumerate() {
+        let read = |acc: Option<gltf::Accessor<'_>>, name: &str| {
+            let Some(acc) = acc else {
+                return Ok(Vec::new());
+            };
+            let element = Element::Accessor(acc.index());
+            let what = format!("morph target {t} {name} in {where_}");
+            let f = read_floats(&acc, buffers, &[D::Vec3], &what)?;
+            if f.count() != n {
+                return Err(SceneError::at(
+                    element,
+                    format!("{what} has {} elements but POSITION has {n}", f.count()),
+                ));
+            }
+            let v = vec3s(&f);
+            if let Some(bad) = v.iter().position(|d| !d.is_finite()) {
+                return Err(SceneError::at(
+                    element,
+                    format!("{what}: displacement {bad} ({}) is not finite", v[bad]),
+                ));
+            }
+            Ok(v)
+        };
+        out.push(MorphTarget {
+            positions: read(target.positions(), "POSITION")?,
+            normals: read(target.normals(), "NORMAL")?,
+            tangents: read(target.tangents(), "TANGENT")?,
+        });
+    }
+    Ok(out)
 }
 
 /// Triangles from a flat index list: lists in threes, strips and fans as the spec says.
@@ -260,8 +547,9 @@ fn assemble(mode: Mode, v: &[u32], where_: &str, warnings: &mut Vec<String>) -> 
 }
 
 /// Renormalises normals; zero or non-finite ones become the area-weighted normal of the
-/// faces around the vertex (+Z for a vertex no face gives one).
-fn repair_normals(prim: &mut Primitive, where_: &str, warnings: &mut Vec<String>) {
+/// faces around the vertex (+Z for a vertex no face gives one). Returns the vertices
+/// repaired.
+fn repair_normals(prim: &mut Primitive, where_: &str, warnings: &mut Vec<String>) -> Vec<usize> {
     let mut bad = Vec::new();
     for (i, nrm) in prim.normals.iter_mut().enumerate() {
         match nrm.try_normalize() {
@@ -270,7 +558,7 @@ fn repair_normals(prim: &mut Primitive, where_: &str, warnings: &mut Vec<String>
         }
     }
     if bad.is_empty() {
-        return;
+        return bad;
     }
     let mut sum = vec![Vec3::ZERO; prim.positions.len()];
     for &[a, b, c] in &prim.indices {
@@ -287,6 +575,7 @@ fn repair_normals(prim: &mut Primitive, where_: &str, warnings: &mut Vec<String>
         "{where_}: {} zero or non-finite normals replaced by face normals",
         bad.len()
     ));
+    bad
 }
 
 /// Generates MikkTSpace tangents for a normal-mapped primitive, first giving it flat
@@ -315,22 +604,18 @@ fn need_tangents(prim: &mut Primitive, set: usize, where_: &str, warnings: &mut 
 /// the spec asks for when NORMAL is absent, made explicit so tangents can be generated.
 fn unweld_with_flat_normals(prim: &mut Primitive) {
     let tris = std::mem::take(&mut prim.indices);
-    let pick = |src: &[Vec2]| -> Vec<Vec2> {
-        if src.is_empty() {
-            Vec::new()
-        } else {
-            tris.iter().flatten().map(|&i| src[i as usize]).collect()
-        }
-    };
-    let uvs = [pick(&prim.uvs[0]), pick(&prim.uvs[1])];
-    let colors = if prim.colors.is_empty() {
-        Vec::new()
-    } else {
-        tris.iter()
-            .flatten()
-            .map(|&i| prim.colors[i as usize])
-            .collect()
-    };
+    let order: Vec<u32> = tris.iter().flatten().copied().collect();
+    let uvs = [gather(&prim.uvs[0], &order), gather(&prim.uvs[1], &order)];
+    let colors = gather(&prim.colors, &order);
+    for set in &mut prim.joint_sets {
+        set.joints = gather(&set.joints, &order);
+        set.weights = gather(&set.weights, &order);
+    }
+    for t in &mut prim.targets {
+        t.positions = gather(&t.positions, &order);
+        t.normals = gather(&t.normals, &order);
+        t.tangents = gather(&t.tangents, &order);
+    }
     let mut positions = Vec::with_capacity(tris.len() * 3);
     let mut normals = Vec::with_capacity(tris.len() * 3);
     for &[a, b, c] in &tris {
@@ -351,4 +636,13 @@ fn unweld_with_flat_normals(prim: &mut Primitive) {
     prim.uvs = uvs;
     prim.colors = colors;
     prim.tangents.clear();
+}
+
+/// `src[order[0]], src[order[1]], ...`; empty for an absent (empty) attribute.
+fn gather<T: Copy>(src: &[T], order: &[u32]) -> Vec<T> {
+    if src.is_empty() {
+        Vec::new()
+    } else {
+        order.iter().map(|&i| src[i as usize]).collect()
+    }
 }

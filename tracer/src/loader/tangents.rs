@@ -130,6 +130,22 @@ fn duplicate_vertex(
     if !prim.colors.is_empty() {
         prim.colors.push(prim.colors[v]);
     }
+    // Skinning and morphing data are per vertex too: the copy shares them.
+    for set in &mut prim.joint_sets {
+        set.joints.push(set.joints[v]);
+        set.weights.push(set.weights[v]);
+    }
+    for target in &mut prim.targets {
+        for d in [
+            &mut target.positions,
+            &mut target.normals,
+            &mut target.tangents,
+        ] {
+            if !d.is_empty() {
+                d.push(d[v]);
+            }
+        }
+    }
     tangents.push(Some(t));
     new
 }

@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)] // each test binary uses its own subset
 
+pub mod gltf_doc;
+
 use glam::{Vec2, Vec3};
 
 /// SplitMix64: small, deterministic, good enough for Monte Carlo tests and test geometry.

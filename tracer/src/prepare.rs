@@ -1,0 +1,500 @@
+//! [`prepare_frame`]: a scene flattened for one frame.
+//!
+//! The node graph is posed at the frame's time (animations evaluated, transforms composed
+//! in double precision) and moved so that the camera sits at the origin (camera-relative
+//! rendering: a scene far from the origin keeps its precision). With an open shutter and
+//! something that moves inside it, the graph is posed at every motion step: rigid instances
+//! get per-step transforms, skinned and morphed meshes per-step vertices, a moving camera
+//! per-step placements. A still scene, or a closed shutter, gets one pose and the static
+//! path, which pays nothing per ray for motion blur.
+
+use std::sync::Arc;
+
+use glam::{Affine3A, DMat3, DMat4, DQuat, DVec3, Vec3};
+
+use crate::animation::{self, Pose};
+use crate::bvh::{Instance, SceneBvh};
+use crate::camera::{Camera, Projection, RigidStep};
+use crate::deform::{self, Deformed};
+use crate::geometry::Aabb;
+use crate::light::{EmissiveTriangle, Environment, LightSet};
+use crate::loader::{framing_camera, mesh_bounds, scene_bounds};
+use crate::material::AlphaMode;
+use crate::motion::{
+    auto_steps, place, step_positions, DeformedMesh, PixelFootprint, MAX_MOTION_STEPS, PROBES,
+};
+use crate::render::{CameraChoice, FrameOptions, PreparedFrame, RenderError};
+use crate::scene::{Node, Scene};
+
+/// The node graph at one time: every node instance with its world transform, and the
+/// first world transform of each node (the one joints of a skin use).
+struct Posed {
+    pose: Pose,
+    instances: Vec<(u32, DMat4)>,
+    world: Vec<Option<DMat4>>,
+}
+
+impl Posed {
+    fn new(scene: &Scene, animations: &[usize], seconds: f64) -> Self {
+        let pose = animation::pose(scene, animations, seconds);
+        let mut instances = Vec::new();
+        scene.for_each_node_instance_with(
+            |i| pose.local[i as usize],
+            |i, m| instances.push((i, *m)),
+        );
+        let world = animation::world_transforms(scene, &pose);
+        Self {
+            pose,
+            instances,
+            world,
+        }
+    }
+}
+
+/// Removes scale and shear from a camera's placement: only position and orientation count.
+fn rigid(m: &DMat4) -> (DVec3, DQuat) {
+    let (_, rotation, translation) = m.to_scale_rotation_translation();
+    let r = rotation.normalize();
+    let r = if r.is_finite() { r } else { DQuat::IDENTITY };
+    (translation, r)
+}
+
+fn to_f32_affine(m: &DMat4) -> Affine3A {
+    Affine3A::from_mat4(m.as_mat4())
+}
+
+/// Whether `node` deforms its mesh: a skin whose mesh carries joint influences, or morph
+/// targets whose weights are not all zero at some pose.
+fn deforms(scene: &Scene, node: u32, poses: &[&Posed]) -> bool {
+    let n = &scene.nodes[node as usize];
+    let Some(mesh) = n.mesh.map(|m| &scene.meshes[m as usize]) else {
+        return false;
+    };
+    let skinned = n.skin.is_some() && mesh.primitives.iter().any(|p| !p.joint_sets.is_empty());
+    let morphed = mesh.primitives.iter().any(|p| !p.targets.is_empty())
+        && poses.iter().any(|posed| {
+            animation::morph_weights(scene, &posed.pose, node)
+                .iter()
+                .any(|&w| w != 0.0)
+        });
+    skinned || morphed
+}
+
+/// The primitives of instance `(node, world)`'s mesh deformed at `posed`, in the prepared
+/// frame's camera-relative space (`relative` moves world space there).
+fn deform_instance(
+    scene: &Scene,
+    posed: &Posed,
+    node: u32,
+    world: &DMat4,
+    relative: &DMat4,
+) -> Vec<Deformed> {
+    let n: &Node = &scene.nodes[node as usize];
+    let mesh = &scene.meshes[n.mesh.expect("only mesh nodes deform") as usize];
+    let weights = animation::morph_weights(scene, &posed.pose, node);
+    let joints = n
+        .skin
+        .and_then(|s| scene.skins.get(s as usize))
+        .map(|skin| {
+            deform::joint_matrices(skin, |j| posed.world[j as usize].map(|w| *relative * w))
+        });
+    mesh.primitives
+        .iter()
+        .map(|prim| {
+            let skin = joints.as_deref().filter(|_| !prim.joint_sets.is_empty());
+            let mut d = deform::deform(prim, weights, skin);
+            if skin.is_none() {
+                place(&mut d, &(*relative * *world));
+            }
+            d
+        })
+        .collect()
+}
+
+/// Up to this many vertices per primitive stand for a deforming mesh when choosing the
+/// number of motion steps.
+const PROBE_VERTICES: usize = 64;
+
+/// Camera-space points that show how the frame moves at `posed`: the corners of every
+/// mesh instance's box and a sample of each deforming mesh's vertices.
+fn probe_points(
+    scene: &Scene,
+    posed: &Posed,
+    deforming: &[bool],
+    relative: &DMat4,
+    camera_from_world: &DMat4,
+) -> Vec<DVec3> {
+    let mut points = Vec::new();
+    for (j, (node, world)) in posed.instances.iter().enumerate() {
+        let Some(mesh) = scene.nodes[*node as usize].mesh else {
+            continue;
+        };
+        if deforming[j] {
+            for d in deform_instance(scene, posed, *node, world, relative) {
+                let stride = d.positions.len().div_ceil(PROBE_VERTICES).max(1);
+                points.extend(
+                    d.positions
+                        .iter()
+                        .step_by(stride)
+                        .map(|p| camera_from_world.transform_point3(p.as_dvec3())),
+                );
+            }
+        } else {
+            let b = mesh_bounds(&scene.meshes[mesh as usize]);
+            if b.is_empty() {
+                continue;
+            }
+            let to_camera = *camera_from_world * *relative * *world;
+            for c in 0..8 {
+                let corner = DVec3::new(
+                    if c & 1 == 0 { b.min.x } else { b.max.x } as f64,
+                    if c & 2 == 0 { b.min.y } else { b.max.y } as f64,
+                    if c & 4 == 0 { b.min.z } else { b.max.z } as f64,
+                );
+                points.push(to_camera.transform_point3(corner));
+            }
+        }
+    }
+    points
+}
+
+/// Flattens `scene` for one frame.
+pub fn prepare_frame(
+    scene: Arc<Scene>,
+    options: &FrameOptions,
+) -> Result<PreparedFrame, RenderError> {
+    if options.width == 0 || options.height == 0 {
+        return Err(RenderError::EmptyImage(options.width, options.height));
+    }
+    if !(options.fps.is_finite() && options.fps > 0.0) {
+        return Err(RenderError::Time(format!(
+            "fps {} must be a positive number",
+            options.fps
+        )));
+    }
+    options.shutter.validate().map_err(RenderError::Time)?;
+    if let Some(n) = options.motion_steps {
+        if !(1..=MAX_MOTION_STEPS).contains(&n) {
+            return Err(RenderError::Time(format!(
+                "motion steps {n} must be between 1 and {MAX_MOTION_STEPS}"
+            )));
+        }
+    }
+    let animations = options
+        .animation
+        .resolve(&scene)
+        .map_err(RenderError::Animation)?;
+    let aspect = options.width as f32 / options.height as f32;
+    let mut warnings = Vec::new();
+    let posed_at = |s: f64| {
+        let seconds = options.shutter.seconds(options.frame, options.fps, s);
+        Posed::new(&scene, &animations, seconds)
+    };
+    let center = posed_at(0.5);
+
+    // Camera: the node instance placing the requested camera, at mid-shutter.
+    let wanted = match &options.camera {
+        CameraChoice::Default => (!scene.cameras.is_empty()).then_some(0),
+        CameraChoice::Index(i) if *i < scene.cameras.len() => Some(*i),
+        CameraChoice::Index(i) => {
+            return Err(RenderError::Camera(format!(
+                "{i} does not exist: the scene has {} camera(s)",
+                scene.cameras.len()
+            )))
+        }
+        CameraChoice::Name(name) => Some(
+            scene
+                .cameras
+                .iter()
+                .position(|c| c.name.as_deref() == Some(name.as_str()))
+                .ok_or_else(|| RenderError::Camera(format!("'{name}' does not exist")))?,
+        ),
+    };
+    let camera_instance = wanted.and_then(|cam| {
+        center
+            .instances
+            .iter()
+            .position(|(n, _)| scene.nodes[*n as usize].camera == Some(cam as u32))
+            .map(|j| (cam, j))
+    });
+    let (projection, camera_world) = match (wanted, camera_instance) {
+        (Some(_), Some((cam, j))) => (scene.cameras[cam].projection, center.instances[j].1),
+        (Some(cam), None) if options.camera != CameraChoice::Default => {
+            return Err(RenderError::Camera(format!(
+                "{cam} is not placed by any node of the scene"
+            )))
+        }
+        _ => framing_camera(&animated_bounds(&scene, &animations), aspect),
+    };
+    let (camera_origin, camera_rotation) = rigid(&camera_world);
+    // Everything moves by -camera_origin, in double precision, before rounding to f32.
+    let relative = DMat4::from_translation(-camera_origin);
+    let camera_at = |posed: &Posed| match camera_instance {
+        Some((_, j)) => rigid(&(relative * posed.instances[j].1)),
+        None => (DVec3::ZERO, camera_rotation),
+    };
+
+    // Motion steps: one unless the shutter is open and an animation plays inside it.
+    let animated = animations
+        .iter()
+        .any(|&a| !scene.animations[a].channels.is_empty());
+    let mut deforming: Vec<bool> = center
+        .instances
+        .iter()
+        .map(|(n, _)| deforms(&scene, *n, &[&center]))
+        .collect();
+    let steps = if !(options.shutter.is_open() && animated) {
+        1
+    } else if let Some(n) = options.motion_steps {
+        n
+    } else {
+        let probes: Vec<Posed> = (0..PROBES)
+            .map(|i| posed_at(i as f64 / (PROBES - 1) as f64))
+            .collect();
+        let refs: Vec<&Posed> = probes.iter().collect();
+        for (j, (n, _)) in center.instances.iter().enumerate() {
+            deforming[j] = deforms(&scene, *n, &refs);
+        }
+        let points: Vec<Vec<DVec3>> = probes
+            .iter()
+            .map(|posed| {
+                let (position, rotation) = camera_at(posed);
+                let camera_from_world =
+                    DMat4::from_rotation_translation(rotation, position).inverse();
+                probe_points(&scene, posed, &deforming, &relative, &camera_from_world)
+            })
+            .collect();
+        auto_steps(&points, pixel_footprint(&projection, options.height))
+    };
+    let poses: Vec<Posed> = if steps == 1 {
+        vec![center]
+    } else {
+        step_positions(steps).into_iter().map(posed_at).collect()
+    };
+    if steps > 1 {
+        let refs: Vec<&Posed> = poses.iter().collect();
+        for (j, (n, _)) in poses[0].instances.iter().enumerate() {
+            deforming[j] = deforms(&scene, *n, &refs);
+        }
+    }
+    let mid = &poses[poses.len() / 2];
+
+    let camera_steps: Vec<RigidStep> = poses
+        .iter()
+        .map(|posed| {
+            let (position, rotation) = camera_at(posed);
+            RigidStep {
+                position: position.as_vec3(),
+                rotation: rotation.as_quat().normalize(),
+            }
+        })
+        .collect();
+    let camera_moves = camera_steps.iter().any(|s| *s != camera_steps[0]);
+    let camera = Camera {
+        projection,
+        to_world: Affine3A::from_mat3(DMat3::from_quat(camera_rotation).as_mat3()),
+        aspect,
+        motion: camera_moves.then(|| camera_steps.into()),
+    };
+
+    // Instances: rigid ones with one transform per step, deformed ones as per-frame meshes.
+    let mut instances = Vec::new();
+    let mut deformed = Vec::new();
+    for (j, &(node, _)) in poses[0].instances.iter().enumerate() {
+        let Some(mesh) = scene.nodes[node as usize].mesh else {
+            continue;
+        };
+        if deforming[j] {
+            let per_step = poses
+                .iter()
+                .map(|posed| deform_instance(&scene, posed, node, &posed.instances[j].1, &relative))
+                .collect();
+            let d = DeformedMesh::new(mesh, &scene.meshes[mesh as usize], per_step);
+            let index = (scene.meshes.len() + deformed.len()) as u32;
+            instances.push(Instance::new(index, Affine3A::IDENTITY, &d.bvh.bounds()));
+            deformed.push(d);
+        } else {
+            let bounds = scene.meshes[mesh as usize].bvh.bounds();
+            let worlds: Vec<DMat4> = poses.iter().map(|p| relative * p.instances[j].1).collect();
+            instances.push(if worlds.len() == 1 {
+                Instance::new(mesh, to_f32_affine(&worlds[0]), &bounds)
+            } else {
+                Instance::moving(mesh, &worlds, &bounds)
+            });
+        }
+    }
+
+    // Punctual lights sit where the middle step puts them: they light the frame but do not
+    // blur inside the shutter.
+    let punctual: Vec<_> = mid
+        .instances
+        .iter()
+        .filter_map(|(node, world)| {
+            let light = scene.nodes[*node as usize].light?;
+            Some((
+                scene.lights[light as usize],
+                to_f32_affine(&(relative * *world)),
+            ))
+        })
+        .collect();
+
+    let n_scene_meshes = scene.meshes.len();
+    let bvh = SceneBvh::build(instances, |m| {
+        let m = m as usize;
+        if m < n_scene_meshes {
+            &scene.meshes[m].bvh
+        } else {
+            &deformed[m - n_scene_meshes].bvh
+        }
+    });
+    let triangles = emissive_triangles(&scene, &bvh, &deformed);
+
+    // Build the BSDF's energy tables now rather than inside the first tile's threads.
+    crate::bsdf::precompute_tables(scene.features.transmission);
+    let mut features = scene.features;
+    let environment = match (&options.environment, &scene.environment) {
+        (Some(env), _) | (None, Some(env)) => env.clone(),
+        (None, None) if punctual.is_empty() => {
+            warnings.push(
+                "the scene defines no environment and no punctual light: using a uniform white \
+                 environment of radiance 1"
+                    .into(),
+            );
+            Environment::Constant(Vec3::ONE)
+        }
+        (None, None) => Environment::Black,
+    };
+    features.environment = !matches!(environment, Environment::Black);
+    let lights = LightSet::new(punctual, triangles, environment, bvh.bounds());
+    let motion = bvh.has_motion() || camera.motion.is_some();
+    features.animation = motion;
+
+    let hit_filter: Vec<Vec<bool>> = scene
+        .meshes
+        .iter()
+        .map(|m| {
+            m.primitives
+                .iter()
+                .map(|p| {
+                    let mat = &scene.materials[p.material as usize];
+                    mat.alpha_mode != AlphaMode::Opaque
+                        || (!mat.double_sided && mat.transmission == 0.0)
+                })
+                .collect()
+        })
+        .collect();
+    let any_hit_filter = hit_filter.iter().flatten().any(|&f| f);
+
+    Ok(PreparedFrame {
+        scene,
+        frame: options.frame,
+        width: options.width,
+        height: options.height,
+        camera,
+        camera_origin,
+        bvh,
+        deformed,
+        motion_steps: steps,
+        motion,
+        lights,
+        hit_filter,
+        any_hit_filter,
+        features,
+        warnings,
+    })
+}
+
+/// Poses sampled over the animations' time range to bound where the scene goes.
+const BOUNDS_POSES: usize = 9;
+
+/// World bounds of the scene over the whole time range of `animations` (its still bounds
+/// without animation), so that the framing camera of a scene without a camera keeps every
+/// frame of a sequence in view, and stays the same from frame to frame.
+fn animated_bounds(scene: &Scene, animations: &[usize]) -> Aabb {
+    let Some((start, end)) = animation::time_range(scene, animations) else {
+        return scene_bounds(scene);
+    };
+    let mut bounds = Aabb::EMPTY;
+    for k in 0..BOUNDS_POSES {
+        let seconds = start + (end - start) * k as f64 / (BOUNDS_POSES - 1) as f64;
+        let posed = Posed::new(scene, animations, seconds);
+        for (node, world) in &posed.instances {
+            let Some(mesh) = scene.nodes[*node as usize].mesh else {
+                continue;
+            };
+            if deforms(scene, *node, &[&posed]) {
+                for d in deform_instance(scene, &posed, *node, world, &DMat4::IDENTITY) {
+                    d.positions.iter().for_each(|p| bounds.grow(*p));
+                }
+            } else {
+                let b = mesh_bounds(&scene.meshes[mesh as usize]);
+                if !b.is_empty() {
+                    for c in b.corners() {
+                        bounds.grow(world.transform_point3(c.as_dvec3()).as_vec3());
+                    }
+                }
+            }
+        }
+    }
+    bounds
+}
+
+/// How wide a pixel is at a distance, for the automatic motion-step choice.
+fn pixel_footprint(projection: &Projection, height: u32) -> PixelFootprint {
+    let h = height.max(1) as f64;
+    match *projection {
+        Projection::Perspective { yfov, .. } => PixelFootprint {
+            absolute: 0.0,
+            per_distance: 2.0 * (0.5 * yfov as f64).tan() / h,
+        },
+        Projection::Orthographic { ymag, .. } => PixelFootprint {
+            absolute: 2.0 * ymag as f64 / h,
+            per_distance: 0.0,
+        },
+    }
+}
+
+/// Emissive triangles in the prepared frame, for next-event estimation. Emitters that move
+/// inside the shutter are left out: light sampling would need their position at each
+/// ray's time. They still light the scene when paths hit them (the MIS weight is then 1,
+/// since the light sampler's density for them is 0), which is unbiased, only noisier.
+fn emissive_triangles(
+    scene: &Scene,
+    bvh: &SceneBvh,
+    deformed: &[DeformedMesh],
+) -> Vec<EmissiveTriangle> {
+    let mut triangles = Vec::new();
+    for (i, inst) in bvh.instances().iter().enumerate() {
+        if inst.motion.is_some() {
+            continue;
+        }
+        let d = (inst.mesh as usize)
+            .checked_sub(scene.meshes.len())
+            .map(|k| &deformed[k]);
+        if d.is_some_and(DeformedMesh::moves) {
+            continue;
+        }
+        let mesh = &scene.meshes[d.map_or(inst.mesh, |d| d.source) as usize];
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let material = &scene.materials[prim.material as usize];
+            if !material.is_emissive() {
+                continue;
+            }
+            for t in 0..prim.indices.len() {
+                let v = prim.triangle(t);
+                let object = match d {
+                    Some(d) => d.positions(p, v, 0.0),
+                    None => v.map(|i| prim.positions[i]),
+                };
+                triangles.push(EmissiveTriangle {
+                    p: object.map(|x| inst.to_world.transform_point3(x)),
+                    emission: material.emissive,
+                    double_sided: material.double_sided,
+                    instance: i as u32,
+                    triangle: mesh.first_triangle[p] + t as u32,
+                });
+            }
+        }
+    }
+    triangles
+}
