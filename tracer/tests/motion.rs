@@ -1,6 +1,6 @@
-//! Motion blur against its analytic answer: an emissive slab moving at a known speed under
-//! an orthographic camera smears into a linear ramp exactly as wide as it moves while the
-//! shutter is open; rigid motion, morphing, skinning and a moving camera all give that
+//! Motion blur against its analytic answer: an emissive box (a cube stretched to a slab)
+//! moving at a known speed under an orthographic camera smears into a linear ramp exactly
+//! as wide as it moves while the shutter is open; rigid motion, morphing, skinning and a moving camera all give that
 //! same ramp, and a closed shutter gives a sharp edge on the static path.
 
 use std::sync::Arc;
@@ -15,7 +15,7 @@ use tracer::material::Material;
 use tracer::motion::Shutter;
 use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
 use tracer::scene::{CameraDef, JointSet, MorphTarget, Node, Scene, SceneBuilder, Skin, Trs};
-use tracer::shapes::quad;
+use tracer::shapes::{cube, quad};
 
 /// Image: 64 × 16 pixels of 1/16 world unit each, spanning x in [-2, 2].
 const WIDTH: u32 = 64;
@@ -28,8 +28,8 @@ const SPEED: f64 = 2.0;
 /// Frame 2 is at t = 0.5 s, where every setup below puts the slab's centre at x = 0.
 const FRAME: i32 = 2;
 
-/// A 16-pixel-wide emissive slab spanning the image's height, as one quad in object space
-/// centred on the origin.
+/// A 16-pixel-wide emissive box spanning the image's height: the unit cube stretched to
+/// 1 × 2 × 1, centred on the origin.
 fn slab(b: &mut SceneBuilder) -> Vec<tracer::scene::Primitive> {
     let glow = b.material(Material {
         base_color: Vec4::new(0.0, 0.0, 0.0, 1.0),
@@ -37,11 +37,9 @@ fn slab(b: &mut SceneBuilder) -> Vec<tracer::scene::Primitive> {
         double_sided: true,
         ..Default::default()
     });
-    let v = |x: f32, y: f32| Vec3::new(x, y, 0.0);
-    vec![quad(
-        [v(-0.5, -1.0), v(0.5, -1.0), v(0.5, 1.0), v(-0.5, 1.0)],
-        glow,
-    )]
+    let mut box_ = cube(glow);
+    box_.positions.iter_mut().for_each(|p| p.y *= 2.0);
+    vec![box_]
 }
 
 /// An orthographic camera at z = 5 seeing x in [-2, 2], y in [-0.5, 0.5].
@@ -339,5 +337,91 @@ fn explicit_motion_steps_are_used_and_checked() {
     for bad in [0, 65] {
         let err = prepare_frame(scene.clone(), &options(bad)).err().unwrap();
         assert!(err.to_string().contains("motion steps"), "{err}");
+    }
+}
+
+/// A point light carried by an animated node lights the floor below where the animation
+/// puts it at each frame: the bright spot follows the light, in closed form.
+#[test]
+fn an_animated_light_moves_with_its_node() {
+    use tracer::light::PunctualLight;
+
+    let mut b = SceneBuilder::default();
+    let floor = b.material(Material {
+        base_color: Vec4::new(0.8, 0.8, 0.8, 1.0),
+        metallic: 0.0,
+        roughness: 1.0,
+        specular: 0.0,
+        double_sided: true,
+        ..Default::default()
+    });
+    let v = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+    b.mesh(
+        "floor",
+        vec![quad(
+            [v(-2.0, -0.5), v(2.0, -0.5), v(2.0, 0.5), v(-2.0, 0.5)],
+            floor,
+        )],
+        DMat4::IDENTITY,
+    );
+    camera(&mut b, DMat4::IDENTITY);
+    let light = b.light(
+        PunctualLight::Point {
+            intensity: Vec3::ONE,
+            range: None,
+        },
+        DMat4::IDENTITY,
+    );
+    let mut scene = finish(b);
+    scene.nodes[light as usize].trs = Some(Trs::default());
+    // The light hangs 0.5 above the floor and slides along x from -1 (t = 0) to +1 (t = 1).
+    scene.animations.push(slide(light, -1.0, 0.5));
+    let scene = Arc::new(scene);
+
+    for (frame, x_light) in [(1, -0.5), (3, 0.5)] {
+        let options = FrameOptions {
+            frame,
+            fps: FPS,
+            width: WIDTH,
+            height: HEIGHT,
+            ..Default::default()
+        };
+        let prepared = prepare_frame(scene.clone(), &options).unwrap();
+        assert!(!prepared.motion);
+        let settings = RenderSettings {
+            max_depth: 1,
+            seed: 0,
+        };
+        let rect = TileRect::new(0, 0, WIDTH, HEIGHT);
+        let lit = render_region(
+            &prepared,
+            &settings,
+            rect,
+            SampleRange::new(0, 16),
+            16,
+            &|_| {},
+        )
+        .resolve();
+        // The two middle rows straddle y = 0, the line under the light.
+        let w = WIDTH as usize;
+        let p: Vec<f64> = (0..w)
+            .map(|x| 0.5 * (lit.beauty[7 * w + x].x + lit.beauty[8 * w + x].x) as f64)
+            .collect();
+        let brightest = (0..p.len()).max_by(|&a, &b| p[a].total_cmp(&p[b])).unwrap();
+        // World x maps to pixel column (x + 2) · 16; the light is over a column edge, so
+        // the brightest column is one of the two beside it.
+        let expected = (x_light + 2.0) * 16.0;
+        assert!(
+            (brightest as f64 + 0.5 - expected).abs() <= 1.0,
+            "frame {frame}: brightest column {brightest}, light above x = {expected} px"
+        );
+        // The irradiance right under the light is I / h² = 4 lux: radiance 0.8 · 4 / π,
+        // less the fall-off across a pixel (under 1 %).
+        let peak = p[brightest];
+        let expected_peak = 0.8 * 4.0 / std::f64::consts::PI;
+        assert!(
+            (peak / expected_peak - 1.0).abs() < 0.03,
+            "peak {peak}, expected {expected_peak}"
+        );
     }
 }
