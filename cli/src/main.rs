@@ -3,6 +3,7 @@
 mod args;
 mod bench;
 mod render;
+mod server;
 
 use clap::{Parser, Subcommand};
 
@@ -20,11 +21,14 @@ enum Command {
     Render(render::RenderArgs),
     /// Measure the tracer: rays per second, and time and error against samples per pixel.
     Bench(bench::BenchArgs),
+    /// Run the farm server: REST API, scheduler, tile assembly, dashboard.
+    Server(server::ServerArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Render(args) => render::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Server(args) => server::run(args),
     }
 }

@@ -1,3 +1,46 @@
 //! Tessera's wire types. Every JSON shape exchanged between the CLI, the server and the
-//! workers is defined here once, as serde types (filled by the farm issues).
+//! workers is defined here once, as serde types; the server derives its OpenAPI document
+//! from them (feature `openapi`), and nothing here knows how the server stores anything.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`scene`] | what an uploaded scene holds ([`SceneInfo`]) |
+//! | [`job`] | the job spec a client submits and the status it reads back, frames |
+//! | [`worker`] | registration, lease, heartbeat, result upload headers, failure reports |
+//! | [`event`] | server-sent events for jobs, frames and workers |
+//! | [`error`] | the JSON error body every failed request answers with |
+//!
+//! Times on the wire are Unix milliseconds (`*_ms`); durations are seconds (`*_seconds`).
 #![warn(missing_docs)]
+
+pub mod error;
+pub mod event;
+pub mod job;
+pub mod scene;
+pub mod worker;
+
+pub use error::ErrorBody;
+pub use event::Event;
+pub use job::{
+    CameraSpec, FrameList, FrameRange, FrameState, FrameStatus, JobList, JobSpec, JobState,
+    JobStatus, OutputLayer, TaskCounts,
+};
+pub use scene::{AnimationInfo, CameraInfo, SceneInfo};
+pub use worker::{
+    FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, Rect, ResultAck,
+    ResultMetadata, SampleSpan, TaskToken, WorkerInfo, WorkerList, WorkerRegistered,
+    WorkerRegistration,
+};
+
+/// Every path of the API starts with this.
+pub const API_PREFIX: &str = "/api/v1";
+
+/// The answer of `GET /healthz`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct Health {
+    /// `ok` while the server answers and its database opens.
+    pub status: String,
+    /// The server's version.
+    pub version: String,
+}

@@ -1,2 +1,209 @@
-//! Tessera's farm server (API, scheduler, persistence, tile assembly). Filled by the
-//! farm-server issue; it depends on the tracer only to validate scenes and make previews.
+//! Tessera's farm server: REST API, scheduler, persistence, tile assembly, live progress.
+//! It uses the tracer only to validate scenes, check tiles and write frames and previews.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`config`] | settings: listen address, data folder, tokens, lease timing, limits |
+//! | [`limits`] | every bound the server enforces, with its value |
+//! | [`db`], [`migrations`] | SQLite (WAL) off the async runtime; versioned schema |
+//! | [`store`] | files beside the database: scenes by SHA-256, tiles, job outputs |
+//! | [`state`] | the task state machine: one transition table |
+//! | [`scheduler`] | leases, heartbeats, failures, expiry, job controls: one transaction each |
+//! | [`spec`] | job-spec checks (each error names its field) and the split into tasks |
+//! | [`scene`] | scene uploads checked with the tracer's loader and summarised |
+//! | [`intake`], [`assembly`] | tile uploads checked and accepted; frames assembled |
+//! | [`status`] | read models: job progress, frames, workers |
+//! | [`events`], [`metrics`] | server-sent events; Prometheus metrics |
+//! | [`auth`] | worker and client bearer tokens |
+//! | [`api`] | the HTTP routes, one file per resource, and the OpenAPI document |
+//! | [`dashboard`] | the web page at `/` |
+//!
+//! A binary (or a test) calls [`serve`] with a bound listener and a shutdown future.
+
+pub mod api;
+pub mod app;
+pub mod assembly;
+pub mod auth;
+pub mod config;
+pub mod dashboard;
+pub mod db;
+pub mod error;
+pub mod events;
+pub mod intake;
+pub mod limits;
+pub mod metrics;
+pub mod migrations;
+pub mod scene;
+pub mod scheduler;
+pub mod spec;
+pub mod state;
+pub mod status;
+pub mod store;
+
+use std::future::Future;
+use std::sync::Arc;
+
+use axum::routing::get;
+use axum::Router;
+use tokio::net::TcpListener;
+use tower_http::trace::TraceLayer;
+
+pub use config::Config;
+
+use app::{now_ms, App, AppState};
+
+/// Why the server could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    /// The data folder could not be created or read.
+    #[error("data folder {path}: {source}")]
+    DataDir {
+        /// The folder.
+        path: String,
+        /// What the OS said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The database could not be opened or migrated.
+    #[error(transparent)]
+    Database(#[from] db::OpenError),
+    /// Recovering after a restart failed.
+    #[error("recovering the previous run's state: {0}")]
+    Recovery(#[from] error::Error),
+    /// Serving failed.
+    #[error("serving: {0}")]
+    Serve(#[source] std::io::Error),
+}
+
+/// Opens the data folder and the database, and recovers from the previous run: leases
+/// that were live are re-queued (their workers hear 409 and stop), and frames whose tiles
+/// were all in but not yet assembled are assembled.
+pub fn open(config: Config) -> Result<AppState, StartError> {
+    let store = store::Store::open(&config.data_dir).map_err(|source| StartError::DataDir {
+        path: config.data_dir.display().to_string(),
+        source,
+    })?;
+    let db = db::Db::open(&store.database())?;
+    let app = Arc::new(App {
+        config,
+        db,
+        store,
+        events: events::Hub::default(),
+        metrics: metrics::Metrics::default(),
+        work: tokio::sync::Notify::new(),
+        assembly: std::sync::Mutex::new(()),
+    });
+    let now = now_ms();
+    let revoked = app.db.with(|c| scheduler::revoke_all_leases(c, now))?;
+    if revoked > 0 {
+        tracing::info!("re-queued {revoked} leases from before the restart");
+    }
+    for (job, frame) in app.db.with(|c| scheduler::unassembled_frames(c))? {
+        intake::finish_frame(&app, job, frame)?;
+    }
+    Ok(app)
+}
+
+/// The whole HTTP service: API, OpenAPI document, health, metrics, dashboard.
+pub fn router(app: AppState) -> Router {
+    let (api, openapi) = api::api(app.clone());
+    let openapi = Arc::new(openapi);
+    Router::new()
+        .merge(api)
+        .route(
+            &format!("{}/openapi.json", proto::API_PREFIX),
+            get(move || {
+                let doc = openapi.clone();
+                async move { axum::Json(doc.as_ref().clone()) }
+            }),
+        )
+        .route("/healthz", get(api::system::healthz))
+        .route("/metrics", get(api::system::prometheus))
+        .merge(dashboard::routes())
+        .layer(TraceLayer::new_for_http())
+        .with_state(app)
+}
+
+/// The OpenAPI document the server serves at `/api/v1/openapi.json`.
+pub fn openapi() -> utoipa::openapi::OpenApi {
+    let config = Config::new(std::env::temp_dir());
+    // Building the router needs a state only for its type; the document does not use it.
+    let app = Arc::new(App {
+        db: db::Db::in_memory(),
+        store: store::Store::unopened(&config.data_dir),
+        config,
+        events: events::Hub::default(),
+        metrics: metrics::Metrics::default(),
+        work: tokio::sync::Notify::new(),
+        assembly: std::sync::Mutex::new(()),
+    });
+    api::api(app).1
+}
+
+/// Every `sweep_interval`: re-queues expired leases, and assembles frames whose tiles are
+/// all in but whose assembly failed (a full disk, say) when their last tile came.
+async fn sweep(app: AppState) {
+    let mut tick = tokio::time::interval(app.config.sweep_interval);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tick.tick().await;
+        let (now, timing) = (now_ms(), app.timing());
+        match app.db.run(move |c| scheduler::expire(c, now, timing)).await {
+            Ok(jobs) if !jobs.is_empty() => {
+                app.metrics.leases_expired(jobs.len() as u64);
+                app.work.notify_waiters();
+                for job in jobs {
+                    app.publish_job(job).await;
+                }
+            }
+            Ok(_) => {}
+            Err(e) => tracing::error!("expiring leases: {e}"),
+        }
+        let a = app.clone();
+        let finished = tokio::task::spawn_blocking(move || -> error::Result<Vec<(u64, i32)>> {
+            let pending = a.db.with(|c| scheduler::unassembled_frames(c))?;
+            for &(job, frame) in &pending {
+                intake::finish_frame(&a, job, frame)?;
+            }
+            Ok(pending)
+        })
+        .await;
+        match finished {
+            Ok(Ok(frames)) => {
+                for (job, frame) in frames {
+                    app.publish_frame(job, frame).await;
+                    app.publish_job(job).await;
+                }
+            }
+            Ok(Err(e)) => tracing::error!("assembling frames: {e}"),
+            Err(e) => tracing::error!("assembling frames: {e}"),
+        }
+    }
+}
+
+/// Serves the farm on `listener` until `shutdown` completes.
+pub async fn serve(
+    listener: TcpListener,
+    config: Config,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> Result<(), StartError> {
+    let app = tokio::task::spawn_blocking(move || open(config))
+        .await
+        .map_err(|e| StartError::Serve(std::io::Error::other(e.to_string())))??;
+    serve_app(listener, app, shutdown).await
+}
+
+/// [`serve`] with an already opened state.
+pub async fn serve_app(
+    listener: TcpListener,
+    app: AppState,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> Result<(), StartError> {
+    let sweeper = tokio::spawn(sweep(app.clone()));
+    let result = axum::serve(listener, router(app))
+        .with_graceful_shutdown(shutdown)
+        .await
+        .map_err(StartError::Serve);
+    sweeper.abort();
+    result
+}

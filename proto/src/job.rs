@@ -1,0 +1,369 @@
+//! Jobs: the spec a client submits, the status it reads back, and frames.
+
+use serde::{Deserialize, Serialize};
+
+/// Which camera renders a job (the tracer's `CameraChoice`).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum CameraSpec {
+    /// The scene's first camera, or one that frames the scene when it has none.
+    #[default]
+    Default,
+    /// glTF camera index.
+    Index(u32),
+    /// glTF camera name.
+    Name(String),
+}
+
+/// Frames `start, start + step, ...` up to and including `end`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct FrameRange {
+    /// First frame (frame f is at time f / fps).
+    pub start: i32,
+    /// Last frame, included when the step lands on it.
+    pub end: i32,
+    /// Distance between rendered frames (at least 1).
+    #[serde(default = "one")]
+    pub step: u32,
+}
+
+impl FrameRange {
+    /// The frame numbers, in order.
+    pub fn frames(&self) -> impl Iterator<Item = i32> {
+        let step = self.step.max(1) as usize;
+        (self.start..=self.end).step_by(step)
+    }
+
+    /// How many frames the range holds (0 when `end < start`).
+    pub fn count(&self) -> u64 {
+        if self.end < self.start {
+            return 0;
+        }
+        (self.end as i64 - self.start as i64) as u64 / self.step.max(1) as u64 + 1
+    }
+}
+
+/// An image layer of the output EXR.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum OutputLayer {
+    /// Linear RGBA radiance (`R G B A`); always written.
+    Beauty,
+    /// Albedo of the first non-specular hit (`albedo.R G B`).
+    Albedo,
+    /// World-space shading normal (`N.X Y Z`).
+    Normal,
+    /// Depth along the view axis (`Z`).
+    Depth,
+}
+
+impl OutputLayer {
+    /// Every layer, in file order.
+    pub const ALL: [OutputLayer; 4] = [
+        OutputLayer::Beauty,
+        OutputLayer::Albedo,
+        OutputLayer::Normal,
+        OutputLayer::Depth,
+    ];
+}
+
+/// What a client asks the farm to render. Fields left out take the defaults shown; unknown
+/// fields are refused (a typo is an error, not a silently ignored setting).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct JobSpec {
+    /// SHA-256 digest of an uploaded scene.
+    pub scene: String,
+    /// A name for people; defaults to `job <id>`.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Frames to render; default: the scene's animation range at `fps` (frame 0 for a
+    /// still scene).
+    #[serde(default)]
+    pub frames: Option<FrameRange>,
+    /// Frames per second (default 24).
+    #[serde(default = "default_fps")]
+    pub fps: f64,
+    /// Image width in pixels (default 1280).
+    #[serde(default = "default_width")]
+    pub width: u32,
+    /// Image height in pixels (default 720).
+    #[serde(default = "default_height")]
+    pub height: u32,
+    /// The camera (default: the scene's first).
+    #[serde(default)]
+    pub camera: CameraSpec,
+    /// Samples per pixel (default 64).
+    #[serde(default = "default_spp")]
+    pub spp: u32,
+    /// Maximum bounces (default 8).
+    #[serde(default = "default_max_depth")]
+    pub max_depth: u32,
+    /// Seed mixed into every random number (default 0).
+    #[serde(default)]
+    pub seed: u32,
+    /// Shutter open and close, in frames relative to each frame (default `[0, 0]`: no
+    /// motion blur).
+    #[serde(default)]
+    pub shutter: [f64; 2],
+    /// Transform samples across the shutter for motion blur (default: the tracer decides).
+    #[serde(default)]
+    pub motion_steps: Option<u32>,
+    /// The animation that plays, by name (default: all of them).
+    #[serde(default)]
+    pub animation: Option<String>,
+    /// Tile side in pixels (default: chosen so one task is a few seconds of work).
+    #[serde(default)]
+    pub tile_size: Option<u32>,
+    /// Each tile's samples split into this many passes, for progressive previews
+    /// (default 1).
+    #[serde(default = "one")]
+    pub sample_passes: u32,
+    /// Higher runs first (default 0).
+    #[serde(default)]
+    pub priority: i32,
+    /// Attempts per task before it fails (default 3).
+    #[serde(default = "default_max_attempts")]
+    pub max_attempts: u32,
+    /// Layers written to the frames (default all; `beauty` is always written).
+    #[serde(default = "default_layers")]
+    pub layers: Vec<OutputLayer>,
+}
+
+impl JobSpec {
+    /// A spec for `scene` with every other field at its default.
+    pub fn new(scene: impl Into<String>) -> Self {
+        JobSpec {
+            scene: scene.into(),
+            name: None,
+            frames: None,
+            fps: default_fps(),
+            width: default_width(),
+            height: default_height(),
+            camera: CameraSpec::Default,
+            spp: default_spp(),
+            max_depth: default_max_depth(),
+            seed: 0,
+            shutter: [0.0, 0.0],
+            motion_steps: None,
+            animation: None,
+            tile_size: None,
+            sample_passes: 1,
+            priority: 0,
+            max_attempts: default_max_attempts(),
+            layers: default_layers(),
+        }
+    }
+}
+
+fn one() -> u32 {
+    1
+}
+fn default_fps() -> f64 {
+    24.0
+}
+fn default_width() -> u32 {
+    1280
+}
+fn default_height() -> u32 {
+    720
+}
+fn default_spp() -> u32 {
+    64
+}
+fn default_max_depth() -> u32 {
+    8
+}
+fn default_max_attempts() -> u32 {
+    3
+}
+fn default_layers() -> Vec<OutputLayer> {
+    OutputLayer::ALL.to_vec()
+}
+
+/// Where a job stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum JobState {
+    /// No task has been leased yet.
+    Queued,
+    /// Tasks are being rendered.
+    Running,
+    /// Paused by a client: nothing is leased until it resumes.
+    Paused,
+    /// Cancelled by a client; unfinished tasks will not run.
+    Cancelled,
+    /// A task ran out of attempts; the other frames still finish.
+    Failed,
+    /// Every frame is assembled.
+    Done,
+}
+
+/// Tasks of a job by state.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct TaskCounts {
+    /// Waiting for a worker.
+    pub queued: u64,
+    /// Held by a worker.
+    pub leased: u64,
+    /// Rendered and accepted.
+    pub done: u64,
+    /// Out of attempts.
+    pub failed: u64,
+    /// Cancelled with their job.
+    pub cancelled: u64,
+}
+
+impl TaskCounts {
+    /// All tasks.
+    pub fn total(&self) -> u64 {
+        self.queued + self.leased + self.done + self.failed + self.cancelled
+    }
+}
+
+/// A job as the server sees it now.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct JobStatus {
+    /// The job's id.
+    pub id: u64,
+    /// Its name.
+    pub name: String,
+    /// Where it stands.
+    pub state: JobState,
+    /// The spec with every default filled in (frames and tile size resolved).
+    pub spec: JobSpec,
+    /// When it was created.
+    pub created_ms: i64,
+    /// When it reached done, failed or cancelled with nothing left running.
+    pub finished_ms: Option<i64>,
+    /// Tasks by state.
+    pub tasks: TaskCounts,
+    /// Frames in the job.
+    pub frames_total: u64,
+    /// Frames assembled.
+    pub frames_done: u64,
+    /// Frames with a failed task.
+    pub frames_failed: u64,
+    /// Finished samples over the job's pixel samples, 0 to 1.
+    pub progress: f64,
+    /// Pixel samples per second over the accepted tiles, measured from the first lease.
+    pub samples_per_second: f64,
+    /// Seconds left at that rate, when there is one.
+    pub eta_seconds: Option<f64>,
+}
+
+/// `GET /jobs`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct JobList {
+    /// Jobs, newest first.
+    pub jobs: Vec<JobStatus>,
+}
+
+/// Where a frame stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum FrameState {
+    /// No tile accepted yet.
+    Queued,
+    /// Some tiles accepted.
+    Rendering,
+    /// A tile ran out of attempts.
+    Failed,
+    /// Cancelled before it finished.
+    Cancelled,
+    /// Assembled: EXR and PNG can be downloaded.
+    Done,
+}
+
+/// One frame of a job.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct FrameStatus {
+    /// Frame number.
+    pub frame: i32,
+    /// Where it stands.
+    pub state: FrameState,
+    /// Tasks (tiles × sample passes) in the frame.
+    pub tasks_total: u64,
+    /// Tasks accepted.
+    pub tasks_done: u64,
+    /// The EXR's file name in the job's output folder (`frame_0001.exr`).
+    pub file: String,
+}
+
+/// `GET /jobs/{id}/frames`.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct FrameList {
+    /// Frames in order.
+    pub frames: Vec<FrameStatus>,
+}
+
+/// The file name of frame `frame`: four digits, zero padded (`frame_0001.exr`).
+pub fn frame_file_name(frame: i32, extension: &str) -> String {
+    format!("frame_{frame:04}.{extension}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spec_defaults_fill_missing_fields() {
+        let spec: JobSpec = serde_json::from_str(r#"{"scene":"abc"}"#).unwrap();
+        assert_eq!(spec, JobSpec::new("abc"));
+        assert_eq!(spec.layers.len(), 4);
+    }
+
+    #[test]
+    fn unknown_field_is_named() {
+        let err = serde_json::from_str::<JobSpec>(r#"{"scene":"a","sppp":4}"#).unwrap_err();
+        assert!(err.to_string().contains("sppp"), "{err}");
+    }
+
+    #[test]
+    fn frame_range_counts_with_step() {
+        let r = FrameRange {
+            start: 1,
+            end: 10,
+            step: 3,
+        };
+        assert_eq!(r.frames().collect::<Vec<_>>(), vec![1, 4, 7, 10]);
+        assert_eq!(r.count(), 4);
+        assert_eq!(
+            FrameRange {
+                start: 5,
+                end: 4,
+                step: 1
+            }
+            .count(),
+            0
+        );
+    }
+
+    #[test]
+    fn camera_spec_json_forms() {
+        let c: CameraSpec = serde_json::from_str(r#"{"index":2}"#).unwrap();
+        assert_eq!(c, CameraSpec::Index(2));
+        let c: CameraSpec = serde_json::from_str(r#"{"name":"Cam"}"#).unwrap();
+        assert_eq!(c, CameraSpec::Name("Cam".into()));
+        let c: CameraSpec = serde_json::from_str(r#""default""#).unwrap();
+        assert_eq!(c, CameraSpec::Default);
+    }
+
+    #[test]
+    fn frame_files_have_four_digits() {
+        assert_eq!(frame_file_name(1, "exr"), "frame_0001.exr");
+        assert_eq!(frame_file_name(12345, "png"), "frame_12345.png");
+    }
+}

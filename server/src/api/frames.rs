@@ -1,0 +1,91 @@
+//! Frames of a job: their states, the assembled EXR and the PNG preview.
+
+use axum::extract::State;
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use proto::{FrameList, FrameState};
+
+use super::error::PathParams;
+use crate::app::AppState;
+use crate::error::{Error, Result};
+use crate::status;
+
+/// The frames of a job, with their states.
+#[utoipa::path(
+    get,
+    path = "/jobs/{id}/frames",
+    tag = "frames",
+    params(("id" = u64, Path, description = "job id")),
+    responses((status = 200, body = FrameList), (status = 404, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn list(
+    State(app): State<AppState>,
+    PathParams(id): PathParams<u64>,
+) -> Result<Json<FrameList>> {
+    Ok(Json(app.db.run(move |c| status::frames(c, id)).await?))
+}
+
+async fn file(
+    app: &AppState,
+    job: u64,
+    frame: i32,
+    ext: &str,
+    content_type: &'static str,
+) -> Result<Response> {
+    let path = app.store.frame(job, frame, ext);
+    match tokio::fs::read(&path).await {
+        Ok(bytes) => Ok(([(header::CONTENT_TYPE, content_type)], bytes).into_response()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let f = app
+                .db
+                .run(move |c| status::frame_status(c, job, frame))
+                .await?;
+            Err(Error::NotFound(format!(
+                "frame {frame} of job {job} has no {ext} yet (it is {})",
+                match f.state {
+                    FrameState::Queued => "queued",
+                    FrameState::Rendering => "rendering",
+                    FrameState::Failed => "failed",
+                    FrameState::Cancelled => "cancelled",
+                    FrameState::Done => "done",
+                }
+            )))
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The assembled multi-layer EXR of a frame (once it is done).
+#[utoipa::path(
+    get,
+    path = "/jobs/{id}/frames/{frame}/exr",
+    tag = "frames",
+    params(("id" = u64, Path, description = "job id"), ("frame" = i32, Path, description = "frame number")),
+    responses((status = 200, content_type = "image/x-exr", body = Vec<u8>), (status = 404, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn exr(
+    State(app): State<AppState>,
+    PathParams((id, frame)): PathParams<(u64, i32)>,
+) -> Result<Response> {
+    file(&app, id, frame, "exr", "image/x-exr").await
+}
+
+/// The PNG preview of a frame: final once the frame is done, progressive (the sample
+/// passes in so far) before.
+#[utoipa::path(
+    get,
+    path = "/jobs/{id}/frames/{frame}/png",
+    tag = "frames",
+    params(("id" = u64, Path, description = "job id"), ("frame" = i32, Path, description = "frame number")),
+    responses((status = 200, content_type = "image/png", body = Vec<u8>), (status = 404, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn png(
+    State(app): State<AppState>,
+    PathParams((id, frame)): PathParams<(u64, i32)>,
+) -> Result<Response> {
+    file(&app, id, frame, "png", "image/png").await
+}

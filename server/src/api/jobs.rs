@@ -1,0 +1,212 @@
+//! Jobs: create, list, get, cancel, pause, resume, retry failed tasks, delete.
+
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::Json;
+use proto::{JobList, JobSpec, JobStatus, SceneInfo};
+use rusqlite::OptionalExtension;
+
+use super::error::{JsonBody, PathParams};
+use crate::app::{now_ms, AppState};
+use crate::error::{Error, Result};
+use crate::{scheduler, spec, status};
+
+/// Creates a job: the spec is checked field by field and split into tasks.
+#[utoipa::path(
+    post,
+    path = "/jobs",
+    tag = "jobs",
+    request_body = JobSpec,
+    responses(
+        (status = 201, body = JobStatus),
+        (status = 422, description = "a field is out of bounds; `field` names it", body = proto::ErrorBody),
+    ),
+    security(("client_token" = []))
+)]
+pub async fn create(
+    State(app): State<AppState>,
+    JsonBody(spec): JsonBody<JobSpec>,
+) -> Result<(StatusCode, Json<JobStatus>)> {
+    let max_tasks = app.config.max_tasks_per_job;
+    let now = now_ms();
+    let id = app
+        .db
+        .run(move |c| -> Result<u64> {
+            let scene: Option<String> = c
+                .query_row(
+                    "SELECT info FROM scenes WHERE digest = ?1",
+                    [&spec.scene],
+                    |r| r.get(0),
+                )
+                .optional()?;
+            let scene: SceneInfo = match scene {
+                Some(json) => serde_json::from_str(&json)?,
+                None => {
+                    return Err(Error::Invalid {
+                        field: "scene".into(),
+                        message: format!(
+                            "no scene with digest `{}`; upload it first (POST /api/v1/scenes)",
+                            spec.scene
+                        ),
+                    })
+                }
+            };
+            let plan = spec::plan(spec, &scene, max_tasks).map_err(|e| Error::Invalid {
+                field: e.field,
+                message: e.message,
+            })?;
+            scheduler::create_job(c, &plan, now)
+        })
+        .await?;
+    app.work.notify_waiters();
+    let status = app.db.run(move |c| status::job_status(c, id, now)).await?;
+    app.events.send(proto::Event::Job {
+        job: Box::new(status.clone()),
+    });
+    Ok((StatusCode::CREATED, Json(status)))
+}
+
+/// Every job, newest first.
+#[utoipa::path(get, path = "/jobs", tag = "jobs", responses((status = 200, body = JobList)), security(("client_token" = [])))]
+pub async fn list(State(app): State<AppState>) -> Result<Json<JobList>> {
+    let now = now_ms();
+    let jobs = app.db.run(move |c| status::list_jobs(c, now)).await?;
+    Ok(Json(JobList { jobs }))
+}
+
+/// One job: tasks by state, frames done, samples per second, ETA.
+#[utoipa::path(
+    get,
+    path = "/jobs/{id}",
+    tag = "jobs",
+    params(("id" = u64, Path, description = "job id")),
+    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn get(
+    State(app): State<AppState>,
+    PathParams(id): PathParams<u64>,
+) -> Result<Json<JobStatus>> {
+    let now = now_ms();
+    Ok(Json(
+        app.db.run(move |c| status::job_status(c, id, now)).await?,
+    ))
+}
+
+/// Runs a job control, then answers and broadcasts the job's new status.
+async fn control(
+    app: AppState,
+    id: u64,
+    f: impl FnOnce(&mut rusqlite::Connection, u64, i64) -> Result<()> + Send + 'static,
+) -> Result<Json<JobStatus>> {
+    let now = now_ms();
+    let status = app
+        .db
+        .run(move |c| {
+            f(c, id, now)?;
+            status::job_status(c, id, now)
+        })
+        .await?;
+    app.work.notify_waiters();
+    app.events.send(proto::Event::Job {
+        job: Box::new(status.clone()),
+    });
+    Ok(Json(status))
+}
+
+/// Cancels a job: unfinished tasks will not run; workers rendering them hear 409.
+#[utoipa::path(
+    post,
+    path = "/jobs/{id}/cancel",
+    tag = "jobs",
+    params(("id" = u64, Path, description = "job id")),
+    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 409, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn cancel(
+    State(app): State<AppState>,
+    PathParams(id): PathParams<u64>,
+) -> Result<Json<JobStatus>> {
+    control(app, id, scheduler::cancel).await
+}
+
+/// Pauses a job: nothing more is leased; workers rendering it hear 409 and the tasks go
+/// back to the queue.
+#[utoipa::path(
+    post,
+    path = "/jobs/{id}/pause",
+    tag = "jobs",
+    params(("id" = u64, Path, description = "job id")),
+    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 409, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn pause(
+    State(app): State<AppState>,
+    PathParams(id): PathParams<u64>,
+) -> Result<Json<JobStatus>> {
+    control(app, id, scheduler::pause).await
+}
+
+/// Resumes a paused job.
+#[utoipa::path(
+    post,
+    path = "/jobs/{id}/resume",
+    tag = "jobs",
+    params(("id" = u64, Path, description = "job id")),
+    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 409, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn resume(
+    State(app): State<AppState>,
+    PathParams(id): PathParams<u64>,
+) -> Result<Json<JobStatus>> {
+    control(app, id, scheduler::resume).await
+}
+
+/// Re-queues a job's failed tasks with fresh attempts.
+#[utoipa::path(
+    post,
+    path = "/jobs/{id}/retry",
+    tag = "jobs",
+    params(("id" = u64, Path, description = "job id")),
+    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 409, description = "no failed tasks, or cancelled", body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn retry(
+    State(app): State<AppState>,
+    PathParams(id): PathParams<u64>,
+) -> Result<Json<JobStatus>> {
+    control(app, id, |c, id, now| {
+        scheduler::retry(c, id, now).map(|_| ())
+    })
+    .await
+}
+
+/// Deletes a job with its outputs.
+#[utoipa::path(
+    delete,
+    path = "/jobs/{id}",
+    tag = "jobs",
+    params(("id" = u64, Path, description = "job id")),
+    responses((status = 204, description = "deleted"), (status = 404, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn delete(
+    State(app): State<AppState>,
+    PathParams(id): PathParams<u64>,
+) -> Result<StatusCode> {
+    let now = now_ms();
+    app.db
+        .run(move |c| scheduler::delete_job(c, id, now))
+        .await?;
+    let (jobs_dir, tiles_dir) = (app.store.job_dir(id), app.store.tile_dir(id));
+    for dir in [jobs_dir, tiles_dir] {
+        match tokio::fs::remove_dir_all(&dir).await {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e.into()),
+        }
+    }
+    app.events.send(proto::Event::JobDeleted { job_id: id });
+    Ok(StatusCode::NO_CONTENT)
+}

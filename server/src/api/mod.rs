@@ -1,0 +1,109 @@
+//! The HTTP surface: routes per resource, each group behind its token and body limit, and
+//! the OpenAPI document generated from the same handlers (utoipa-axum registers a handler
+//! and its documentation together, so the two cannot drift apart).
+//!
+//! | file | routes |
+//! |---|---|
+//! | `scenes.rs` | `POST /scenes`, `GET /scenes/{digest}`, `GET /scenes/{digest}/info` |
+//! | `jobs.rs` | `POST/GET /jobs`, `GET/DELETE /jobs/{id}`, `POST /jobs/{id}/{cancel,pause,resume,retry}` |
+//! | `frames.rs` | `GET /jobs/{id}/frames`, `GET /jobs/{id}/frames/{frame}/{exr,png}` |
+//! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat}`, `POST /workers/{id}/tasks/{task}/{result,failure}` |
+//! | `system.rs` | `/healthz`, `/metrics`, `/api/v1/openapi.json` |
+//! | `error.rs` | errors as JSON; extractors that reject with them |
+
+pub mod error;
+pub mod frames;
+pub mod jobs;
+pub mod scenes;
+pub mod system;
+pub mod workers;
+
+use axum::extract::DefaultBodyLimit;
+use axum::middleware::from_fn_with_state;
+use axum::Router;
+use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+use utoipa::{Modify, OpenApi};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use crate::app::AppState;
+use crate::auth::{self, Role};
+use crate::events;
+use crate::limits::MAX_JSON_BYTES;
+
+#[derive(OpenApi)]
+#[openapi(
+    info(title = "Tessera farm API", description = "Scenes, jobs, frames and workers of a Tessera render farm."),
+    modifiers(&Security),
+    tags(
+        (name = "scenes", description = "GLB scenes, stored by SHA-256"),
+        (name = "jobs", description = "render jobs"),
+        (name = "frames", description = "assembled frames"),
+        (name = "workers", description = "the worker protocol"),
+        (name = "events", description = "server-sent events"),
+    )
+)]
+struct ApiDoc;
+
+struct Security;
+
+impl Modify for Security {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        let components = openapi.components.get_or_insert_with(Default::default);
+        for name in ["client_token", "worker_token"] {
+            components.add_security_scheme(
+                name,
+                SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+            );
+        }
+    }
+}
+
+/// The `/api/v1` routes and their OpenAPI document.
+pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
+    let guard = |role| from_fn_with_state((app.clone(), role), auth::require);
+    let json_limit = DefaultBodyLimit::max(MAX_JSON_BYTES);
+
+    let client = OpenApiRouter::new()
+        .routes(routes!(jobs::create, jobs::list))
+        .routes(routes!(jobs::get, jobs::delete))
+        .routes(routes!(jobs::cancel))
+        .routes(routes!(jobs::pause))
+        .routes(routes!(jobs::resume))
+        .routes(routes!(jobs::retry))
+        .routes(routes!(frames::list))
+        .routes(routes!(frames::exr))
+        .routes(routes!(frames::png))
+        .routes(routes!(workers::list))
+        .routes(routes!(events::events))
+        .layer(json_limit)
+        .route_layer(guard(Role::Client));
+    // Raw bodies: the handlers read them with their own limits (scene, tile).
+    let scene_upload = OpenApiRouter::new()
+        .routes(routes!(scenes::upload))
+        .route_layer(guard(Role::Client));
+    let shared = OpenApiRouter::new()
+        .routes(routes!(scenes::download))
+        .routes(routes!(scenes::info))
+        .route_layer(guard(Role::Either));
+    let worker = OpenApiRouter::new()
+        .routes(routes!(workers::register))
+        .routes(routes!(workers::lease))
+        .routes(routes!(workers::heartbeat))
+        .routes(routes!(workers::failure))
+        .layer(json_limit)
+        .route_layer(guard(Role::Worker));
+    let tile_upload = OpenApiRouter::new()
+        .routes(routes!(workers::result))
+        .route_layer(guard(Role::Worker));
+
+    let v1 = OpenApiRouter::new()
+        .merge(client)
+        .merge(scene_upload)
+        .merge(shared)
+        .merge(worker)
+        .merge(tile_upload);
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .nest(proto::API_PREFIX, v1)
+        .split_for_parts()
+}

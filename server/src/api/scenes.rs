@@ -1,0 +1,141 @@
+//! `POST /scenes` (upload a GLB), `GET /scenes/{digest}` (the GLB),
+//! `GET /scenes/{digest}/info` (what it holds).
+
+use axum::body::Body;
+use axum::extract::State;
+use axum::http::{header, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use proto::SceneInfo;
+use rusqlite::OptionalExtension;
+
+use super::error::{read_body, PathParams};
+use crate::app::{now_ms, AppState};
+use crate::error::{Error, Result};
+use crate::store::{self, is_digest};
+
+/// Uploads a scene as one self-contained GLB. The tracer's loader checks it here, so a
+/// malformed scene never reaches a worker. Stored by SHA-256: uploading the same bytes
+/// twice stores them once.
+#[utoipa::path(
+    post,
+    path = "/scenes",
+    tag = "scenes",
+    request_body(content = Vec<u8>, content_type = "model/gltf-binary", description = "a GLB file"),
+    responses(
+        (status = 201, description = "stored", body = SceneInfo),
+        (status = 200, description = "already stored", body = SceneInfo),
+        (status = 413, description = "over the size limit", body = proto::ErrorBody),
+        (status = 422, description = "not a scene the tracer can load; the message names the glTF element", body = proto::ErrorBody),
+    ),
+    security(("client_token" = []))
+)]
+pub async fn upload(State(app): State<AppState>, body: Body) -> Result<Response> {
+    let bytes = read_body(body, app.config.max_scene_bytes, "scene").await?;
+    if bytes.is_empty() {
+        return Err(Error::BadScene(
+            "the body is empty; send the scene's GLB bytes".into(),
+        ));
+    }
+    let a = app.clone();
+    let (info, created) = tokio::task::spawn_blocking(move || -> Result<(SceneInfo, bool)> {
+        // A scene already stored was checked when it first came: answer from the database.
+        let digest = store::sha256_hex(&bytes);
+        let known: Option<String> = a.db.with(|c| {
+            c.query_row("SELECT info FROM scenes WHERE digest = ?1", [&digest], |r| r.get(0))
+                .optional()
+        })?;
+        if let Some(json) = known {
+            return Ok((serde_json::from_str(&json)?, false));
+        }
+        let (info, _scene) = crate::scene::inspect(&bytes)
+            .map_err(|e| Error::BadScene(format!("the scene cannot be loaded: {e}")))?;
+        store::write_atomic(&a.store.scene(&digest), &bytes)?;
+        let json = serde_json::to_string(&info)?;
+        let now = now_ms();
+        a.db.with(|c| {
+            c.execute(
+                "INSERT OR IGNORE INTO scenes (digest, size, info, created_ms) VALUES (?1, ?2, ?3, ?4)",
+                rusqlite::params![digest, bytes.len() as i64, json, now],
+            )
+        })?;
+        a.metrics.scene_stored(bytes.len());
+        Ok((info, true))
+    })
+    .await
+    .map_err(|e| Error::Internal(format!("scene check panicked: {e}")))??;
+    let status = if created {
+        StatusCode::CREATED
+    } else {
+        StatusCode::OK
+    };
+    Ok((status, Json(info)).into_response())
+}
+
+fn check_digest(digest: &str) -> Result<()> {
+    if is_digest(digest) {
+        Ok(())
+    } else {
+        Err(Error::Invalid {
+            field: "digest".into(),
+            message: format!("`{digest}` is not a SHA-256 digest (64 lower-case hex digits)"),
+        })
+    }
+}
+
+/// What an uploaded scene holds.
+#[utoipa::path(
+    get,
+    path = "/scenes/{digest}/info",
+    tag = "scenes",
+    params(("digest" = String, Path, description = "SHA-256 of the GLB")),
+    responses((status = 200, body = SceneInfo), (status = 404, body = proto::ErrorBody)),
+    security(("client_token" = []), ("worker_token" = []))
+)]
+pub async fn info(
+    State(app): State<AppState>,
+    PathParams(digest): PathParams<String>,
+) -> Result<Json<SceneInfo>> {
+    check_digest(&digest)?;
+    let d = digest.clone();
+    let json: Option<String> = app
+        .db
+        .run(move |c| {
+            c.query_row("SELECT info FROM scenes WHERE digest = ?1", [&d], |r| {
+                r.get(0)
+            })
+            .optional()
+        })
+        .await?;
+    let json = json.ok_or_else(|| {
+        Error::NotFound(format!("no scene with digest {digest}; upload it first"))
+    })?;
+    Ok(Json(serde_json::from_str(&json)?))
+}
+
+/// The GLB bytes of a scene (workers fetch it once per digest and cache it).
+#[utoipa::path(
+    get,
+    path = "/scenes/{digest}",
+    tag = "scenes",
+    params(("digest" = String, Path, description = "SHA-256 of the GLB")),
+    responses(
+        (status = 200, description = "the GLB", content_type = "model/gltf-binary", body = Vec<u8>),
+        (status = 404, body = proto::ErrorBody)
+    ),
+    security(("client_token" = []), ("worker_token" = []))
+)]
+pub async fn download(
+    State(app): State<AppState>,
+    PathParams(digest): PathParams<String>,
+) -> Result<Response> {
+    check_digest(&digest)?;
+    let path = app.store.scene(&digest);
+    match tokio::fs::read(&path).await {
+        Ok(bytes) => Ok(([(header::CONTENT_TYPE, "model/gltf-binary")], bytes).into_response()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(Error::NotFound(format!(
+            "no scene with digest {digest}; upload it first"
+        ))),
+        Err(e) => Err(e.into()),
+    }
+}

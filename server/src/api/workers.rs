@@ -1,0 +1,240 @@
+//! Workers: register, list, long-poll lease, heartbeat, upload a result, report a failure.
+
+use std::time::{Duration, Instant};
+
+use axum::body::Body;
+use axum::extract::State;
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use proto::{
+    FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, ResultAck,
+    ResultMetadata, TaskToken, WorkerList, WorkerRegistered, WorkerRegistration,
+};
+
+use super::error::{read_body, JsonBody, PathParams};
+use crate::app::{now_ms, AppState};
+use crate::error::{Error, Result};
+use crate::limits::{MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
+use crate::{intake, scheduler, status};
+
+/// Registers a worker; the answer carries its id and the timing it must keep.
+#[utoipa::path(
+    post,
+    path = "/workers",
+    tag = "workers",
+    request_body = WorkerRegistration,
+    responses((status = 201, body = WorkerRegistered), (status = 422, body = proto::ErrorBody)),
+    security(("worker_token" = []))
+)]
+pub async fn register(
+    State(app): State<AppState>,
+    JsonBody(reg): JsonBody<WorkerRegistration>,
+) -> Result<(StatusCode, Json<WorkerRegistered>)> {
+    for (field, value) in [("name", &reg.name), ("version", &reg.version)] {
+        if value.is_empty() || value.len() > MAX_WORKER_TEXT_BYTES {
+            return Err(Error::Invalid {
+                field: field.into(),
+                message: format!(
+                    "must be 1 to {MAX_WORKER_TEXT_BYTES} bytes, got {}",
+                    value.len()
+                ),
+            });
+        }
+    }
+    if reg.threads == 0 || reg.threads > 4096 {
+        return Err(Error::Invalid {
+            field: "threads".into(),
+            message: format!("must be 1 to 4096, got {}", reg.threads),
+        });
+    }
+    let now = now_ms();
+    let id = app
+        .db
+        .run(move |c| scheduler::register_worker(c, &reg.name, reg.threads, &reg.version, now))
+        .await?;
+    app.publish_worker(id).await;
+    Ok((
+        StatusCode::CREATED,
+        Json(WorkerRegistered {
+            worker_id: id,
+            lease_seconds: app.config.lease.as_secs(),
+            heartbeat_seconds: app.config.heartbeat_interval().as_secs(),
+            max_wait_seconds: app.config.max_lease_wait.as_secs(),
+        }),
+    ))
+}
+
+/// Every worker: name, threads, version, current task, last seen.
+#[utoipa::path(get, path = "/workers", tag = "workers", responses((status = 200, body = WorkerList)), security(("client_token" = [])))]
+pub async fn list(State(app): State<AppState>) -> Result<Json<WorkerList>> {
+    let (now, lease) = (now_ms(), app.config.lease_ms());
+    Ok(Json(
+        app.db.run(move |c| status::workers(c, now, lease)).await?,
+    ))
+}
+
+/// Asks for a task, waiting up to `wait_seconds` (capped by the server) for one:
+/// 200 with a lease, or 204 when there is no work.
+#[utoipa::path(
+    post,
+    path = "/workers/{id}/lease",
+    tag = "workers",
+    params(("id" = u64, Path, description = "worker id")),
+    request_body = LeaseRequest,
+    responses((status = 200, body = Lease), (status = 204, description = "no work now; ask again"), (status = 404, body = proto::ErrorBody)),
+    security(("worker_token" = []))
+)]
+pub async fn lease(
+    State(app): State<AppState>,
+    PathParams(worker): PathParams<u64>,
+    JsonBody(req): JsonBody<LeaseRequest>,
+) -> Result<Response> {
+    let started = Instant::now();
+    let wait = Duration::from_secs(req.wait_seconds).min(app.config.max_lease_wait);
+    let deadline = tokio::time::Instant::now() + wait;
+    loop {
+        // Listen before looking, so work that appears in between is not missed.
+        let notified = app.work.notified();
+        tokio::pin!(notified);
+        notified.as_mut().enable();
+        let (now, timing) = (now_ms(), app.timing());
+        // If the worker hangs up while this runs, the lease is granted but never seen; it
+        // expires after one lease period and the task is leased again.
+        let lease = app
+            .db
+            .run(move |c| scheduler::lease(c, worker, now, timing))
+            .await?;
+        if let Some(lease) = lease {
+            app.metrics.lease_granted(started.elapsed().as_secs_f64());
+            app.publish_worker(worker).await;
+            app.publish_job(lease.job_id).await;
+            return Ok(Json(lease).into_response());
+        }
+        if tokio::time::timeout_at(deadline, notified).await.is_err() {
+            return Ok(StatusCode::NO_CONTENT.into_response());
+        }
+    }
+}
+
+/// Extends a lease (or, without a token, says the worker is alive). 409 means the lease
+/// is gone — the job was paused or cancelled, or the lease expired: stop rendering.
+#[utoipa::path(
+    post,
+    path = "/workers/{id}/heartbeat",
+    tag = "workers",
+    params(("id" = u64, Path, description = "worker id")),
+    request_body = Heartbeat,
+    responses((status = 200, body = HeartbeatAck), (status = 409, description = "lease gone: stop", body = proto::ErrorBody)),
+    security(("worker_token" = []))
+)]
+pub async fn heartbeat(
+    State(app): State<AppState>,
+    PathParams(worker): PathParams<u64>,
+    JsonBody(hb): JsonBody<Heartbeat>,
+) -> Result<Json<HeartbeatAck>> {
+    let (now, timing) = (now_ms(), app.timing());
+    let deadline = app
+        .db
+        .run(move |c| scheduler::heartbeat(c, worker, hb.token, now, timing))
+        .await?;
+    Ok(Json(HeartbeatAck {
+        deadline_ms: deadline,
+    }))
+}
+
+/// Uploads a rendered tile: the body is the EXR, the `x-tessera-*` headers carry the
+/// attempt, SHA-256, samples, rays and render time. A second upload for a finished task
+/// is answered 200 with `accepted: false` and ignored.
+#[utoipa::path(
+    post,
+    path = "/workers/{id}/tasks/{task}/result",
+    tag = "workers",
+    params(
+        ("id" = u64, Path, description = "worker id"),
+        ("task" = u64, Path, description = "task id"),
+        ("x-tessera-attempt" = u32, Header, description = "the lease's attempt"),
+        ("x-tessera-sha256" = String, Header, description = "hex SHA-256 of the body"),
+        ("x-tessera-samples" = u32, Header, description = "samples per pixel rendered"),
+        ("x-tessera-rays" = u64, Header, description = "rays traced"),
+        ("x-tessera-render-ms" = u64, Header, description = "render time on the worker"),
+    ),
+    request_body(content = Vec<u8>, content_type = "image/x-exr", description = "the tile"),
+    responses(
+        (status = 200, body = ResultAck),
+        (status = 409, description = "lease gone: drop the tile", body = proto::ErrorBody),
+        (status = 413, body = proto::ErrorBody),
+        (status = 422, description = "the tile is refused; the message says why", body = proto::ErrorBody),
+    ),
+    security(("worker_token" = []))
+)]
+pub async fn result(
+    State(app): State<AppState>,
+    PathParams((worker, task)): PathParams<(u64, u64)>,
+    headers: HeaderMap,
+    body: Body,
+) -> Result<Json<ResultAck>> {
+    let meta = ResultMetadata::from_headers(|name| headers.get(name).and_then(|v| v.to_str().ok()))
+        .map_err(|(field, message)| Error::Invalid {
+            field: field.into(),
+            message,
+        })?;
+    let bytes = read_body(body, app.config.max_tile_bytes, "tile").await?;
+    let token = TaskToken {
+        task_id: task,
+        attempt: meta.attempt,
+    };
+    let a = app.clone();
+    let received =
+        tokio::task::spawn_blocking(move || intake::receive(&a, worker, token, &meta, &bytes))
+            .await
+            .map_err(|e| Error::Internal(format!("tile intake panicked: {e}")))??;
+    if received.accepted {
+        app.publish_frame(received.job, received.frame).await;
+        app.publish_job(received.job).await;
+        app.publish_worker(worker).await;
+    }
+    Ok(Json(ResultAck {
+        accepted: received.accepted,
+        frame_done: received.frame_done,
+    }))
+}
+
+/// Reports that a lease could not be rendered: the task goes back to the queue (or fails
+/// past its job's max attempts).
+#[utoipa::path(
+    post,
+    path = "/workers/{id}/tasks/{task}/failure",
+    tag = "workers",
+    params(("id" = u64, Path, description = "worker id"), ("task" = u64, Path, description = "task id")),
+    request_body = FailureReport,
+    responses((status = 200, body = FailureAck), (status = 409, description = "lease gone", body = proto::ErrorBody)),
+    security(("worker_token" = []))
+)]
+pub async fn failure(
+    State(app): State<AppState>,
+    PathParams((worker, task)): PathParams<(u64, u64)>,
+    JsonBody(report): JsonBody<FailureReport>,
+) -> Result<Json<FailureAck>> {
+    let mut message = report.message;
+    if message.len() > MAX_FAILURE_MESSAGE_BYTES {
+        let mut cut = MAX_FAILURE_MESSAGE_BYTES;
+        while !message.is_char_boundary(cut) {
+            cut -= 1;
+        }
+        message.truncate(cut);
+    }
+    let token = TaskToken {
+        task_id: task,
+        attempt: report.attempt,
+    };
+    let (now, timing) = (now_ms(), app.timing());
+    let (job, ack) = app
+        .db
+        .run(move |c| scheduler::fail(c, worker, token, &message, now, timing))
+        .await?;
+    app.work.notify_waiters();
+    app.publish_job(job).await;
+    app.publish_worker(worker).await;
+    Ok(Json(ack))
+}

@@ -1,0 +1,274 @@
+//! Tiles in, frames out. Each upload is checked before it is accepted (checksum, sample
+//! count, EXR parses, frame size, data window, channels, finite values); when a frame's
+//! last tile is in, its sample passes merge by sample-weighted average, the tiles are
+//! pasted into the frame, and the frame is written atomically as a multi-layer EXR plus a
+//! PNG preview. When a pass of a frame completes before the frame does, a progressive PNG
+//! preview is written from the passes in so far.
+
+use std::path::Path;
+
+use exr::image::{AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer};
+use exr::math::Vec2;
+use exr::meta::attribute::{AttributeValue, IntegerBounds, Text};
+use exr::meta::header::{ImageAttributes, LayerAttributes};
+use exr::prelude::traits::WritableImage;
+use glam::{Vec3, Vec4};
+use proto::{JobSpec, OutputLayer, ResultMetadata};
+use tracer::film::{Layers, TileRect, NO_HIT_DEPTH};
+use tracer::output::{self, ExrMetadata};
+
+use crate::error::{Error, Result};
+use crate::scheduler::TaskRow;
+use crate::store::{self, sha256_hex, Store};
+
+/// Checks an uploaded tile against its task and returns its pixels.
+pub fn check_tile(
+    bytes: &[u8],
+    meta: &ResultMetadata,
+    task: &TaskRow,
+    frame_size: (u32, u32),
+) -> Result<Layers> {
+    let actual = sha256_hex(bytes);
+    if actual != meta.sha256 {
+        return Err(Error::BadTile(format!(
+            "checksum mismatch: header {} says {}, the {} bytes received hash to {actual}; \
+             the upload was damaged, send it again",
+            ResultMetadata::SHA256,
+            meta.sha256,
+            bytes.len()
+        )));
+    }
+    if meta.samples != task.samples.len() {
+        return Err(Error::Invalid {
+            field: ResultMetadata::SAMPLES.into(),
+            message: format!(
+                "the task asks for samples {}..{} ({} per pixel) but the tile says {}",
+                task.samples.start,
+                task.samples.end,
+                task.samples.len(),
+                meta.samples
+            ),
+        });
+    }
+    output::validate_tile(bytes, task.rect, frame_size)
+        .map_err(|e| Error::BadTile(format!("tile of task {}: {e}", task.id)))
+}
+
+/// Sample-weighted average of the passes of one tile: `parts` are (pass layers, samples
+/// per pixel). Beauty and albedo average by samples; normals are summed by weight and
+/// renormalised; depth averages over the passes that hit something.
+pub fn merge_passes(parts: &[(Layers, u32)]) -> Layers {
+    if let [(only, _)] = parts {
+        return only.clone();
+    }
+    let rect = parts[0].0.rect;
+    let total: f32 = parts.iter().map(|(_, n)| *n as f32).sum();
+    let mut out = Layers::new(rect);
+    for i in 0..rect.area() {
+        let mut beauty = Vec4::ZERO;
+        let mut albedo = Vec3::ZERO;
+        let mut normal = Vec3::ZERO;
+        let (mut depth, mut depth_weight) = (0.0f32, 0.0f32);
+        for (layers, n) in parts {
+            let w = *n as f32;
+            beauty += layers.beauty[i] * w;
+            albedo += layers.albedo[i] * w;
+            normal += layers.normal[i] * w;
+            if layers.depth[i] < NO_HIT_DEPTH {
+                depth += layers.depth[i] * w;
+                depth_weight += w;
+            }
+        }
+        out.beauty[i] = beauty / total;
+        out.albedo[i] = albedo / total;
+        out.normal[i] = normal.normalize_or_zero();
+        out.depth[i] = if depth_weight > 0.0 {
+            depth / depth_weight
+        } else {
+            NO_HIT_DEPTH
+        };
+    }
+    out
+}
+
+/// Builds a frame (or, for a preview, as much of it as is in) from the accepted tiles of
+/// `tasks` (one frame's done tasks, by tile then pass).
+pub fn build_frame(store: &Store, spec: &JobSpec, tasks: &[TaskRow]) -> Result<Layers> {
+    let mut frame = Layers::new(TileRect::new(0, 0, spec.width, spec.height));
+    let mut i = 0;
+    while i < tasks.len() {
+        let tile = tasks[i].tile;
+        let mut parts = Vec::new();
+        while i < tasks.len() && tasks[i].tile == tile {
+            let t = &tasks[i];
+            let path = store.tile(t.job_id, t.id);
+            let image = output::read_exr(&path)
+                .map_err(|e| Error::Internal(format!("reading accepted tile: {e}")))?;
+            parts.push((image.layers, t.samples.len()));
+            i += 1;
+        }
+        frame.paste(&merge_passes(&parts));
+    }
+    Ok(frame)
+}
+
+/// Writes the final frame: `frame_NNNN.exr` with the job's layers and `frame_NNNN.png`,
+/// both atomically.
+pub fn write_frame(
+    store: &Store,
+    job: u64,
+    frame_no: i32,
+    spec: &JobSpec,
+    frame: &Layers,
+) -> Result<()> {
+    let size = (spec.width, spec.height);
+    let meta = ExrMetadata::new()
+        .with(ExrMetadata::VERSION, env!("CARGO_PKG_VERSION"))
+        .with(ExrMetadata::SPP, spec.spp.to_string())
+        .with(ExrMetadata::SETTINGS, serde_json::to_string(spec)?)
+        .with("tessera/job", job.to_string())
+        .with("tessera/frame", frame_no.to_string());
+    let bytes = encode_layers(size, frame, &spec.layers, &meta)?;
+    store::write_atomic(&store.frame(job, frame_no, "exr"), &bytes)?;
+    write_preview(store, job, frame_no, spec, frame)
+}
+
+/// Writes `frame_NNNN.png` atomically.
+pub fn write_preview(
+    store: &Store,
+    job: u64,
+    frame_no: i32,
+    spec: &JobSpec,
+    frame: &Layers,
+) -> Result<()> {
+    let path = store.frame(job, frame_no, "png");
+    std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
+    output::write_preview_png(&path, (spec.width, spec.height), frame, 0.0)
+        .map_err(|e| Error::Internal(format!("writing preview: {e}")))
+}
+
+/// The EXR bytes of `layers` with only the `wanted` layers: the tracer's own encoder when
+/// all are wanted, else the same channel names and encoding without the others.
+fn encode_layers(
+    size: (u32, u32),
+    layers: &Layers,
+    wanted: &[OutputLayer],
+    meta: &ExrMetadata,
+) -> Result<Vec<u8>> {
+    if OutputLayer::ALL.iter().all(|l| wanted.contains(l)) {
+        return output::encode_exr(size, layers, meta)
+            .map_err(|e| Error::Internal(format!("encoding frame: {e}")));
+    }
+    let n = layers.rect.area();
+    let mut channels: Vec<AnyChannel<FlatSamples>> = Vec::new();
+    let mut add = |name: &str, values: Vec<f32>| {
+        channels.push(AnyChannel::new(name, FlatSamples::F32(values)));
+    };
+    let comp4 = |c: usize| (0..n).map(|i| layers.beauty[i][c]).collect::<Vec<f32>>();
+    for (c, name) in ["R", "G", "B", "A"].into_iter().enumerate() {
+        add(name, comp4(c));
+    }
+    if wanted.contains(&OutputLayer::Albedo) {
+        for (c, name) in ["albedo.R", "albedo.G", "albedo.B"].into_iter().enumerate() {
+            add(name, (0..n).map(|i| layers.albedo[i][c]).collect());
+        }
+    }
+    if wanted.contains(&OutputLayer::Normal) {
+        for (c, name) in ["N.X", "N.Y", "N.Z"].into_iter().enumerate() {
+            add(name, (0..n).map(|i| layers.normal[i][c]).collect());
+        }
+    }
+    if wanted.contains(&OutputLayer::Depth) {
+        add("Z", layers.depth.clone());
+    }
+    let mut attributes = LayerAttributes {
+        layer_position: Vec2(layers.rect.x as i32, layers.rect.y as i32),
+        software_name: Some(Text::from(concat!("Tessera ", env!("CARGO_PKG_VERSION")))),
+        ..LayerAttributes::default()
+    };
+    for (name, value) in &meta.attributes {
+        attributes.other.insert(
+            Text::from_slice_unchecked(name.as_bytes()),
+            AttributeValue::Text(Text::from_slice_unchecked(value.as_bytes())),
+        );
+    }
+    let display = IntegerBounds::new(Vec2(0, 0), Vec2(size.0 as usize, size.1 as usize));
+    let layer = Layer::new(
+        Vec2(layers.rect.width as usize, layers.rect.height as usize),
+        attributes,
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels.into()),
+    );
+    let image = Image::new(ImageAttributes::new(display), layer);
+    let mut out = std::io::Cursor::new(Vec::new());
+    image
+        .write()
+        .to_buffered(&mut out)
+        .map_err(|e| Error::Internal(format!("encoding frame: {e}")))?;
+    Ok(out.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layers(rect: TileRect, v: f32, depth: f32) -> Layers {
+        let mut l = Layers::new(rect);
+        l.beauty
+            .iter_mut()
+            .for_each(|b| *b = Vec4::new(v, v * 2.0, v * 3.0, 1.0));
+        l.albedo.iter_mut().for_each(|a| *a = Vec3::splat(v));
+        l.normal.iter_mut().for_each(|n| *n = Vec3::Z);
+        l.depth.iter_mut().for_each(|d| *d = depth);
+        l
+    }
+
+    #[test]
+    fn passes_merge_by_sample_weight() {
+        let rect = TileRect::new(0, 0, 2, 1);
+        // 1 sample of 1.0 and 3 samples of 3.0 average to 2.5.
+        let merged = merge_passes(&[
+            (layers(rect, 1.0, 4.0), 1),
+            (layers(rect, 3.0, NO_HIT_DEPTH), 3),
+        ]);
+        assert_eq!(merged.beauty[0], Vec4::new(2.5, 5.0, 7.5, 1.0));
+        assert_eq!(merged.albedo[1], Vec3::splat(2.5));
+        assert_eq!(merged.normal[0], Vec3::Z);
+        // Only the first pass hit: its depth stands.
+        assert_eq!(merged.depth[0], 4.0);
+        let none = merge_passes(&[
+            (layers(rect, 1.0, NO_HIT_DEPTH), 2),
+            (layers(rect, 1.0, NO_HIT_DEPTH), 2),
+        ]);
+        assert_eq!(none.depth[1], NO_HIT_DEPTH);
+    }
+
+    #[test]
+    fn one_pass_is_kept_bit_for_bit() {
+        let rect = TileRect::new(4, 2, 3, 2);
+        let l = layers(rect, 0.1234567, 9.87654);
+        assert_eq!(merge_passes(&[(l.clone(), 7)]), l);
+    }
+
+    #[test]
+    fn layer_subset_writes_only_those_channels() {
+        let rect = TileRect::new(0, 0, 4, 3);
+        let l = layers(rect, 0.5, 2.0);
+        let bytes = encode_layers(
+            (4, 3),
+            &l,
+            &[OutputLayer::Beauty, OutputLayer::Depth],
+            &ExrMetadata::new().with("tessera/frame", "7"),
+        )
+        .unwrap();
+        let image = output::decode_exr(&bytes).unwrap();
+        assert_eq!(image.layers.beauty, l.beauty);
+        assert_eq!(image.layers.depth, l.depth);
+        // Albedo was not written: the decoder fills it with black.
+        assert!(image.layers.albedo.iter().all(|a| *a == Vec3::ZERO));
+        assert_eq!(image.attribute("tessera/frame"), Some("7"));
+        let all = encode_layers((4, 3), &l, &OutputLayer::ALL, &ExrMetadata::new()).unwrap();
+        assert_eq!(output::decode_exr(&all).unwrap().layers, l);
+        assert!(bytes.len() < all.len());
+    }
+}

@@ -1,0 +1,64 @@
+//! Server settings: where to listen, where data lives, tokens, timing and limits.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use crate::limits;
+
+/// Everything `serve` needs. [`Config::new`] gives the defaults `tessera server` uses.
+#[derive(Clone, Debug)]
+pub struct Config {
+    /// Address to listen on (loopback by default: the farm is opened up on purpose).
+    pub listen: SocketAddr,
+    /// Folder holding the database, scenes, tiles and job outputs.
+    pub data_dir: PathBuf,
+    /// Bearer token workers must present; `None` leaves worker routes open.
+    pub worker_token: Option<String>,
+    /// Bearer token clients (CLI, dashboard) must present; `None` leaves them open.
+    pub client_token: Option<String>,
+    /// How long a lease lasts without a heartbeat.
+    pub lease: Duration,
+    /// How often the server looks for expired leases.
+    pub sweep_interval: Duration,
+    /// The longest a lease request may wait for work.
+    pub max_lease_wait: Duration,
+    /// A worker that fails this many tasks of one job gets no more of that job.
+    pub block_after_failures: u32,
+    /// Most tasks (frames × tiles × passes) one job may have.
+    pub max_tasks_per_job: u64,
+    /// Largest scene upload, bytes.
+    pub max_scene_bytes: usize,
+    /// Largest tile upload, bytes.
+    pub max_tile_bytes: usize,
+}
+
+impl Config {
+    /// Defaults: 127.0.0.1:8700, no tokens, 60 s leases.
+    pub fn new(data_dir: impl Into<PathBuf>) -> Self {
+        Config {
+            listen: SocketAddr::from(([127, 0, 0, 1], 8700)),
+            data_dir: data_dir.into(),
+            worker_token: None,
+            client_token: None,
+            lease: Duration::from_secs(60),
+            sweep_interval: Duration::from_secs(2),
+            max_lease_wait: Duration::from_secs(30),
+            block_after_failures: 3,
+            max_tasks_per_job: limits::DEFAULT_MAX_TASKS_PER_JOB,
+            max_scene_bytes: limits::DEFAULT_MAX_SCENE_BYTES,
+            max_tile_bytes: limits::MAX_TILE_BYTES,
+        }
+    }
+
+    /// Lease length in milliseconds.
+    pub(crate) fn lease_ms(&self) -> i64 {
+        self.lease.as_millis() as i64
+    }
+
+    /// How often a worker should heartbeat: a quarter of the lease, so that three
+    /// heartbeats may be lost before the lease expires.
+    pub fn heartbeat_interval(&self) -> Duration {
+        (self.lease / 4).max(Duration::from_secs(1))
+    }
+}

@@ -1,0 +1,90 @@
+//! The SQLite database: one connection in WAL mode behind a mutex. Every call runs on
+//! tokio's blocking pool ([`Db::run`]) so SQLite never blocks the async runtime; code that
+//! is already on a blocking thread (tile assembly) uses [`Db::with`].
+
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use rusqlite::Connection;
+
+use crate::migrations::{self, MigrationError};
+
+/// Why the database could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// SQLite could not open or configure the file.
+    #[error("opening the database {path}: {source}")]
+    Sql {
+        /// The file.
+        path: String,
+        /// What SQLite said.
+        #[source]
+        source: rusqlite::Error,
+    },
+    /// The schema could not be migrated.
+    #[error(transparent)]
+    Migration(#[from] MigrationError),
+}
+
+/// A handle on the database; clones share the connection.
+#[derive(Clone)]
+pub struct Db {
+    conn: Arc<Mutex<Connection>>,
+}
+
+impl Db {
+    /// Opens (creating) the database at `path`, in WAL mode with foreign keys on, and
+    /// migrates it to the current schema.
+    pub fn open(path: &Path) -> Result<Db, OpenError> {
+        let sql = |source| OpenError::Sql {
+            path: path.display().to_string(),
+            source,
+        };
+        let mut conn = Connection::open(path).map_err(sql)?;
+        // WAL: readers do not block the writer; synchronous=FULL: a committed transaction
+        // survives a power cut, which the restart guarantees rely on.
+        conn.pragma_update(None, "journal_mode", "WAL")
+            .map_err(sql)?;
+        conn.pragma_update(None, "synchronous", "FULL")
+            .map_err(sql)?;
+        conn.pragma_update(None, "foreign_keys", "ON")
+            .map_err(sql)?;
+        conn.busy_timeout(std::time::Duration::from_secs(5))
+            .map_err(sql)?;
+        migrations::migrate(&mut conn)?;
+        Ok(Db {
+            conn: Arc::new(Mutex::new(conn)),
+        })
+    }
+
+    /// An empty in-memory database at the current schema (for building the router
+    /// without a data folder, as [`crate::openapi`] does).
+    pub fn in_memory() -> Db {
+        let mut conn = Connection::open_in_memory().expect("SQLite opens an in-memory database");
+        migrations::migrate(&mut conn).expect("the schema applies to an empty database");
+        Db {
+            conn: Arc::new(Mutex::new(conn)),
+        }
+    }
+
+    /// Runs `f` with the connection on the current thread (which must be allowed to
+    /// block).
+    pub fn with<R>(&self, f: impl FnOnce(&mut Connection) -> R) -> R {
+        // A panic inside `f` poisons the mutex; the connection itself is still usable
+        // (SQLite rolls back an unfinished transaction when it is dropped).
+        let mut conn = self.conn.lock().unwrap_or_else(|p| p.into_inner());
+        f(&mut conn)
+    }
+
+    /// Runs `f` with the connection on the blocking pool.
+    pub async fn run<R: Send + 'static>(
+        &self,
+        f: impl FnOnce(&mut Connection) -> R + Send + 'static,
+    ) -> R {
+        let db = self.clone();
+        match tokio::task::spawn_blocking(move || db.with(f)).await {
+            Ok(r) => r,
+            Err(e) => std::panic::resume_unwind(e.into_panic()),
+        }
+    }
+}

@@ -1,0 +1,137 @@
+//! The tile upload pipeline, start to end on one blocking thread (a client that hangs up
+//! cannot stop it half-way): is the lease current, is the tile good, store it, mark the
+//! task done (one transaction), then assemble the frame or write a progressive preview.
+
+use proto::{ResultMetadata, TaskToken};
+
+use crate::app::{now_ms, App};
+use crate::assembly;
+use crate::error::Result;
+use crate::scheduler::{self, Accepted};
+
+/// What became of an upload.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Received {
+    /// First upload for the task (`false`: a duplicate, ignored).
+    pub accepted: bool,
+    /// The task's job.
+    pub job: u64,
+    /// The task's frame.
+    pub frame: i32,
+    /// The frame is now assembled.
+    pub frame_done: bool,
+}
+
+/// Checks, stores and accepts one tile.
+pub fn receive(
+    app: &App,
+    worker: u64,
+    token: TaskToken,
+    meta: &ResultMetadata,
+    bytes: &[u8],
+) -> Result<Received> {
+    let (fresh, task) = app
+        .db
+        .with(|c| scheduler::precheck_upload(c, worker, token))?;
+    if !fresh {
+        return Ok(Received {
+            accepted: false,
+            job: task.job_id,
+            frame: task.frame,
+            frame_done: false,
+        });
+    }
+    let spec = app.db.with(|c| scheduler::job_spec(c, task.job_id))?;
+    if let Err(e) = assembly::check_tile(bytes, meta, &task, (spec.width, spec.height)) {
+        app.metrics.tile_refused();
+        return Err(e);
+    }
+    crate::store::write_atomic(&app.store.tile(task.job_id, task.id), bytes)?;
+    let now = now_ms();
+    let accepted = app
+        .db
+        .with(|c| scheduler::accept(c, worker, token, meta.rays, meta.render_ms, now))?;
+    match accepted {
+        Accepted::Duplicate => Ok(Received {
+            accepted: false,
+            job: task.job_id,
+            frame: task.frame,
+            frame_done: false,
+        }),
+        Accepted::New {
+            job,
+            frame,
+            frame_complete,
+            pass_complete,
+            ..
+        } => {
+            app.metrics.tile_accepted(bytes.len());
+            if frame_complete {
+                finish_frame(app, job, frame)?;
+            } else if pass_complete {
+                preview_frame(app, job, frame)?;
+            }
+            Ok(Received {
+                accepted: true,
+                job,
+                frame,
+                frame_done: frame_complete,
+            })
+        }
+    }
+}
+
+/// Assembles a frame whose tasks are all done: EXR and PNG written atomically, the frame
+/// marked assembled, then its tile files removed.
+pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
+    let _guard = app.assembly.lock().unwrap_or_else(|p| p.into_inner());
+    let (spec, tasks, assembled) = app.db.with(|c| -> Result<_> {
+        Ok((
+            scheduler::job_spec(c, job)?,
+            scheduler::done_tasks_of_frame(c, job, frame)?,
+            is_assembled(c, job, frame)?,
+        ))
+    })?;
+    // Another caller (the upload that completed it, or the sweeper) got here first.
+    if assembled {
+        return Ok(());
+    }
+    let layers = assembly::build_frame(&app.store, &spec, &tasks)?;
+    assembly::write_frame(&app.store, job, frame, &spec, &layers)?;
+    let now = now_ms();
+    app.db
+        .with(|c| scheduler::mark_assembled(c, job, frame, now))?;
+    for t in &tasks {
+        // The frame holds them now; a leftover tile only costs disk.
+        let _ = std::fs::remove_file(app.store.tile(job, t.id));
+    }
+    Ok(())
+}
+
+/// Writes a progressive PNG of a frame from the passes accepted so far (not once the frame
+/// is assembled: the final preview must not be replaced by an older one).
+pub fn preview_frame(app: &App, job: u64, frame: i32) -> Result<()> {
+    let _guard = app.assembly.lock().unwrap_or_else(|p| p.into_inner());
+    let (spec, tasks, assembled) = app.db.with(|c| -> Result<_> {
+        let assembled = is_assembled(c, job, frame)?;
+        Ok((
+            scheduler::job_spec(c, job)?,
+            scheduler::done_tasks_of_frame(c, job, frame)?,
+            assembled,
+        ))
+    })?;
+    if assembled {
+        return Ok(());
+    }
+    let layers = assembly::build_frame(&app.store, &spec, &tasks)?;
+    assembly::write_preview(&app.store, job, frame, &spec, &layers)
+}
+
+/// Whether the frame is marked assembled.
+fn is_assembled(c: &rusqlite::Connection, job: u64, frame: i32) -> Result<bool> {
+    Ok(c.query_row(
+        "SELECT assembled_ms IS NOT NULL FROM frames WHERE job_id = ?1 AND frame = ?2",
+        rusqlite::params![job, frame],
+        |r| r.get(0),
+    )?)
+}

@@ -1,0 +1,46 @@
+//! Every bound the server enforces, in one place. The job-spec bounds are checked in
+//! `spec.rs`, each error naming the field; the byte limits are per-route body limits.
+
+/// Longest side of a frame, pixels.
+pub const MAX_RESOLUTION: u32 = 16_384;
+/// Samples per pixel.
+pub const MAX_SPP: u32 = 1_000_000;
+/// Frames per job.
+pub const MAX_FRAMES: u64 = 100_000;
+/// Largest frame number (file names stay readable; the tracer keys frames by `i32`).
+pub const MAX_FRAME_NUMBER: i32 = 9_999_999;
+/// Frames per second.
+pub const MAX_FPS: f64 = 1_000.0;
+/// Bounces.
+pub const MAX_DEPTH: u32 = 1_024;
+/// Smallest and largest tile side, pixels.
+pub const MIN_TILE_SIZE: u32 = 8;
+/// Largest tile side: a 1024² tile is 46 MB of f32 channels, under [`MAX_TILE_BYTES`].
+pub const MAX_TILE_SIZE: u32 = 1_024;
+/// Sample passes per tile.
+pub const MAX_SAMPLE_PASSES: u32 = 256;
+/// |priority|.
+pub const MAX_PRIORITY: i32 = 1_000;
+/// Attempts per task.
+pub const MAX_ATTEMPTS: u32 = 100;
+/// Shutter open/close, in frames either side of the frame.
+pub const MAX_SHUTTER_FRAMES: f64 = 10.0;
+/// Motion steps across the shutter.
+pub const MAX_MOTION_STEPS: u32 = 256;
+/// Length of a job name, bytes.
+pub const MAX_NAME_BYTES: usize = 200;
+/// Default bound on tasks per job (configurable in [`crate::Config`]).
+pub const DEFAULT_MAX_TASKS_PER_JOB: u64 = 1_000_000;
+/// Default scene upload limit: 512 MiB.
+pub const DEFAULT_MAX_SCENE_BYTES: usize = 512 << 20;
+/// Tile upload limit: 64 MiB.
+pub const MAX_TILE_BYTES: usize = 64 << 20;
+/// JSON request bodies (job specs, heartbeats, registrations): 64 KiB.
+pub const MAX_JSON_BYTES: usize = 64 << 10;
+/// Worker name and version strings, bytes.
+pub const MAX_WORKER_TEXT_BYTES: usize = 200;
+/// Failure message kept per report, bytes (longer ones are cut).
+pub const MAX_FAILURE_MESSAGE_BYTES: usize = 4_096;
+/// Pixel samples one task should hold by default: a few seconds on a worker (64×64
+/// pixels at 256 samples, about 1M camera paths).
+pub const TARGET_TASK_PIXEL_SAMPLES: u64 = 1 << 20;

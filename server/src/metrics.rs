@@ -1,0 +1,137 @@
+//! Prometheus metrics at `/metrics`. Counters (tiles and bytes received, lease latency)
+//! are recorded as they happen; gauges (jobs, tasks and workers by state) are read from
+//! the database at scrape time, so they are right after a restart too.
+//!
+//! Each server owns its recorder (used through `metrics::with_local_recorder`) instead of
+//! installing a global one, so that several servers in one test process keep separate
+//! numbers.
+
+use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle, PrometheusRecorder};
+use rusqlite::Connection;
+
+use crate::error::Result;
+
+/// The server's recorder.
+pub struct Metrics {
+    recorder: PrometheusRecorder,
+    handle: PrometheusHandle,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        let recorder = PrometheusBuilder::new().build_recorder();
+        let handle = recorder.handle();
+        Metrics { recorder, handle }
+    }
+}
+
+/// Gauges read from the database.
+#[derive(Debug, Default)]
+pub struct Snapshot {
+    jobs: Vec<(String, u64)>,
+    tasks: Vec<(String, u64)>,
+    workers_online: u64,
+    workers_total: u64,
+    /// Open server-sent event streams.
+    pub listeners: usize,
+}
+
+impl Metrics {
+    fn record(&self, f: impl FnOnce()) {
+        metrics::with_local_recorder(&self.recorder, f);
+    }
+
+    /// A tile of `bytes` was accepted.
+    pub fn tile_accepted(&self, bytes: usize) {
+        self.record(|| {
+            metrics::counter!("tessera_tiles_received_total").increment(1);
+            metrics::counter!("tessera_tile_bytes_received_total").increment(bytes as u64);
+        });
+    }
+
+    /// A tile was refused (bad checksum, size, channels, values).
+    pub fn tile_refused(&self) {
+        self.record(|| metrics::counter!("tessera_tiles_refused_total").increment(1));
+    }
+
+    /// A scene of `bytes` was stored.
+    pub fn scene_stored(&self, bytes: usize) {
+        self.record(|| {
+            metrics::counter!("tessera_scene_bytes_received_total").increment(bytes as u64)
+        });
+    }
+
+    /// A lease request was answered with a task after `seconds`.
+    pub fn lease_granted(&self, seconds: f64) {
+        self.record(|| {
+            metrics::counter!("tessera_leases_total").increment(1);
+            metrics::histogram!("tessera_lease_latency_seconds").record(seconds);
+        });
+    }
+
+    /// Leases that expired.
+    pub fn leases_expired(&self, n: u64) {
+        self.record(|| metrics::counter!("tessera_leases_expired_total").increment(n));
+    }
+
+    /// The Prometheus text, with the gauges of `snapshot`.
+    pub fn render(&self, snapshot: &Snapshot) -> String {
+        self.record(|| {
+            for (state, n) in &snapshot.jobs {
+                metrics::gauge!("tessera_jobs", "state" => state.clone()).set(*n as f64);
+            }
+            for (state, n) in &snapshot.tasks {
+                metrics::gauge!("tessera_tasks", "state" => state.clone()).set(*n as f64);
+            }
+            metrics::gauge!("tessera_workers", "state" => "online")
+                .set(snapshot.workers_online as f64);
+            metrics::gauge!("tessera_workers", "state" => "offline")
+                .set((snapshot.workers_total - snapshot.workers_online) as f64);
+            metrics::gauge!("tessera_event_listeners").set(snapshot.listeners as f64);
+        });
+        self.handle.render()
+    }
+}
+
+/// Reads the gauges: jobs by state, tasks by state, workers online (seen within two lease
+/// periods) and offline.
+pub fn snapshot(conn: &Connection, now: i64, lease_ms: i64) -> Result<Snapshot> {
+    let mut jobs: Vec<(String, u64)> =
+        ["queued", "running", "paused", "cancelled", "failed", "done"]
+            .iter()
+            .map(|s| (s.to_string(), 0))
+            .collect();
+    for job in crate::status::list_jobs(conn, now)? {
+        let name = serde_json::to_value(job.state)?
+            .as_str()
+            .unwrap_or("")
+            .to_string();
+        if let Some(slot) = jobs.iter_mut().find(|(s, _)| *s == name) {
+            slot.1 += 1;
+        }
+    }
+    let mut tasks: Vec<(String, u64)> = crate::state::TaskState::ALL
+        .iter()
+        .map(|s| (s.as_str().to_string(), 0))
+        .collect();
+    let mut stmt = conn.prepare("SELECT state, count(*) FROM tasks GROUP BY state")?;
+    let rows = stmt.query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, u64>(1)?)))?;
+    for row in rows {
+        let (state, n) = row?;
+        if let Some(slot) = tasks.iter_mut().find(|(s, _)| *s == state) {
+            slot.1 = n;
+        }
+    }
+    let (workers_total, workers_online) = conn.query_row(
+        "SELECT count(*), coalesce(sum(last_seen_ms >= ?1), 0) FROM workers",
+        [now - 2 * lease_ms],
+        |r| Ok((r.get(0)?, r.get(1)?)),
+    )?;
+    Ok(Snapshot {
+        jobs,
+        tasks,
+        workers_online,
+        workers_total,
+        listeners: 0,
+    })
+}

@@ -1,0 +1,172 @@
+//! Versioned schema migrations. The database's `user_version` is the number of migrations
+//! applied; each migration runs in its own transaction. Append, never edit: a database in
+//! the field has already run the old ones.
+
+use rusqlite::Connection;
+
+/// Migration `i` takes the schema from version `i` to `i + 1`.
+const MIGRATIONS: &[&str] = &[
+    // 1: scenes, jobs, frames, tasks, workers, failures, blocks, event log.
+    r#"
+    CREATE TABLE scenes (
+        digest      TEXT PRIMARY KEY,
+        size        INTEGER NOT NULL,
+        info        TEXT NOT NULL,             -- proto::SceneInfo as JSON
+        created_ms  INTEGER NOT NULL
+    );
+    CREATE TABLE jobs (
+        id              INTEGER PRIMARY KEY AUTOINCREMENT,
+        name            TEXT NOT NULL,
+        scene           TEXT NOT NULL REFERENCES scenes(digest),
+        spec            TEXT NOT NULL,         -- resolved proto::JobSpec as JSON
+        control         TEXT NOT NULL CHECK (control IN ('active', 'paused', 'cancelled')),
+        priority        INTEGER NOT NULL,
+        max_attempts    INTEGER NOT NULL,
+        created_ms      INTEGER NOT NULL,
+        first_lease_ms  INTEGER,
+        finished_ms     INTEGER,               -- set while nothing is left to run
+        pixel_samples   INTEGER NOT NULL       -- width * height * spp * frames
+    );
+    CREATE TABLE frames (
+        job_id        INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+        frame         INTEGER NOT NULL,
+        tasks_total   INTEGER NOT NULL,
+        tasks_done    INTEGER NOT NULL DEFAULT 0,
+        assembled_ms  INTEGER,
+        PRIMARY KEY (job_id, frame)
+    );
+    CREATE TABLE tasks (
+        id            INTEGER PRIMARY KEY AUTOINCREMENT,
+        job_id        INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+        frame         INTEGER NOT NULL,
+        tile          INTEGER NOT NULL,
+        pass          INTEGER NOT NULL,
+        x INTEGER NOT NULL, y INTEGER NOT NULL, w INTEGER NOT NULL, h INTEGER NOT NULL,
+        sample_start  INTEGER NOT NULL,
+        sample_end    INTEGER NOT NULL,
+        state         TEXT NOT NULL
+                      CHECK (state IN ('queued', 'leased', 'done', 'failed', 'cancelled')),
+        attempt       INTEGER NOT NULL DEFAULT 0,   -- leases granted: the fencing token
+        failures      INTEGER NOT NULL DEFAULT 0,   -- failed or expired attempts
+        worker_id     INTEGER,
+        leased_ms     INTEGER,
+        deadline_ms   INTEGER,
+        done_ms       INTEGER,
+        rays          INTEGER,
+        render_ms     INTEGER
+    );
+    CREATE INDEX tasks_queue ON tasks (state, job_id, frame, pass, tile);
+    CREATE INDEX tasks_by_job ON tasks (job_id, frame, state);
+    CREATE INDEX tasks_by_worker ON tasks (worker_id, state);
+    CREATE TABLE workers (
+        id             INTEGER PRIMARY KEY AUTOINCREMENT,
+        name           TEXT NOT NULL,
+        threads        INTEGER NOT NULL,
+        version        TEXT NOT NULL,
+        registered_ms  INTEGER NOT NULL,
+        last_seen_ms   INTEGER NOT NULL,
+        tasks_done     INTEGER NOT NULL DEFAULT 0
+    );
+    CREATE TABLE task_failures (
+        task_id    INTEGER NOT NULL REFERENCES tasks(id) ON DELETE CASCADE,
+        job_id     INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+        worker_id  INTEGER NOT NULL,
+        attempt    INTEGER NOT NULL,
+        reason     TEXT NOT NULL CHECK (reason IN ('reported', 'expired')),
+        message    TEXT NOT NULL,
+        at_ms      INTEGER NOT NULL
+    );
+    CREATE INDEX task_failures_by_worker ON task_failures (job_id, worker_id);
+    CREATE INDEX task_failures_by_task ON task_failures (task_id, worker_id);
+    CREATE TABLE job_blocks (
+        job_id     INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+        worker_id  INTEGER NOT NULL,
+        PRIMARY KEY (job_id, worker_id)
+    );
+    CREATE TABLE events (
+        id      INTEGER PRIMARY KEY AUTOINCREMENT,
+        at_ms   INTEGER NOT NULL,
+        job_id  INTEGER,
+        kind    TEXT NOT NULL,
+        detail  TEXT NOT NULL
+    );
+    "#,
+];
+
+/// The schema version this build writes.
+pub const SCHEMA_VERSION: u32 = MIGRATIONS.len() as u32;
+
+/// Why the database cannot be brought to [`SCHEMA_VERSION`].
+#[derive(Debug, thiserror::Error)]
+pub enum MigrationError {
+    /// The database was written by a newer Tessera.
+    #[error(
+        "the database has schema version {found}, newer than this server's {SCHEMA_VERSION}; \
+         run a newer tessera or point --data at another folder"
+    )]
+    TooNew {
+        /// The version found.
+        found: u32,
+    },
+    /// SQLite refused a migration.
+    #[error("migrating the database to version {to}: {source}")]
+    Sql {
+        /// The version being reached.
+        to: u32,
+        /// What SQLite said.
+        #[source]
+        source: rusqlite::Error,
+    },
+}
+
+/// Applies every migration the database has not run yet.
+pub fn migrate(conn: &mut Connection) -> Result<u32, MigrationError> {
+    let sql_err = |to| move |source| MigrationError::Sql { to, source };
+    let found: u32 = conn
+        .pragma_query_value(None, "user_version", |r| r.get(0))
+        .map_err(sql_err(0))?;
+    if found > SCHEMA_VERSION {
+        return Err(MigrationError::TooNew { found });
+    }
+    for (i, sql) in MIGRATIONS.iter().enumerate().skip(found as usize) {
+        let to = i as u32 + 1;
+        let tx = conn.transaction().map_err(sql_err(to))?;
+        tx.execute_batch(sql).map_err(sql_err(to))?;
+        tx.pragma_update(None, "user_version", to)
+            .map_err(sql_err(to))?;
+        tx.commit().map_err(sql_err(to))?;
+    }
+    Ok(SCHEMA_VERSION)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fresh_database_reaches_current_version_and_stays_there() {
+        let mut conn = Connection::open_in_memory().unwrap();
+        assert_eq!(migrate(&mut conn).unwrap(), SCHEMA_VERSION);
+        // Running again applies nothing (the tables exist; a rerun would fail).
+        assert_eq!(migrate(&mut conn).unwrap(), SCHEMA_VERSION);
+        let tables: i64 = conn
+            .query_row(
+                "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name IN \
+                 ('scenes','jobs','frames','tasks','workers','task_failures','job_blocks','events')",
+                [],
+                |r| r.get(0),
+            )
+            .unwrap();
+        assert_eq!(tables, 8);
+    }
+
+    #[test]
+    fn newer_database_is_refused() {
+        let mut conn = Connection::open_in_memory().unwrap();
+        conn.pragma_update(None, "user_version", SCHEMA_VERSION + 1)
+            .unwrap();
+        let err = migrate(&mut conn).unwrap_err();
+        assert!(matches!(err, MigrationError::TooNew { found } if found == SCHEMA_VERSION + 1));
+        assert!(err.to_string().contains("newer"));
+    }
+}

@@ -1,0 +1,841 @@
+//! Scheduling and every task state change, each one database transaction: lease (priority,
+//! then age), heartbeat, accept, fail, expire, revoke on restart, and the job controls
+//! (pause, resume, cancel, retry, delete). Every state change goes through
+//! [`state::transition`](crate::state::transition); times are passed in (`now`, Unix ms) so
+//! tests need no clock.
+
+use proto::{FailureAck, JobSpec, Lease, Rect, SampleSpan, TaskToken};
+use rusqlite::{params, Connection, OptionalExtension, Transaction};
+use tracer::film::{SampleRange, TileRect};
+
+use crate::error::{Error, Result};
+use crate::spec::Plan;
+use crate::state::{transition, TaskEvent, TaskState};
+
+/// The scheduler's settings.
+#[derive(Clone, Copy, Debug)]
+pub struct Timing {
+    /// Lease length, ms.
+    pub lease_ms: i64,
+    /// A worker that failed this many tasks of a job is blocked from it.
+    pub block_after_failures: u32,
+}
+
+/// One row of `tasks`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TaskRow {
+    /// Task id.
+    pub id: u64,
+    /// Job id.
+    pub job_id: u64,
+    /// Frame number.
+    pub frame: i32,
+    /// Tile index in the frame.
+    pub tile: u32,
+    /// Sample pass index.
+    pub pass: u32,
+    /// The tile.
+    pub rect: TileRect,
+    /// The samples.
+    pub samples: SampleRange,
+    /// State.
+    pub state: TaskState,
+    /// Leases granted so far (the current lease's attempt).
+    pub attempt: u32,
+    /// Failed or expired attempts.
+    pub failures: u32,
+    /// The worker holding the lease.
+    pub worker_id: Option<u64>,
+}
+
+const TASK_COLUMNS: &str =
+    "id, job_id, frame, tile, pass, x, y, w, h, sample_start, sample_end, state, attempt, \
+     failures, worker_id";
+
+fn task_from_row(r: &rusqlite::Row) -> rusqlite::Result<TaskRow> {
+    let state: String = r.get(11)?;
+    Ok(TaskRow {
+        id: r.get(0)?,
+        job_id: r.get(1)?,
+        frame: r.get(2)?,
+        tile: r.get(3)?,
+        pass: r.get(4)?,
+        rect: TileRect::new(r.get(5)?, r.get(6)?, r.get(7)?, r.get(8)?),
+        samples: SampleRange::new(r.get(9)?, r.get(10)?),
+        state: TaskState::parse(&state).ok_or_else(|| {
+            rusqlite::Error::FromSqlConversionFailure(
+                11,
+                rusqlite::types::Type::Text,
+                format!("unknown task state `{state}`").into(),
+            )
+        })?,
+        attempt: r.get(12)?,
+        failures: r.get(13)?,
+        worker_id: r.get(14)?,
+    })
+}
+
+/// The task `id`, if it exists.
+pub fn load_task(conn: &Connection, id: u64) -> Result<Option<TaskRow>> {
+    Ok(conn
+        .query_row(
+            &format!("SELECT {TASK_COLUMNS} FROM tasks WHERE id = ?1"),
+            [id],
+            task_from_row,
+        )
+        .optional()?)
+}
+
+/// Moves `task` by `event` through the transition table and stores the new state; the
+/// caller updates the other columns in the same transaction.
+fn set_state(tx: &Transaction, task: &TaskRow, event: TaskEvent) -> Result<TaskState> {
+    let to = transition(task.state, event)?;
+    let changed = tx.execute(
+        "UPDATE tasks SET state = ?1 WHERE id = ?2 AND state = ?3",
+        params![to.as_str(), task.id, task.state.as_str()],
+    )?;
+    if changed != 1 {
+        return Err(Error::Conflict(format!(
+            "task {} changed meanwhile",
+            task.id
+        )));
+    }
+    Ok(to)
+}
+
+/// Appends to the event log.
+fn log(tx: &Transaction, now: i64, job: Option<u64>, kind: &str, detail: &str) -> Result<()> {
+    tx.execute(
+        "INSERT INTO events (at_ms, job_id, kind, detail) VALUES (?1, ?2, ?3, ?4)",
+        params![now, job, kind, detail],
+    )?;
+    Ok(())
+}
+
+/// Sets or clears `jobs.finished_ms`: set when nothing is left to run (every task done,
+/// failed or cancelled and every complete frame assembled), cleared when work reappears.
+pub fn update_finished(tx: &Transaction, job: u64, now: i64) -> Result<()> {
+    let open: i64 = tx.query_row(
+        "SELECT (SELECT count(*) FROM tasks WHERE job_id = ?1 AND state IN ('queued', 'leased'))
+              + (SELECT count(*) FROM frames WHERE job_id = ?1
+                   AND tasks_done = tasks_total AND assembled_ms IS NULL)",
+        [job],
+        |r| r.get(0),
+    )?;
+    if open == 0 {
+        tx.execute(
+            "UPDATE jobs SET finished_ms = coalesce(finished_ms, ?2) WHERE id = ?1",
+            params![job, now],
+        )?;
+    } else {
+        tx.execute("UPDATE jobs SET finished_ms = NULL WHERE id = ?1", [job])?;
+    }
+    Ok(())
+}
+
+/// Records that `worker` called now; fails if it never registered.
+fn touch_worker(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
+    let n = tx.execute(
+        "UPDATE workers SET last_seen_ms = ?2 WHERE id = ?1",
+        params![worker, now],
+    )?;
+    if n == 0 {
+        return Err(Error::NotFound(format!(
+            "worker {worker} is not registered (the server's data folder may have been \
+             replaced); register again"
+        )));
+    }
+    Ok(())
+}
+
+/// Stores a new job and its tasks; returns its id.
+pub fn create_job(conn: &mut Connection, plan: &Plan, now: i64) -> Result<u64> {
+    let tx = conn.transaction()?;
+    let spec = &plan.spec;
+    tx.execute(
+        "INSERT INTO jobs (name, scene, spec, control, priority, max_attempts, created_ms,
+                           pixel_samples)
+         VALUES ('', ?1, ?2, 'active', ?3, ?4, ?5, ?6)",
+        params![
+            spec.scene,
+            serde_json::to_string(spec)?,
+            spec.priority,
+            spec.max_attempts,
+            now,
+            plan.pixel_samples() as i64
+        ],
+    )?;
+    let id = tx.last_insert_rowid() as u64;
+    let name = spec.name.clone().unwrap_or_else(|| format!("job {id}"));
+    tx.execute("UPDATE jobs SET name = ?2 WHERE id = ?1", params![id, name])?;
+    {
+        let mut frame =
+            tx.prepare("INSERT INTO frames (job_id, frame, tasks_total) VALUES (?1, ?2, ?3)")?;
+        for &f in &plan.frames {
+            frame.execute(params![id, f, plan.tasks_per_frame()])?;
+        }
+        let mut task = tx.prepare(
+            "INSERT INTO tasks (job_id, frame, tile, pass, x, y, w, h, sample_start,
+                                sample_end, state)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued')",
+        )?;
+        for t in plan.tasks() {
+            task.execute(params![
+                id,
+                t.frame,
+                t.tile,
+                t.pass,
+                t.rect.x,
+                t.rect.y,
+                t.rect.width,
+                t.rect.height,
+                t.samples.start,
+                t.samples.end
+            ])?;
+        }
+    }
+    log(
+        &tx,
+        now,
+        Some(id),
+        "job_created",
+        &format!("{} tasks", plan.task_count()),
+    )?;
+    tx.commit()?;
+    Ok(id)
+}
+
+/// Registers a worker; returns its id.
+pub fn register_worker(
+    conn: &mut Connection,
+    name: &str,
+    threads: u32,
+    version: &str,
+    now: i64,
+) -> Result<u64> {
+    let tx = conn.transaction()?;
+    tx.execute(
+        "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms)
+         VALUES (?1, ?2, ?3, ?4, ?4)",
+        params![name, threads, version, now],
+    )?;
+    let id = tx.last_insert_rowid() as u64;
+    log(&tx, now, None, "worker_registered", &format!("{id} {name}"))?;
+    tx.commit()?;
+    Ok(id)
+}
+
+/// The next queued task for `worker` in job `job`: tasks it has not failed first; a task
+/// it failed only when no other live worker could take it.
+fn next_task_in_job(
+    tx: &Transaction,
+    job: u64,
+    worker: u64,
+    live_since: i64,
+) -> Result<Option<u64>> {
+    let fresh: Option<u64> = tx
+        .query_row(
+            "SELECT t.id FROM tasks t
+             WHERE t.state = 'queued' AND t.job_id = ?1
+               AND NOT EXISTS (SELECT 1 FROM task_failures f
+                               WHERE f.task_id = t.id AND f.worker_id = ?2)
+             ORDER BY t.frame, t.pass, t.tile LIMIT 1",
+            params![job, worker],
+            |r| r.get(0),
+        )
+        .optional()?;
+    if fresh.is_some() {
+        return Ok(fresh);
+    }
+    Ok(tx
+        .query_row(
+            "SELECT t.id FROM tasks t
+             WHERE t.state = 'queued' AND t.job_id = ?1
+               AND NOT EXISTS (
+                   SELECT 1 FROM workers w
+                   WHERE w.id != ?2 AND w.last_seen_ms >= ?3
+                     AND NOT EXISTS (SELECT 1 FROM task_failures f
+                                     WHERE f.task_id = t.id AND f.worker_id = w.id)
+                     AND NOT EXISTS (SELECT 1 FROM job_blocks b
+                                     WHERE b.job_id = t.job_id AND b.worker_id = w.id))
+             ORDER BY t.frame, t.pass, t.tile LIMIT 1",
+            params![job, worker, live_since],
+            |r| r.get(0),
+        )
+        .optional()?)
+}
+
+/// Leases the next task to `worker`: active jobs by priority (highest first), then age;
+/// within a job, frame by frame and pass by pass so that previews fill in evenly.
+pub fn lease(
+    conn: &mut Connection,
+    worker: u64,
+    now: i64,
+    timing: Timing,
+) -> Result<Option<Lease>> {
+    let tx = conn.transaction()?;
+    touch_worker(&tx, worker, now)?;
+    // A worker counts as live if it called within two lease periods.
+    let live_since = now - 2 * timing.lease_ms;
+    let jobs: Vec<u64> = {
+        let mut stmt = tx.prepare(
+            "SELECT j.id FROM jobs j
+             WHERE j.control = 'active'
+               AND EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = j.id AND t.state = 'queued')
+               AND NOT EXISTS (SELECT 1 FROM job_blocks b
+                               WHERE b.job_id = j.id AND b.worker_id = ?1)
+             ORDER BY j.priority DESC, j.created_ms, j.id",
+        )?;
+        let rows = stmt.query_map([worker], |r| r.get(0))?;
+        rows.collect::<rusqlite::Result<_>>()?
+    };
+    let mut chosen = None;
+    for job in jobs {
+        if let Some(id) = next_task_in_job(&tx, job, worker, live_since)? {
+            chosen = Some(id);
+            break;
+        }
+    }
+    let Some(id) = chosen else {
+        tx.commit()?;
+        return Ok(None);
+    };
+    let task = load_task(&tx, id)?.ok_or_else(|| Error::Internal("task vanished".into()))?;
+    set_state(&tx, &task, TaskEvent::Lease)?;
+    let deadline = now + timing.lease_ms;
+    let attempt = task.attempt + 1;
+    tx.execute(
+        "UPDATE tasks SET attempt = ?2, worker_id = ?3, leased_ms = ?4, deadline_ms = ?5
+         WHERE id = ?1",
+        params![id, attempt, worker, now, deadline],
+    )?;
+    tx.execute(
+        "UPDATE jobs SET first_lease_ms = coalesce(first_lease_ms, ?2) WHERE id = ?1",
+        params![task.job_id, now],
+    )?;
+    let spec = job_spec(&tx, task.job_id)?;
+    tx.commit()?;
+    Ok(Some(Lease {
+        token: TaskToken {
+            task_id: id,
+            attempt,
+        },
+        job_id: task.job_id,
+        scene: spec.scene,
+        frame: task.frame,
+        fps: spec.fps,
+        width: spec.width,
+        height: spec.height,
+        camera: spec.camera,
+        shutter: spec.shutter,
+        motion_steps: spec.motion_steps,
+        animation: spec.animation,
+        max_depth: spec.max_depth,
+        seed: spec.seed,
+        tile: Rect {
+            x: task.rect.x,
+            y: task.rect.y,
+            width: task.rect.width,
+            height: task.rect.height,
+        },
+        samples: SampleSpan {
+            start: task.samples.start,
+            end: task.samples.end,
+        },
+        deadline_ms: deadline,
+    }))
+}
+
+/// The resolved spec of a job.
+pub fn job_spec(conn: &Connection, job: u64) -> Result<JobSpec> {
+    let json: String = conn
+        .query_row("SELECT spec FROM jobs WHERE id = ?1", [job], |r| r.get(0))
+        .optional()?
+        .ok_or_else(|| Error::NotFound(format!("job {job} does not exist")))?;
+    Ok(serde_json::from_str(&json)?)
+}
+
+/// Checks that `token` is `worker`'s current lease; the error says why not, for the
+/// worker's log.
+pub fn check_token(conn: &Connection, worker: u64, token: TaskToken) -> Result<TaskRow> {
+    let task = load_task(conn, token.task_id)?.ok_or_else(|| {
+        Error::LeaseGone(format!(
+            "task {} no longer exists (its job was deleted)",
+            token.task_id
+        ))
+    })?;
+    if task.state == TaskState::Leased
+        && task.attempt == token.attempt
+        && task.worker_id == Some(worker)
+    {
+        return Ok(task);
+    }
+    let control: String = conn.query_row(
+        "SELECT control FROM jobs WHERE id = ?1",
+        [task.job_id],
+        |r| r.get(0),
+    )?;
+    let why = match (task.state, control.as_str()) {
+        (_, "paused") => format!("job {} is paused", task.job_id),
+        (TaskState::Cancelled, _) | (_, "cancelled") => format!("job {} is cancelled", task.job_id),
+        (TaskState::Done, _) => "the task is already done".to_string(),
+        _ => format!(
+            "the lease (attempt {}) expired or was taken back; the task is now {} at attempt {}",
+            token.attempt,
+            task.state.as_str(),
+            task.attempt
+        ),
+    };
+    Err(Error::LeaseGone(format!("task {}: {why}", token.task_id)))
+}
+
+/// A heartbeat: extends `token`'s lease and returns the new deadline, or says the lease
+/// is gone (paused, cancelled, expired). Without a token it only marks the worker alive.
+pub fn heartbeat(
+    conn: &mut Connection,
+    worker: u64,
+    token: Option<TaskToken>,
+    now: i64,
+    timing: Timing,
+) -> Result<Option<i64>> {
+    let tx = conn.transaction()?;
+    touch_worker(&tx, worker, now)?;
+    let Some(token) = token else {
+        tx.commit()?;
+        return Ok(None);
+    };
+    let result = check_token(&tx, worker, token).and_then(|task| {
+        let deadline = now + timing.lease_ms;
+        tx.execute(
+            "UPDATE tasks SET deadline_ms = ?2 WHERE id = ?1",
+            params![task.id, deadline],
+        )?;
+        Ok(deadline)
+    });
+    // The worker's last-seen time is kept even when the lease is gone.
+    tx.commit()?;
+    result.map(Some)
+}
+
+/// What [`accept`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Accepted {
+    /// The task was already done; this upload is ignored.
+    Duplicate,
+    /// The tile is the task's result.
+    New {
+        /// The task's job.
+        job: u64,
+        /// Its frame.
+        frame: i32,
+        /// Its pass.
+        pass: u32,
+        /// Every task of the frame is now done: assemble it.
+        frame_complete: bool,
+        /// Every task of this pass of the frame is done: a preview can be made.
+        pass_complete: bool,
+    },
+}
+
+/// Whether an upload for `token` should be read at all: `Ok(true)` for the current lease,
+/// `Ok(false)` for a task already done (a duplicate to ignore), else the lease is gone.
+pub fn precheck_upload(
+    conn: &Connection,
+    worker: u64,
+    token: TaskToken,
+) -> Result<(bool, TaskRow)> {
+    if let Some(task) = load_task(conn, token.task_id)? {
+        if task.state == TaskState::Done {
+            return Ok((false, task));
+        }
+    }
+    check_token(conn, worker, token).map(|t| (true, t))
+}
+
+/// Marks `token`'s task done with its (validated, stored) tile. A second upload for a
+/// finished task is a [`Accepted::Duplicate`].
+pub fn accept(
+    conn: &mut Connection,
+    worker: u64,
+    token: TaskToken,
+    rays: u64,
+    render_ms: u64,
+    now: i64,
+) -> Result<Accepted> {
+    let tx = conn.transaction()?;
+    touch_worker(&tx, worker, now)?;
+    let (fresh, task) = precheck_upload(&tx, worker, token)?;
+    if !fresh {
+        tx.commit()?;
+        return Ok(Accepted::Duplicate);
+    }
+    set_state(&tx, &task, TaskEvent::Complete)?;
+    tx.execute(
+        "UPDATE tasks SET done_ms = ?2, rays = ?3, render_ms = ?4, deadline_ms = NULL
+         WHERE id = ?1",
+        params![task.id, now, rays as i64, render_ms as i64],
+    )?;
+    tx.execute(
+        "UPDATE workers SET tasks_done = tasks_done + 1 WHERE id = ?1",
+        [worker],
+    )?;
+    tx.execute(
+        "UPDATE frames SET tasks_done = tasks_done + 1 WHERE job_id = ?1 AND frame = ?2",
+        params![task.job_id, task.frame],
+    )?;
+    let frame_complete: bool = tx.query_row(
+        "SELECT tasks_done = tasks_total FROM frames WHERE job_id = ?1 AND frame = ?2",
+        params![task.job_id, task.frame],
+        |r| r.get(0),
+    )?;
+    let pass_left: i64 = tx.query_row(
+        "SELECT count(*) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND pass = ?3
+           AND state != 'done'",
+        params![task.job_id, task.frame, task.pass],
+        |r| r.get(0),
+    )?;
+    update_finished(&tx, task.job_id, now)?;
+    tx.commit()?;
+    Ok(Accepted::New {
+        job: task.job_id,
+        frame: task.frame,
+        pass: task.pass,
+        frame_complete,
+        pass_complete: pass_left == 0,
+    })
+}
+
+/// Records a failed attempt of `task` by `worker` (reported or expired): re-queues it, or
+/// fails it past its job's max attempts, and blocks the worker from the job once it has
+/// failed `block_after_failures` of its tasks.
+fn fail_attempt(
+    tx: &Transaction,
+    task: &TaskRow,
+    worker: u64,
+    reason: &str,
+    message: &str,
+    now: i64,
+    timing: Timing,
+) -> Result<FailureAck> {
+    let max_attempts: u32 = tx.query_row(
+        "SELECT max_attempts FROM jobs WHERE id = ?1",
+        [task.job_id],
+        |r| r.get(0),
+    )?;
+    let failures = task.failures + 1;
+    let exhausted = failures >= max_attempts;
+    let event = match reason {
+        "expired" => TaskEvent::Expire { exhausted },
+        _ => TaskEvent::Fail { exhausted },
+    };
+    let to = set_state(tx, task, event)?;
+    tx.execute(
+        "UPDATE tasks SET failures = ?2, worker_id = NULL, deadline_ms = NULL WHERE id = ?1",
+        params![task.id, failures],
+    )?;
+    tx.execute(
+        "INSERT INTO task_failures (task_id, job_id, worker_id, attempt, reason, message, at_ms)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+        params![
+            task.id,
+            task.job_id,
+            worker,
+            task.attempt,
+            reason,
+            message,
+            now
+        ],
+    )?;
+    let by_worker: u32 = tx.query_row(
+        "SELECT count(*) FROM task_failures WHERE job_id = ?1 AND worker_id = ?2",
+        params![task.job_id, worker],
+        |r| r.get(0),
+    )?;
+    let blocked = by_worker >= timing.block_after_failures;
+    if blocked {
+        let added = tx.execute(
+            "INSERT OR IGNORE INTO job_blocks (job_id, worker_id) VALUES (?1, ?2)",
+            params![task.job_id, worker],
+        )?;
+        if added > 0 {
+            log(
+                tx,
+                now,
+                Some(task.job_id),
+                "worker_blocked",
+                &format!("worker {worker} failed {by_worker} tasks of the job"),
+            )?;
+        }
+    }
+    log(
+        tx,
+        now,
+        Some(task.job_id),
+        if exhausted {
+            "task_failed"
+        } else {
+            "task_retry"
+        },
+        &format!(
+            "task {} attempt {} on worker {worker} ({reason}): {message}",
+            task.id, task.attempt
+        ),
+    )?;
+    update_finished(tx, task.job_id, now)?;
+    Ok(FailureAck {
+        requeued: to == TaskState::Queued,
+        task_failed: to == TaskState::Failed,
+        blocked_from_job: blocked,
+    })
+}
+
+/// A worker reports that it could not render its lease.
+pub fn fail(
+    conn: &mut Connection,
+    worker: u64,
+    token: TaskToken,
+    message: &str,
+    now: i64,
+    timing: Timing,
+) -> Result<(u64, FailureAck)> {
+    let tx = conn.transaction()?;
+    touch_worker(&tx, worker, now)?;
+    let task = check_token(&tx, worker, token)?;
+    let ack = fail_attempt(&tx, &task, worker, "reported", message, now, timing)?;
+    tx.commit()?;
+    Ok((task.job_id, ack))
+}
+
+/// Re-queues (or fails) every lease whose deadline passed; returns the jobs touched.
+pub fn expire(conn: &mut Connection, now: i64, timing: Timing) -> Result<Vec<u64>> {
+    let tx = conn.transaction()?;
+    let expired: Vec<TaskRow> = {
+        let mut stmt = tx.prepare(&format!(
+            "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased' AND deadline_ms < ?1"
+        ))?;
+        let rows = stmt.query_map([now], task_from_row)?;
+        rows.collect::<rusqlite::Result<_>>()?
+    };
+    let mut jobs = Vec::new();
+    for task in &expired {
+        let worker = task.worker_id.unwrap_or(0);
+        fail_attempt(
+            &tx,
+            task,
+            worker,
+            "expired",
+            "lease expired without a heartbeat",
+            now,
+            timing,
+        )?;
+        if !jobs.contains(&task.job_id) {
+            jobs.push(task.job_id);
+        }
+    }
+    tx.commit()?;
+    Ok(jobs)
+}
+
+/// At startup: every lease from before the restart is taken back (no attempt counted: the
+/// server, not the worker, lost it). Returns how many.
+pub fn revoke_all_leases(conn: &mut Connection, now: i64) -> Result<usize> {
+    let tx = conn.transaction()?;
+    let leased: Vec<TaskRow> = {
+        let mut stmt = tx.prepare(&format!(
+            "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased'"
+        ))?;
+        let rows = stmt.query_map([], task_from_row)?;
+        rows.collect::<rusqlite::Result<_>>()?
+    };
+    for task in &leased {
+        revoke(&tx, task)?;
+    }
+    if !leased.is_empty() {
+        log(
+            &tx,
+            now,
+            None,
+            "leases_revoked",
+            &format!("{} leases after a restart", leased.len()),
+        )?;
+    }
+    tx.commit()?;
+    Ok(leased.len())
+}
+
+fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {
+    set_state(tx, task, TaskEvent::Revoke)?;
+    tx.execute(
+        "UPDATE tasks SET worker_id = NULL, deadline_ms = NULL WHERE id = ?1",
+        [task.id],
+    )?;
+    Ok(())
+}
+
+fn job_tasks(tx: &Transaction, job: u64, states: &[TaskState]) -> Result<Vec<TaskRow>> {
+    let list: Vec<String> = states.iter().map(|s| format!("'{}'", s.as_str())).collect();
+    let mut stmt = tx.prepare(&format!(
+        "SELECT {TASK_COLUMNS} FROM tasks WHERE job_id = ?1 AND state IN ({})",
+        list.join(", ")
+    ))?;
+    let rows = stmt.query_map([job], task_from_row)?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+fn job_control(tx: &Transaction, job: u64) -> Result<String> {
+    tx.query_row("SELECT control FROM jobs WHERE id = ?1", [job], |r| {
+        r.get(0)
+    })
+    .optional()?
+    .ok_or_else(|| Error::NotFound(format!("job {job} does not exist")))
+}
+
+fn job_finished(tx: &Transaction, job: u64) -> Result<bool> {
+    Ok(tx.query_row(
+        "SELECT finished_ms IS NOT NULL FROM jobs WHERE id = ?1",
+        [job],
+        |r| r.get(0),
+    )?)
+}
+
+/// Pauses a job: nothing more is leased, and its live leases are taken back (their
+/// workers hear 409 on their next heartbeat).
+pub fn pause(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    match job_control(&tx, job)?.as_str() {
+        "cancelled" => return Err(Error::Conflict(format!("job {job} is cancelled"))),
+        "paused" => return Ok(()),
+        _ => {}
+    }
+    if job_finished(&tx, job)? {
+        return Err(Error::Conflict(format!(
+            "job {job} has nothing left to run"
+        )));
+    }
+    tx.execute("UPDATE jobs SET control = 'paused' WHERE id = ?1", [job])?;
+    for task in job_tasks(&tx, job, &[TaskState::Leased])? {
+        revoke(&tx, &task)?;
+    }
+    log(&tx, now, Some(job), "job_paused", "")?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Resumes a paused job.
+pub fn resume(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    match job_control(&tx, job)?.as_str() {
+        "cancelled" => return Err(Error::Conflict(format!("job {job} is cancelled"))),
+        "active" => return Ok(()),
+        _ => {}
+    }
+    tx.execute("UPDATE jobs SET control = 'active' WHERE id = ?1", [job])?;
+    log(&tx, now, Some(job), "job_resumed", "")?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Cancels a job: its queued and leased tasks are cancelled (workers hear 409).
+pub fn cancel(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    if job_control(&tx, job)? == "cancelled" {
+        return Ok(());
+    }
+    let open = job_tasks(&tx, job, &[TaskState::Queued, TaskState::Leased])?;
+    if open.is_empty() && job_finished(&tx, job)? {
+        return Err(Error::Conflict(format!("job {job} has already finished")));
+    }
+    tx.execute("UPDATE jobs SET control = 'cancelled' WHERE id = ?1", [job])?;
+    for task in &open {
+        set_state(&tx, task, TaskEvent::Cancel)?;
+        tx.execute(
+            "UPDATE tasks SET worker_id = NULL, deadline_ms = NULL WHERE id = ?1",
+            [task.id],
+        )?;
+    }
+    log(
+        &tx,
+        now,
+        Some(job),
+        "job_cancelled",
+        &format!("{} tasks cancelled", open.len()),
+    )?;
+    update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Re-queues a job's failed tasks with fresh attempts, and lifts its worker blocks.
+/// Returns how many tasks.
+pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
+    let tx = conn.transaction()?;
+    if job_control(&tx, job)? == "cancelled" {
+        return Err(Error::Conflict(format!("job {job} is cancelled")));
+    }
+    let failed = job_tasks(&tx, job, &[TaskState::Failed])?;
+    if failed.is_empty() {
+        return Err(Error::Conflict(format!("job {job} has no failed tasks")));
+    }
+    for task in &failed {
+        set_state(&tx, task, TaskEvent::Retry)?;
+        tx.execute("UPDATE tasks SET failures = 0 WHERE id = ?1", [task.id])?;
+        tx.execute("DELETE FROM task_failures WHERE task_id = ?1", [task.id])?;
+    }
+    tx.execute("DELETE FROM job_blocks WHERE job_id = ?1", [job])?;
+    log(
+        &tx,
+        now,
+        Some(job),
+        "job_retried",
+        &format!("{} tasks", failed.len()),
+    )?;
+    update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(failed.len())
+}
+
+/// Deletes a job's rows (its files are removed by the caller after this commits).
+pub fn delete_job(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    job_control(&tx, job)?;
+    tx.execute("DELETE FROM jobs WHERE id = ?1", [job])?;
+    log(&tx, now, Some(job), "job_deleted", "")?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Marks a frame assembled.
+pub fn mark_assembled(conn: &mut Connection, job: u64, frame: i32, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    tx.execute(
+        "UPDATE frames SET assembled_ms = ?3 WHERE job_id = ?1 AND frame = ?2",
+        params![job, frame, now],
+    )?;
+    log(&tx, now, Some(job), "frame_assembled", &frame.to_string())?;
+    update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Frames whose tasks are all done but which are not assembled (a crash in between).
+pub fn unassembled_frames(conn: &Connection) -> Result<Vec<(u64, i32)>> {
+    let mut stmt = conn.prepare(
+        "SELECT job_id, frame FROM frames WHERE tasks_done = tasks_total AND assembled_ms IS NULL",
+    )?;
+    let rows = stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// The done tasks of one frame (for assembly), by tile then pass.
+pub fn done_tasks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<TaskRow>> {
+    let mut stmt = conn.prepare(&format!(
+        "SELECT {TASK_COLUMNS} FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
+         ORDER BY tile, pass"
+    ))?;
+    let rows = stmt.query_map(params![job, frame], task_from_row)?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+#[cfg(test)]
+#[path = "scheduler_tests.rs"]
+mod tests;

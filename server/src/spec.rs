@@ -1,0 +1,596 @@
+//! Job specs: every field checked against `limits.rs` (the error names the field),
+//! defaults resolved against the scene, and the job split into tasks
+//! (frame × tile × sample pass).
+
+use proto::{CameraSpec, FrameRange, JobSpec, OutputLayer, SceneInfo};
+use tracer::film::{SampleRange, TileRect};
+
+use crate::limits::*;
+
+/// A spec field that is out of bounds or does not fit the scene.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FieldError {
+    /// The field, as named in the JSON (`width`, `frames.end`, ...).
+    pub field: String,
+    /// What is wrong, for a person.
+    pub message: String,
+}
+
+fn bad<T>(field: &str, message: impl Into<String>) -> Result<T, FieldError> {
+    Err(FieldError {
+        field: field.to_string(),
+        message: message.into(),
+    })
+}
+
+/// A checked job: the spec with its defaults resolved, and how it splits into tasks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    /// The spec, every optional field filled in.
+    pub spec: JobSpec,
+    /// Frame numbers.
+    pub frames: Vec<i32>,
+    /// Tiles of one frame, row by row.
+    pub tiles: Vec<TileRect>,
+    /// Sample passes of one tile, in order.
+    pub passes: Vec<SampleRange>,
+}
+
+/// One task of a plan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PlannedTask {
+    /// Frame number.
+    pub frame: i32,
+    /// Index into [`Plan::tiles`].
+    pub tile: u32,
+    /// Index into [`Plan::passes`].
+    pub pass: u32,
+    /// The tile.
+    pub rect: TileRect,
+    /// The samples.
+    pub samples: SampleRange,
+}
+
+impl Plan {
+    /// Number of tasks.
+    pub fn task_count(&self) -> u64 {
+        self.frames.len() as u64 * self.tiles.len() as u64 * self.passes.len() as u64
+    }
+
+    /// Tasks per frame.
+    pub fn tasks_per_frame(&self) -> u64 {
+        self.tiles.len() as u64 * self.passes.len() as u64
+    }
+
+    /// Pixel samples of the whole job.
+    pub fn pixel_samples(&self) -> u64 {
+        self.frames.len() as u64
+            * self.spec.width as u64
+            * self.spec.height as u64
+            * self.spec.spp as u64
+    }
+
+    /// Every task, frame by frame, pass by pass, tile by tile.
+    pub fn tasks(&self) -> impl Iterator<Item = PlannedTask> + '_ {
+        self.frames.iter().flat_map(move |&frame| {
+            self.passes
+                .iter()
+                .enumerate()
+                .flat_map(move |(p, &samples)| {
+                    self.tiles
+                        .iter()
+                        .enumerate()
+                        .map(move |(t, &rect)| PlannedTask {
+                            frame,
+                            tile: t as u32,
+                            pass: p as u32,
+                            rect,
+                            samples,
+                        })
+                })
+        })
+    }
+}
+
+/// The tile side that makes one task about [`TARGET_TASK_PIXEL_SAMPLES`]: a power of two
+/// between 16 and 256.
+pub fn default_tile_size(spp_per_pass: u32) -> u32 {
+    let side = (TARGET_TASK_PIXEL_SAMPLES as f64 / spp_per_pass.max(1) as f64).sqrt();
+    let mut s = 16u32;
+    while s < 256 && ((s * 2) as f64) <= side {
+        s *= 2;
+    }
+    s
+}
+
+/// Checks `spec` against the limits and `scene`, and plans its tasks.
+pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan, FieldError> {
+    if spec.scene != scene.digest {
+        return bad("scene", "internal: spec checked against another scene");
+    }
+    if let Some(name) = &spec.name {
+        if name.len() > MAX_NAME_BYTES {
+            return bad(
+                "name",
+                format!("is {} bytes; at most {MAX_NAME_BYTES}", name.len()),
+            );
+        }
+    }
+    if !(spec.fps.is_finite() && spec.fps > 0.0 && spec.fps <= MAX_FPS) {
+        return bad(
+            "fps",
+            format!("must be above 0 and at most {MAX_FPS}, got {}", spec.fps),
+        );
+    }
+    for (field, v) in [("width", spec.width), ("height", spec.height)] {
+        if v == 0 || v > MAX_RESOLUTION {
+            return bad(
+                field,
+                format!("must be 1 to {MAX_RESOLUTION} pixels, got {v}"),
+            );
+        }
+    }
+    if spec.spp == 0 || spec.spp > MAX_SPP {
+        return bad("spp", format!("must be 1 to {MAX_SPP}, got {}", spec.spp));
+    }
+    if spec.max_depth > MAX_DEPTH {
+        return bad(
+            "max_depth",
+            format!("must be at most {MAX_DEPTH}, got {}", spec.max_depth),
+        );
+    }
+    let [open, close] = spec.shutter;
+    if !(open.is_finite() && close.is_finite())
+        || open > close
+        || open.abs() > MAX_SHUTTER_FRAMES
+        || close.abs() > MAX_SHUTTER_FRAMES
+    {
+        return bad(
+            "shutter",
+            format!(
+                "must be [open, close] in frames with open <= close, both within \
+                 ±{MAX_SHUTTER_FRAMES}; got [{open}, {close}]"
+            ),
+        );
+    }
+    if let Some(steps) = spec.motion_steps {
+        if steps == 0 || steps > MAX_MOTION_STEPS {
+            return bad(
+                "motion_steps",
+                format!("must be 1 to {MAX_MOTION_STEPS}, got {steps}"),
+            );
+        }
+    }
+    let animation = match &spec.animation {
+        None => None,
+        Some(name) => match scene
+            .animations
+            .iter()
+            .find(|a| a.name.as_deref() == Some(name))
+        {
+            Some(a) => Some(a),
+            None => {
+                return bad(
+                    "animation",
+                    format!(
+                        "the scene has no animation named `{name}`{}",
+                        names_of(scene.animations.iter().filter_map(|a| a.name.as_deref()))
+                    ),
+                )
+            }
+        },
+    };
+    match &spec.camera {
+        CameraSpec::Default => {}
+        CameraSpec::Index(i) => {
+            if *i as usize >= scene.cameras.len() {
+                return bad(
+                    "camera",
+                    format!(
+                        "camera {i} does not exist: the scene has {} camera(s)",
+                        scene.cameras.len()
+                    ),
+                );
+            }
+        }
+        CameraSpec::Name(name) => {
+            if !scene
+                .cameras
+                .iter()
+                .any(|c| c.name.as_deref() == Some(name))
+            {
+                return bad(
+                    "camera",
+                    format!(
+                        "the scene has no camera named `{name}`{}",
+                        names_of(scene.cameras.iter().filter_map(|c| c.name.as_deref()))
+                    ),
+                );
+            }
+        }
+    }
+    let frames = match spec.frames {
+        Some(r) => r,
+        None => {
+            // The animation range at the job's fps: frame f shows time f / fps.
+            let (start, end) = match animation {
+                Some(a) => (a.start_seconds, a.end_seconds),
+                None => (0.0, scene.duration_seconds),
+            };
+            FrameRange {
+                start: (start * spec.fps).floor().max(0.0) as i32,
+                end: (end * spec.fps).ceil().min(MAX_FRAME_NUMBER as f64) as i32,
+                step: 1,
+            }
+        }
+    };
+    if frames.step == 0 {
+        return bad("frames.step", "must be at least 1");
+    }
+    if frames.start < 0 || frames.start > MAX_FRAME_NUMBER {
+        return bad(
+            "frames.start",
+            format!("must be 0 to {MAX_FRAME_NUMBER}, got {}", frames.start),
+        );
+    }
+    if frames.end < frames.start || frames.end > MAX_FRAME_NUMBER {
+        return bad(
+            "frames.end",
+            format!(
+                "must be from frames.start ({}) to {MAX_FRAME_NUMBER}, got {}",
+                frames.start, frames.end
+            ),
+        );
+    }
+    if frames.count() > MAX_FRAMES {
+        return bad(
+            "frames",
+            format!("{} frames; at most {MAX_FRAMES} per job", frames.count()),
+        );
+    }
+    spec.frames = Some(frames);
+    if spec.sample_passes == 0 || spec.sample_passes > MAX_SAMPLE_PASSES.min(spec.spp) {
+        return bad(
+            "sample_passes",
+            format!(
+                "must be 1 to {} (at most {MAX_SAMPLE_PASSES} and at most spp), got {}",
+                MAX_SAMPLE_PASSES.min(spec.spp),
+                spec.sample_passes
+            ),
+        );
+    }
+    let tile_size = match spec.tile_size {
+        Some(s) if !(MIN_TILE_SIZE..=MAX_TILE_SIZE).contains(&s) => {
+            return bad(
+                "tile_size",
+                format!("must be {MIN_TILE_SIZE} to {MAX_TILE_SIZE} pixels, got {s}"),
+            )
+        }
+        Some(s) => s,
+        None => default_tile_size(spec.spp.div_ceil(spec.sample_passes)),
+    };
+    spec.tile_size = Some(tile_size);
+    if spec.priority.abs() > MAX_PRIORITY {
+        return bad(
+            "priority",
+            format!(
+                "must be -{MAX_PRIORITY} to {MAX_PRIORITY}, got {}",
+                spec.priority
+            ),
+        );
+    }
+    if spec.max_attempts == 0 || spec.max_attempts > MAX_ATTEMPTS {
+        return bad(
+            "max_attempts",
+            format!("must be 1 to {MAX_ATTEMPTS}, got {}", spec.max_attempts),
+        );
+    }
+    if !spec.layers.contains(&OutputLayer::Beauty) {
+        return bad("layers", "must include `beauty`");
+    }
+    for (i, l) in spec.layers.iter().enumerate() {
+        if spec.layers[..i].contains(l) {
+            return bad("layers", format!("`{}` is listed twice", layer_name(*l)));
+        }
+    }
+    spec.layers = OutputLayer::ALL
+        .into_iter()
+        .filter(|l| spec.layers.contains(l))
+        .collect();
+
+    let tiles = TileRect::new(0, 0, spec.width, spec.height).tiles(tile_size);
+    let n = spec.sample_passes as u64;
+    let passes = (0..n)
+        .map(|p| {
+            let at = |k: u64| (spec.spp as u64 * k / n) as u32;
+            SampleRange::new(at(p), at(p + 1))
+        })
+        .collect();
+    let plan = Plan {
+        frames: frames.frames().collect(),
+        tiles,
+        passes,
+        spec,
+    };
+    if plan.task_count() > max_tasks {
+        return bad(
+            "tile_size",
+            format!(
+                "{} frames × {} tiles × {} sample passes = {} tasks, over this server's limit of \
+                 {max_tasks}; use a larger tile_size, fewer sample_passes or fewer frames",
+                plan.frames.len(),
+                plan.tiles.len(),
+                plan.passes.len(),
+                plan.task_count()
+            ),
+        );
+    }
+    Ok(plan)
+}
+
+/// `OutputLayer` as written in JSON.
+pub fn layer_name(l: OutputLayer) -> &'static str {
+    match l {
+        OutputLayer::Beauty => "beauty",
+        OutputLayer::Albedo => "albedo",
+        OutputLayer::Normal => "normal",
+        OutputLayer::Depth => "depth",
+    }
+}
+
+/// `; it has: a, b` (or `; it has none`).
+fn names_of<'a>(names: impl Iterator<Item = &'a str>) -> String {
+    let names: Vec<&str> = names.collect();
+    if names.is_empty() {
+        "; it has no named ones".to_string()
+    } else {
+        format!("; it has: {}", names.join(", "))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proto::{AnimationInfo, CameraInfo};
+
+    fn scene() -> SceneInfo {
+        SceneInfo {
+            digest: "d".repeat(64),
+            size: 1,
+            cameras: vec![CameraInfo {
+                index: 0,
+                name: Some("Main".into()),
+            }],
+            animations: vec![AnimationInfo {
+                index: 0,
+                name: Some("Walk".into()),
+                start_seconds: 0.5,
+                end_seconds: 2.0,
+            }],
+            duration_seconds: 2.0,
+            triangles: 12,
+            lights: 0,
+            meshes: 1,
+            instances: 1,
+            materials: 1,
+            textures: 0,
+            features: vec![],
+            warnings: vec![],
+        }
+    }
+
+    fn spec() -> JobSpec {
+        JobSpec::new("d".repeat(64))
+    }
+
+    fn field_of(spec: JobSpec) -> String {
+        plan(spec, &scene(), 1_000_000).unwrap_err().field
+    }
+
+    #[test]
+    fn frames_default_to_the_animation_range_at_the_job_fps() {
+        let p = plan(spec(), &scene(), 1_000_000).unwrap();
+        // 0 s to 2 s at 24 fps.
+        assert_eq!(
+            p.spec.frames,
+            Some(FrameRange {
+                start: 0,
+                end: 48,
+                step: 1
+            })
+        );
+        let mut s = spec();
+        s.animation = Some("Walk".into());
+        s.fps = 10.0;
+        let p = plan(s, &scene(), 1_000_000).unwrap();
+        assert_eq!(
+            p.spec.frames,
+            Some(FrameRange {
+                start: 5,
+                end: 20,
+                step: 1
+            })
+        );
+    }
+
+    #[test]
+    fn split_is_frames_times_tiles_times_passes() {
+        let mut s = spec();
+        s.frames = Some(FrameRange {
+            start: 1,
+            end: 3,
+            step: 1,
+        });
+        s.width = 100;
+        s.height = 50;
+        s.tile_size = Some(32);
+        s.spp = 10;
+        s.sample_passes = 3;
+        let p = plan(s, &scene(), 1_000_000).unwrap();
+        // 4 × 2 tiles, 3 passes, 3 frames.
+        assert_eq!(p.tiles.len(), 8);
+        assert_eq!(
+            p.passes,
+            vec![
+                SampleRange::new(0, 3),
+                SampleRange::new(3, 6),
+                SampleRange::new(6, 10)
+            ]
+        );
+        assert_eq!(p.task_count(), 72);
+        assert_eq!(p.tasks().count(), 72);
+        assert_eq!(p.tiles[7], TileRect::new(96, 32, 4, 18));
+        assert_eq!(p.pixel_samples(), 3 * 100 * 50 * 10);
+    }
+
+    #[test]
+    fn default_tile_is_a_few_seconds_of_work() {
+        assert_eq!(default_tile_size(64), 128);
+        assert_eq!(default_tile_size(256), 64);
+        assert_eq!(default_tile_size(1), 256);
+        assert_eq!(default_tile_size(1_000_000), 16);
+    }
+
+    #[test]
+    fn each_limit_names_its_field() {
+        type Change = Box<dyn Fn(&mut JobSpec)>;
+        let cases: Vec<(&str, Change)> = vec![
+            ("width", Box::new(|s| s.width = MAX_RESOLUTION + 1)),
+            ("height", Box::new(|s| s.height = 0)),
+            ("spp", Box::new(|s| s.spp = MAX_SPP + 1)),
+            ("spp", Box::new(|s| s.spp = 0)),
+            ("fps", Box::new(|s| s.fps = f64::NAN)),
+            ("fps", Box::new(|s| s.fps = MAX_FPS * 2.0)),
+            ("max_depth", Box::new(|s| s.max_depth = MAX_DEPTH + 1)),
+            ("shutter", Box::new(|s| s.shutter = [0.5, 0.0])),
+            (
+                "shutter",
+                Box::new(|s| s.shutter = [0.0, MAX_SHUTTER_FRAMES + 1.0]),
+            ),
+            ("motion_steps", Box::new(|s| s.motion_steps = Some(0))),
+            (
+                "motion_steps",
+                Box::new(|s| s.motion_steps = Some(MAX_MOTION_STEPS + 1)),
+            ),
+            ("animation", Box::new(|s| s.animation = Some("Run".into()))),
+            ("camera", Box::new(|s| s.camera = CameraSpec::Index(1))),
+            (
+                "camera",
+                Box::new(|s| s.camera = CameraSpec::Name("Side".into())),
+            ),
+            (
+                "frames.step",
+                Box::new(|s| {
+                    s.frames = Some(FrameRange {
+                        start: 0,
+                        end: 1,
+                        step: 0,
+                    })
+                }),
+            ),
+            (
+                "frames.start",
+                Box::new(|s| {
+                    s.frames = Some(FrameRange {
+                        start: -1,
+                        end: 1,
+                        step: 1,
+                    })
+                }),
+            ),
+            (
+                "frames.end",
+                Box::new(|s| {
+                    s.frames = Some(FrameRange {
+                        start: 5,
+                        end: 4,
+                        step: 1,
+                    })
+                }),
+            ),
+            (
+                "frames",
+                Box::new(|s| {
+                    s.frames = Some(FrameRange {
+                        start: 0,
+                        end: MAX_FRAMES as i32,
+                        step: 1,
+                    })
+                }),
+            ),
+            ("sample_passes", Box::new(|s| s.sample_passes = 0)),
+            (
+                "sample_passes",
+                Box::new(|s| {
+                    s.spp = 4;
+                    s.sample_passes = 5
+                }),
+            ),
+            (
+                "tile_size",
+                Box::new(|s| s.tile_size = Some(MIN_TILE_SIZE - 1)),
+            ),
+            (
+                "tile_size",
+                Box::new(|s| s.tile_size = Some(MAX_TILE_SIZE + 1)),
+            ),
+            ("priority", Box::new(|s| s.priority = -MAX_PRIORITY - 1)),
+            ("max_attempts", Box::new(|s| s.max_attempts = 0)),
+            (
+                "max_attempts",
+                Box::new(|s| s.max_attempts = MAX_ATTEMPTS + 1),
+            ),
+            ("layers", Box::new(|s| s.layers = vec![OutputLayer::Depth])),
+            (
+                "layers",
+                Box::new(|s| s.layers = vec![OutputLayer::Beauty, OutputLayer::Beauty]),
+            ),
+            (
+                "name",
+                Box::new(|s| s.name = Some("x".repeat(MAX_NAME_BYTES + 1))),
+            ),
+        ];
+        for (field, change) in cases {
+            let mut s = spec();
+            change(&mut s);
+            assert_eq!(field_of(s.clone()), field, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn limits_themselves_are_accepted() {
+        let mut s = spec();
+        s.width = MAX_RESOLUTION;
+        s.height = 8;
+        s.spp = MAX_SPP;
+        s.max_depth = MAX_DEPTH;
+        s.tile_size = Some(MAX_TILE_SIZE);
+        s.frames = Some(FrameRange {
+            start: 0,
+            end: 0,
+            step: 1,
+        });
+        s.camera = CameraSpec::Name("Main".into());
+        s.layers = vec![OutputLayer::Depth, OutputLayer::Beauty];
+        let p = plan(s, &scene(), 1_000_000).unwrap();
+        assert_eq!(p.tiles.len(), 16);
+        assert_eq!(p.spec.layers, vec![OutputLayer::Beauty, OutputLayer::Depth]);
+    }
+
+    #[test]
+    fn task_limit_is_configurable_and_named() {
+        let mut s = spec();
+        s.frames = Some(FrameRange {
+            start: 0,
+            end: 9,
+            step: 1,
+        });
+        s.width = 64;
+        s.height = 64;
+        s.tile_size = Some(32);
+        assert_eq!(plan(s.clone(), &scene(), 40).unwrap().task_count(), 40);
+        let err = plan(s, &scene(), 39).unwrap_err();
+        assert_eq!(err.field, "tile_size");
+        assert!(err.message.contains("40 tasks"), "{}", err.message);
+    }
+}

@@ -1,0 +1,255 @@
+//! Read models: job status (tasks by state, frames done, samples per second, ETA), frame
+//! lists, workers. Nothing here writes.
+
+use proto::{
+    FrameList, FrameState, FrameStatus, JobSpec, JobState, JobStatus, TaskCounts, TaskToken,
+    WorkerInfo, WorkerList,
+};
+use rusqlite::{params, Connection, OptionalExtension};
+
+use crate::error::{Error, Result};
+
+/// One job's status at `now`.
+pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
+    let row = conn
+        .query_row(
+            "SELECT name, spec, control, created_ms, first_lease_ms, finished_ms, pixel_samples
+             FROM jobs WHERE id = ?1",
+            [job],
+            |r| {
+                Ok((
+                    r.get::<_, String>(0)?,
+                    r.get::<_, String>(1)?,
+                    r.get::<_, String>(2)?,
+                    r.get::<_, i64>(3)?,
+                    r.get::<_, Option<i64>>(4)?,
+                    r.get::<_, Option<i64>>(5)?,
+                    r.get::<_, i64>(6)?,
+                ))
+            },
+        )
+        .optional()?
+        .ok_or_else(|| Error::NotFound(format!("job {job} does not exist")))?;
+    let (name, spec, control, created_ms, first_lease_ms, finished_ms, pixel_samples) = row;
+    let spec: JobSpec = serde_json::from_str(&spec)?;
+
+    let mut tasks = TaskCounts::default();
+    let mut done_samples = 0i64;
+    let mut last_done_ms = None::<i64>;
+    {
+        let mut stmt = conn.prepare(
+            "SELECT state, count(*), sum(w * h * (sample_end - sample_start)), max(done_ms)
+             FROM tasks WHERE job_id = ?1 GROUP BY state",
+        )?;
+        let rows = stmt.query_map([job], |r| {
+            Ok((
+                r.get::<_, String>(0)?,
+                r.get::<_, u64>(1)?,
+                r.get::<_, i64>(2)?,
+                r.get::<_, Option<i64>>(3)?,
+            ))
+        })?;
+        for row in rows {
+            let (state, n, samples, done_ms) = row?;
+            match state.as_str() {
+                "queued" => tasks.queued = n,
+                "leased" => tasks.leased = n,
+                "done" => {
+                    tasks.done = n;
+                    done_samples = samples;
+                    last_done_ms = done_ms;
+                }
+                "failed" => tasks.failed = n,
+                _ => tasks.cancelled = n,
+            }
+        }
+    }
+    let (frames_total, frames_done): (u64, u64) = conn.query_row(
+        "SELECT count(*), coalesce(sum(assembled_ms IS NOT NULL), 0) FROM frames WHERE job_id = ?1",
+        [job],
+        |r| Ok((r.get(0)?, r.get(1)?)),
+    )?;
+    let frames_failed: u64 = conn.query_row(
+        "SELECT count(DISTINCT frame) FROM tasks WHERE job_id = ?1 AND state = 'failed'",
+        [job],
+        |r| r.get(0),
+    )?;
+
+    let state = if control == "cancelled" {
+        JobState::Cancelled
+    } else if tasks.failed > 0 {
+        JobState::Failed
+    } else if frames_done == frames_total {
+        JobState::Done
+    } else if control == "paused" {
+        JobState::Paused
+    } else if tasks.leased > 0 || tasks.done > 0 {
+        JobState::Running
+    } else {
+        JobState::Queued
+    };
+
+    // Throughput over the time the job has been worked on: from its first lease to its
+    // last accepted tile once finished, to now while running.
+    let end = match finished_ms {
+        Some(_) => last_done_ms.unwrap_or(now),
+        None => now,
+    };
+    let samples_per_second = match first_lease_ms {
+        Some(start) if end > start && done_samples > 0 => {
+            done_samples as f64 / ((end - start) as f64 / 1000.0)
+        }
+        _ => 0.0,
+    };
+    let remaining = (pixel_samples - done_samples).max(0) as f64;
+    let eta_seconds = match state {
+        JobState::Running | JobState::Queued | JobState::Failed
+            if samples_per_second > 0.0 && finished_ms.is_none() =>
+        {
+            Some(remaining / samples_per_second)
+        }
+        _ => None,
+    };
+    Ok(JobStatus {
+        id: job,
+        name,
+        state,
+        spec,
+        created_ms,
+        finished_ms,
+        tasks,
+        frames_total,
+        frames_done,
+        frames_failed,
+        progress: if pixel_samples > 0 {
+            done_samples as f64 / pixel_samples as f64
+        } else {
+            0.0
+        },
+        samples_per_second,
+        eta_seconds,
+    })
+}
+
+/// Every job, newest first.
+pub fn list_jobs(conn: &Connection, now: i64) -> Result<Vec<JobStatus>> {
+    let ids: Vec<u64> = {
+        let mut stmt = conn.prepare("SELECT id FROM jobs ORDER BY id DESC")?;
+        let rows = stmt.query_map([], |r| r.get(0))?;
+        rows.collect::<rusqlite::Result<_>>()?
+    };
+    ids.into_iter()
+        .map(|id| job_status(conn, id, now))
+        .collect()
+}
+
+const FRAME_QUERY: &str = "SELECT f.frame, f.tasks_total, f.tasks_done, f.assembled_ms,
+        (SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id AND t.frame = f.frame
+           AND t.state = 'failed'),
+        (SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id AND t.frame = f.frame
+           AND t.state = 'leased'),
+        j.control
+     FROM frames f JOIN jobs j ON j.id = f.job_id";
+
+fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
+    let frame: i32 = r.get(0)?;
+    let (total, done): (u64, u64) = (r.get(1)?, r.get(2)?);
+    let assembled: Option<i64> = r.get(3)?;
+    let (failed, leased): (u64, u64) = (r.get(4)?, r.get(5)?);
+    let control: String = r.get(6)?;
+    let state = if assembled.is_some() {
+        FrameState::Done
+    } else if failed > 0 {
+        FrameState::Failed
+    } else if control == "cancelled" {
+        FrameState::Cancelled
+    } else if done > 0 || leased > 0 {
+        FrameState::Rendering
+    } else {
+        FrameState::Queued
+    };
+    Ok(FrameStatus {
+        frame,
+        state,
+        tasks_total: total,
+        tasks_done: done,
+        file: proto::job::frame_file_name(frame, "exr"),
+    })
+}
+
+/// The frames of a job, in order.
+pub fn frames(conn: &Connection, job: u64) -> Result<FrameList> {
+    let exists: bool =
+        conn.query_row("SELECT count(*) > 0 FROM jobs WHERE id = ?1", [job], |r| {
+            r.get(0)
+        })?;
+    if !exists {
+        return Err(Error::NotFound(format!("job {job} does not exist")));
+    }
+    let mut stmt = conn.prepare(&format!(
+        "{FRAME_QUERY} WHERE f.job_id = ?1 ORDER BY f.frame"
+    ))?;
+    let rows = stmt.query_map([job], frame_from_row)?;
+    Ok(FrameList {
+        frames: rows.collect::<rusqlite::Result<_>>()?,
+    })
+}
+
+/// One frame of a job.
+pub fn frame_status(conn: &Connection, job: u64, frame: i32) -> Result<FrameStatus> {
+    conn.query_row(
+        &format!("{FRAME_QUERY} WHERE f.job_id = ?1 AND f.frame = ?2"),
+        params![job, frame],
+        frame_from_row,
+    )
+    .optional()?
+    .ok_or_else(|| Error::NotFound(format!("job {job} has no frame {frame}")))
+}
+
+const WORKER_QUERY: &str =
+    "SELECT w.id, w.name, w.threads, w.version, w.last_seen_ms, w.tasks_done,
+        t.id, t.attempt, t.job_id, t.frame
+     FROM workers w
+     LEFT JOIN tasks t ON t.id = (SELECT id FROM tasks WHERE worker_id = w.id AND state = 'leased'
+                                  ORDER BY leased_ms DESC LIMIT 1)";
+
+fn worker_from_row(r: &rusqlite::Row, now: i64, lease_ms: i64) -> rusqlite::Result<WorkerInfo> {
+    let last_seen_ms: i64 = r.get(4)?;
+    let task: Option<u64> = r.get(6)?;
+    Ok(WorkerInfo {
+        id: r.get(0)?,
+        name: r.get(1)?,
+        threads: r.get(2)?,
+        version: r.get(3)?,
+        last_seen_ms,
+        online: last_seen_ms >= now - 2 * lease_ms,
+        tasks_done: r.get(5)?,
+        current_task: match task {
+            Some(task_id) => Some(TaskToken {
+                task_id,
+                attempt: r.get(7)?,
+            }),
+            None => None,
+        },
+        current_job: r.get(8)?,
+        current_frame: r.get(9)?,
+    })
+}
+
+/// One worker.
+pub fn worker(conn: &Connection, id: u64, now: i64, lease_ms: i64) -> Result<WorkerInfo> {
+    conn.query_row(&format!("{WORKER_QUERY} WHERE w.id = ?1"), [id], |r| {
+        worker_from_row(r, now, lease_ms)
+    })
+    .optional()?
+    .ok_or_else(|| Error::NotFound(format!("worker {id} is not registered")))
+}
+
+/// Every worker, by id.
+pub fn workers(conn: &Connection, now: i64, lease_ms: i64) -> Result<WorkerList> {
+    let mut stmt = conn.prepare(&format!("{WORKER_QUERY} ORDER BY w.id"))?;
+    let rows = stmt.query_map([], |r| worker_from_row(r, now, lease_ms))?;
+    Ok(WorkerList {
+        workers: rows.collect::<rusqlite::Result<_>>()?,
+    })
+}

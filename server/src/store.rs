@@ -1,0 +1,144 @@
+//! Files on disk beside the database: scenes content-addressed by SHA-256, accepted tiles
+//! until their frame is assembled, and each job's output folder.
+//!
+//! ```text
+//! data/tessera.db            SQLite (WAL)
+//! data/scenes/<sha256>.glb
+//! data/tiles/<job>/<task>.exr
+//! data/jobs/<job>/frame_0001.exr, frame_0001.png
+//! ```
+
+use std::fs::{self, File};
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use sha2::{Digest, Sha256};
+
+/// Where everything lives under the data folder.
+#[derive(Clone, Debug)]
+pub struct Store {
+    root: PathBuf,
+}
+
+impl Store {
+    /// Creates the folders under `root` when missing.
+    pub fn open(root: &Path) -> io::Result<Store> {
+        for sub in ["scenes", "tiles", "jobs"] {
+            fs::create_dir_all(root.join(sub))?;
+        }
+        Ok(Store {
+            root: root.to_owned(),
+        })
+    }
+
+    /// A store rooted at `root` without touching the disk.
+    pub fn unopened(root: &Path) -> Store {
+        Store {
+            root: root.to_owned(),
+        }
+    }
+
+    /// The database file.
+    pub fn database(&self) -> PathBuf {
+        self.root.join("tessera.db")
+    }
+
+    /// The GLB of the scene `digest` (a checked hex digest).
+    pub fn scene(&self, digest: &str) -> PathBuf {
+        self.root.join("scenes").join(format!("{digest}.glb"))
+    }
+
+    /// The accepted tile of a task.
+    pub fn tile(&self, job: u64, task: u64) -> PathBuf {
+        self.root
+            .join("tiles")
+            .join(job.to_string())
+            .join(format!("{task}.exr"))
+    }
+
+    /// The folder holding a job's accepted tiles.
+    pub fn tile_dir(&self, job: u64) -> PathBuf {
+        self.root.join("tiles").join(job.to_string())
+    }
+
+    /// The job's output folder.
+    pub fn job_dir(&self, job: u64) -> PathBuf {
+        self.root.join("jobs").join(job.to_string())
+    }
+
+    /// A frame file of a job (`frame_0001.exr`, `frame_0001.png`).
+    pub fn frame(&self, job: u64, frame: i32, extension: &str) -> PathBuf {
+        self.job_dir(job)
+            .join(proto::job::frame_file_name(frame, extension))
+    }
+}
+
+/// Lower-case hex SHA-256 of `bytes`.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    let digest = Sha256::digest(bytes);
+    let mut s = String::with_capacity(64);
+    for b in digest {
+        s.push_str(&format!("{b:02x}"));
+    }
+    s
+}
+
+/// Whether `s` looks like a digest this server wrote (64 lower-case hex digits), so it
+/// can be used as a file name safely.
+pub fn is_digest(s: &str) -> bool {
+    s.len() == 64
+        && s.bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+}
+
+/// Writes `bytes` to `path` atomically: a temp file in the same folder, fsync, rename,
+/// fsync of the folder. A reader (or a restarted server) sees the old file or the new
+/// one, never half of one.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    fs::create_dir_all(dir)?;
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
+    // Unique per process and call: two writers of one path must not share a temp file.
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    let tmp = dir.join(format!(".{name}.{}.{n}.tmp", std::process::id()));
+    let result = (|| {
+        let mut f = File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        fs::rename(&tmp, path)?;
+        File::open(dir)?.sync_all()
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sha256_of_abc_is_the_known_digest() {
+        assert_eq!(
+            sha256_hex(b"abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+        assert!(is_digest(&sha256_hex(b"abc")));
+        assert!(!is_digest("../../etc/passwd"));
+        assert!(!is_digest(&"A".repeat(64)));
+    }
+
+    #[test]
+    fn atomic_write_replaces_and_leaves_no_temp_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sub").join("f.bin");
+        write_atomic(&path, b"one").unwrap();
+        write_atomic(&path, b"two").unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"two");
+        let names: Vec<_> = fs::read_dir(path.parent().unwrap()).unwrap().collect();
+        assert_eq!(names.len(), 1);
+    }
+}

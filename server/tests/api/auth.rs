@@ -1,0 +1,114 @@
+//! Worker and client tokens: each opens only its own routes; a refusal says nothing more.
+
+use proto::{JobSpec, LeaseRequest};
+use reqwest::StatusCode;
+
+use crate::common::*;
+
+#[tokio::test(flavor = "multi_thread")]
+async fn tokens_open_only_their_own_routes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(dir.path());
+    cfg.worker_token = Some("worker-secret".into());
+    cfg.client_token = Some("client-secret".into());
+    let s = TestServer::start(cfg);
+    let c = client();
+
+    // No token, a wrong token, the other role's token: a bare 401.
+    for token in [None, Some("nope"), Some("worker-secret")] {
+        let mut req = c.post(s.url("/scenes")).body(quad_scene());
+        if let Some(t) = token {
+            req = req.bearer_auth(t);
+        }
+        let res = req.send().await.unwrap();
+        let err = error_body(res, StatusCode::UNAUTHORIZED).await;
+        assert_eq!(
+            (err.error.as_str(), err.message.as_str(), err.field),
+            ("unauthorized", "unauthorized", None)
+        );
+    }
+    let res = c
+        .post(s.url("/scenes"))
+        .bearer_auth("client-secret")
+        .body(quad_scene())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(res.status(), StatusCode::CREATED);
+    let scene: proto::SceneInfo = res.json().await.unwrap();
+
+    let mut spec = JobSpec::new(scene.digest.clone());
+    spec.width = 8;
+    spec.height = 8;
+    let res = c
+        .post(s.url("/jobs"))
+        .bearer_auth("worker-secret")
+        .json(&spec)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        res.status(),
+        StatusCode::UNAUTHORIZED,
+        "a worker token cannot create jobs"
+    );
+    let res = c
+        .post(s.url("/jobs"))
+        .bearer_auth("client-secret")
+        .json(&spec)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(res.status(), StatusCode::CREATED);
+
+    let w = SimWorker::register_with(&s, "w", Some("worker-secret")).await;
+    let url = s.url(&format!("/workers/{}/lease", w.id));
+    let res = c
+        .post(&url)
+        .bearer_auth("client-secret")
+        .json(&LeaseRequest::default())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        res.status(),
+        StatusCode::UNAUTHORIZED,
+        "a client token cannot lease"
+    );
+    let res = c
+        .post(&url)
+        .bearer_auth("worker-secret")
+        .json(&LeaseRequest::default())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(res.status(), StatusCode::OK);
+
+    // Scenes download with either token; events take the token as a query parameter.
+    for t in ["worker-secret", "client-secret"] {
+        let res = c
+            .get(s.url(&format!("/scenes/{}", scene.digest)))
+            .bearer_auth(t)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(res.status(), StatusCode::OK);
+    }
+    let res = c
+        .get(s.url("/events?access_token=client-secret"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(res.status(), StatusCode::OK);
+    let res = c
+        .get(s.url("/events?access_token=worker-secret"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(res.status(), StatusCode::UNAUTHORIZED);
+    // Health, metrics, the OpenAPI document and the dashboard page are open.
+    for path in ["/healthz", "/metrics", "/api/v1/openapi.json", "/"] {
+        let res = c.get(format!("{}{path}", s.base)).send().await.unwrap();
+        assert_eq!(res.status(), StatusCode::OK, "{path}");
+    }
+}

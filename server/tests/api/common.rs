@@ -1,0 +1,398 @@
+//! A real server on 127.0.0.1:0 in its own runtime (so a test can crash it), a test
+//! scene as GLB, and a simulated worker that renders tiles with the tracer.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use proto::{Lease, LeaseRequest, ResultAck, ResultMetadata, WorkerRegistered, WorkerRegistration};
+use reqwest::StatusCode;
+use server::Config;
+use tracer::film::{Layers, SampleRange, TileBuffer, TileRect};
+use tracer::output::{encode_exr, ExrMetadata};
+use tracer::render::{
+    prepare_frame, render_tile, CameraChoice, FrameOptions, PreparedFrame, RenderSettings,
+};
+
+/// A server running on its own thread and runtime.
+pub struct TestServer {
+    pub base: String,
+    pub data: PathBuf,
+    stop: Option<std::sync::mpsc::Sender<bool>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl TestServer {
+    /// Starts a server on 127.0.0.1:0 with `config` (its `listen` is ignored).
+    pub fn start(config: Config) -> TestServer {
+        let data = config.data_dir.clone();
+        let (addr_tx, addr_rx) = std::sync::mpsc::channel();
+        let (stop_tx, stop_rx) = std::sync::mpsc::channel::<bool>();
+        let thread = std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .unwrap();
+            let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+            rt.spawn(async move {
+                let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+                addr_tx.send(listener.local_addr().unwrap()).unwrap();
+                server::serve(listener, config, async {
+                    let _ = rx.await;
+                })
+                .await
+                .unwrap();
+            });
+            // `true`: shut down gracefully; `false`: drop everything at once, like kill -9
+            // (no task gets to finish; only what SQLite committed survives).
+            let graceful = stop_rx.recv().unwrap_or(true);
+            if graceful {
+                let _ = tx.send(());
+                rt.shutdown_timeout(Duration::from_secs(5));
+            } else {
+                rt.shutdown_background();
+            }
+        });
+        let addr = addr_rx.recv().expect("server started");
+        TestServer {
+            base: format!("http://{addr}"),
+            data,
+            stop: Some(stop_tx),
+            thread: Some(thread),
+        }
+    }
+
+    /// Kills the server without any shutdown.
+    pub fn crash(mut self) {
+        self.stop.take().unwrap().send(false).unwrap();
+        self.thread.take().unwrap().join().unwrap();
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("{}/api/v1{path}", self.base)
+    }
+}
+
+impl Drop for TestServer {
+    fn drop(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(true);
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// A config for a fresh data folder.
+pub fn config(dir: &Path) -> Config {
+    Config::new(dir.join("data"))
+}
+
+/// A GLB from glTF JSON and a BIN chunk.
+pub fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+    let mut j = json.as_bytes().to_vec();
+    while !j.len().is_multiple_of(4) {
+        j.push(b' ');
+    }
+    let mut b = bin.to_vec();
+    while !b.len().is_multiple_of(4) {
+        b.push(0);
+    }
+    let total = 12 + 8 + j.len() + if b.is_empty() { 0 } else { 8 + b.len() };
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(j.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&j);
+    if !b.is_empty() {
+        out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&b);
+    }
+    out
+}
+
+/// A grey quad in front of a camera named `Main`, lit by the default environment.
+pub fn quad_scene() -> Vec<u8> {
+    let mut bin = Vec::new();
+    for p in [
+        [-1.0f32, -1.0, 0.0],
+        [1.0, -1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [-1.0, 1.0, 0.0],
+    ] {
+        for c in p {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let json = r#"{
+      "asset": {"version": "2.0"},
+      "scene": 0,
+      "scenes": [{"nodes": [0, 1]}],
+      "nodes": [
+        {"mesh": 0, "rotation": [0.0, 0.3826834, 0.0, 0.9238795]},
+        {"camera": 0, "translation": [0.0, 0.0, 3.0], "name": "CameraNode"}
+      ],
+      "cameras": [{"name": "Main", "type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}],
+      "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+      "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.5, 0.3, 1.0], "metallicFactor": 0.0}}],
+      "buffers": [{"byteLength": 60}],
+      "bufferViews": [
+        {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+        {"buffer": 0, "byteOffset": 48, "byteLength": 12}
+      ],
+      "accessors": [
+        {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+         "min": [-1.0, -1.0, 0.0], "max": [1.0, 1.0, 0.0]},
+        {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}
+      ]
+    }"#;
+    glb(json, &bin)
+}
+
+/// An HTTP client; `token` as bearer when given.
+pub fn client() -> reqwest::Client {
+    reqwest::Client::builder()
+        .timeout(Duration::from_secs(120))
+        .build()
+        .unwrap()
+}
+
+pub async fn upload_scene(s: &TestServer, c: &reqwest::Client, glb: Vec<u8>) -> proto::SceneInfo {
+    let res = c.post(s.url("/scenes")).body(glb).send().await.unwrap();
+    assert!(res.status().is_success(), "{:?}", res.text().await);
+    res.json().await.unwrap()
+}
+
+pub async fn create_job(
+    s: &TestServer,
+    c: &reqwest::Client,
+    spec: &proto::JobSpec,
+) -> proto::JobStatus {
+    let res = c.post(s.url("/jobs")).json(spec).send().await.unwrap();
+    assert_eq!(res.status(), StatusCode::CREATED, "{:?}", res.text().await);
+    res.json().await.unwrap()
+}
+
+/// A simulated worker: registers, leases, renders with the tracer, uploads.
+pub struct SimWorker {
+    pub id: u64,
+    pub client: reqwest::Client,
+    pub token: Option<String>,
+    scene: Option<(String, Arc<tracer::scene::Scene>)>,
+}
+
+impl SimWorker {
+    pub async fn register(s: &TestServer, name: &str) -> SimWorker {
+        Self::register_with(s, name, None).await
+    }
+
+    pub async fn register_with(s: &TestServer, name: &str, token: Option<&str>) -> SimWorker {
+        let client = client();
+        let mut req = client.post(s.url("/workers")).json(&WorkerRegistration {
+            name: name.into(),
+            threads: 2,
+            version: "test".into(),
+        });
+        if let Some(t) = token {
+            req = req.bearer_auth(t);
+        }
+        let res = req.send().await.unwrap();
+        assert_eq!(res.status(), StatusCode::CREATED);
+        let reg: WorkerRegistered = res.json().await.unwrap();
+        SimWorker {
+            id: reg.worker_id,
+            client,
+            token: token.map(str::to_string),
+            scene: None,
+        }
+    }
+
+    fn auth(&self, r: reqwest::RequestBuilder) -> reqwest::RequestBuilder {
+        match &self.token {
+            Some(t) => r.bearer_auth(t),
+            None => r,
+        }
+    }
+
+    /// One lease request without waiting: `None` on 204.
+    pub async fn lease(&self, s: &TestServer) -> Option<Lease> {
+        self.lease_wait(s, 0).await
+    }
+
+    pub async fn lease_wait(&self, s: &TestServer, wait_seconds: u64) -> Option<Lease> {
+        let res = self
+            .auth(
+                self.client
+                    .post(s.url(&format!("/workers/{}/lease", self.id))),
+            )
+            .json(&LeaseRequest { wait_seconds })
+            .send()
+            .await
+            .unwrap();
+        match res.status() {
+            StatusCode::OK => Some(res.json().await.unwrap()),
+            StatusCode::NO_CONTENT => None,
+            other => panic!("lease: {other} {:?}", res.text().await),
+        }
+    }
+
+    /// The scene of `lease`, fetched by digest once.
+    pub async fn scene(&mut self, s: &TestServer, lease: &Lease) -> Arc<tracer::scene::Scene> {
+        if let Some((d, scene)) = &self.scene {
+            if *d == lease.scene {
+                return scene.clone();
+            }
+        }
+        let res = self
+            .auth(self.client.get(s.url(&format!("/scenes/{}", lease.scene))))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(res.status(), StatusCode::OK);
+        let bytes = res.bytes().await.unwrap();
+        let scene = Arc::new(tracer::loader::load_glb(&bytes).unwrap());
+        self.scene = Some((lease.scene.clone(), scene.clone()));
+        scene
+    }
+
+    /// Renders `lease` and returns the tile as the EXR bytes a worker uploads.
+    pub async fn render(&mut self, s: &TestServer, lease: &Lease) -> (Vec<u8>, TileBuffer) {
+        let scene = self.scene(s, lease).await;
+        let lease = lease.clone();
+        tokio::task::spawn_blocking(move || {
+            let frame = prepared(scene, &lease);
+            let rect = TileRect::new(
+                lease.tile.x,
+                lease.tile.y,
+                lease.tile.width,
+                lease.tile.height,
+            );
+            let tile = render_tile(
+                &frame,
+                &settings(&lease),
+                rect,
+                SampleRange::new(lease.samples.start, lease.samples.end),
+            );
+            (tile_exr(&lease, &tile.resolve()), tile)
+        })
+        .await
+        .unwrap()
+    }
+
+    /// Uploads `exr` for `lease`.
+    pub async fn upload(&self, s: &TestServer, lease: &Lease, exr: Vec<u8>) -> reqwest::Response {
+        let meta = ResultMetadata {
+            attempt: lease.token.attempt,
+            sha256: server::store::sha256_hex(&exr),
+            samples: lease.samples.end - lease.samples.start,
+            rays: 1000,
+            render_ms: 5,
+        };
+        self.upload_with(s, lease, exr, &meta).await
+    }
+
+    pub async fn upload_with(
+        &self,
+        s: &TestServer,
+        lease: &Lease,
+        exr: Vec<u8>,
+        meta: &ResultMetadata,
+    ) -> reqwest::Response {
+        let mut req = self.auth(self.client.post(s.url(&format!(
+            "/workers/{}/tasks/{}/result",
+            self.id, lease.token.task_id
+        ))));
+        for (k, v) in meta.to_headers() {
+            req = req.header(k, v);
+        }
+        req.body(exr).send().await.unwrap()
+    }
+
+    /// Leases, renders and uploads until there is no work; returns the leases done.
+    pub async fn work_until_idle(&mut self, s: &TestServer) -> Vec<Lease> {
+        let mut done = vec![];
+        while let Some(lease) = self.lease(s).await {
+            let (exr, _) = self.render(s, &lease).await;
+            let res = self.upload(s, &lease, exr).await;
+            assert_eq!(res.status(), StatusCode::OK, "{:?}", res.text().await);
+            let ack: ResultAck = res.json().await.unwrap();
+            assert!(ack.accepted);
+            done.push(lease);
+        }
+        done
+    }
+
+    pub async fn heartbeat(&self, s: &TestServer, lease: &Lease) -> reqwest::Response {
+        self.auth(
+            self.client
+                .post(s.url(&format!("/workers/{}/heartbeat", self.id))),
+        )
+        .json(&proto::Heartbeat {
+            token: Some(lease.token),
+        })
+        .send()
+        .await
+        .unwrap()
+    }
+
+    pub async fn fail(&self, s: &TestServer, lease: &Lease, message: &str) -> reqwest::Response {
+        self.auth(self.client.post(s.url(&format!(
+            "/workers/{}/tasks/{}/failure",
+            self.id, lease.token.task_id
+        ))))
+        .json(&proto::FailureReport {
+            attempt: lease.token.attempt,
+            message: message.into(),
+        })
+        .send()
+        .await
+        .unwrap()
+    }
+}
+
+/// The tracer's frame for a lease.
+pub fn prepared(scene: Arc<tracer::scene::Scene>, lease: &Lease) -> PreparedFrame {
+    let options = FrameOptions {
+        frame: lease.frame,
+        fps: lease.fps,
+        width: lease.width,
+        height: lease.height,
+        camera: match &lease.camera {
+            proto::CameraSpec::Default => CameraChoice::Default,
+            proto::CameraSpec::Index(i) => CameraChoice::Index(*i as usize),
+            proto::CameraSpec::Name(n) => CameraChoice::Name(n.clone()),
+        },
+        ..FrameOptions::default()
+    };
+    prepare_frame(scene, &options).unwrap()
+}
+
+pub fn settings(lease: &Lease) -> RenderSettings {
+    RenderSettings {
+        max_depth: lease.max_depth,
+        seed: lease.seed,
+    }
+}
+
+/// The EXR bytes of a resolved tile, as a worker encodes them.
+pub fn tile_exr(lease: &Lease, layers: &Layers) -> Vec<u8> {
+    let meta = ExrMetadata::new().with(
+        ExrMetadata::SPP,
+        (lease.samples.end - lease.samples.start).to_string(),
+    );
+    encode_exr((lease.width, lease.height), layers, &meta).unwrap()
+}
+
+/// Reads an error body and checks its kind.
+pub async fn error_body(res: reqwest::Response, status: StatusCode) -> proto::ErrorBody {
+    assert_eq!(res.status(), status);
+    res.json().await.unwrap()
+}

@@ -1,0 +1,282 @@
+//! The dashboard in a real headless Chromium (Debian's `chromium`, installed here when
+//! missing), driven over the DevTools protocol: the page is loaded during a job, the job
+//! finishes while it is open, and the DOM must show what only the live event stream could
+//! have told it. A screenshot is kept in the target folder as an artifact.
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use base64::Engine;
+use proto::{FrameRange, JobSpec};
+use reqwest::StatusCode;
+use serde_json::{json, Value};
+use tungstenite::stream::MaybeTlsStream;
+use tungstenite::{Message, WebSocket};
+
+use crate::common::*;
+
+/// The Chromium binary, installing Debian's package when it is missing.
+fn chromium() -> PathBuf {
+    let found = || {
+        Command::new("sh")
+            .args(["-c", "command -v chromium"])
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()))
+    };
+    if let Some(p) = found() {
+        return p;
+    }
+    let status = Command::new("sh")
+        .args([
+            "-c",
+            "apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium",
+        ])
+        .status()
+        .expect("running apt-get");
+    assert!(
+        status.success(),
+        "installing Debian's chromium package failed"
+    );
+    found().expect("chromium on PATH after installing it")
+}
+
+/// A headless Chromium and a DevTools session on one page.
+struct Browser {
+    child: Child,
+    ws: WebSocket<MaybeTlsStream<TcpStream>>,
+    session: String,
+    next_id: u64,
+    _profile: tempfile::TempDir,
+}
+
+impl Browser {
+    fn open(url: &str) -> Browser {
+        let profile = tempfile::tempdir().unwrap();
+        let mut child = Command::new(chromium())
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-dev-shm-usage",
+                "--no-first-run",
+                "--hide-scrollbars",
+                "--remote-debugging-port=0",
+                "--window-size=1200,900",
+            ])
+            .arg(format!("--user-data-dir={}", profile.path().display()))
+            .arg("about:blank")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Chromium prints where its DevTools endpoint listens.
+        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+        let endpoint = loop {
+            let line = lines
+                .next()
+                .expect("chromium exited before listening")
+                .unwrap();
+            if let Some(url) = line.strip_prefix("DevTools listening on ") {
+                break url.trim().to_string();
+            }
+        };
+        // Keep draining stderr so Chromium never blocks on a full pipe.
+        std::thread::spawn(move || for _ in lines {});
+        let (ws, _) = tungstenite::connect(endpoint.as_str()).unwrap();
+        let mut b = Browser {
+            child,
+            ws,
+            session: String::new(),
+            next_id: 0,
+            _profile: profile,
+        };
+        let target = b.call(None, "Target.createTarget", json!({"url": url}));
+        let target_id = target["targetId"].as_str().unwrap().to_string();
+        let attached = b.call(
+            None,
+            "Target.attachToTarget",
+            json!({"targetId": target_id, "flatten": true}),
+        );
+        b.session = attached["sessionId"].as_str().unwrap().to_string();
+        b
+    }
+
+    /// Sends a DevTools command and waits for its answer (skipping events).
+    fn call(&mut self, session: Option<&str>, method: &str, params: Value) -> Value {
+        self.next_id += 1;
+        let id = self.next_id;
+        let mut msg = json!({"id": id, "method": method, "params": params});
+        if let Some(s) = session {
+            msg["sessionId"] = json!(s);
+        }
+        self.ws.send(Message::text(msg.to_string())).unwrap();
+        loop {
+            let Message::Text(text) = self.ws.read().unwrap() else {
+                continue;
+            };
+            let v: Value = serde_json::from_str(text.as_str()).unwrap();
+            if v["id"] == json!(id) {
+                assert!(v.get("error").is_none(), "{method}: {v}");
+                return v["result"].clone();
+            }
+        }
+    }
+
+    /// Evaluates `expr` in the page and returns its JSON value.
+    fn eval(&mut self, expr: &str) -> Value {
+        let session = self.session.clone();
+        let r = self.call(
+            Some(&session),
+            "Runtime.evaluate",
+            json!({"expression": expr, "returnByValue": true}),
+        );
+        r["result"]["value"].clone()
+    }
+
+    /// Evaluates `expr` until it is true (the page updates asynchronously); panics with
+    /// `what` after a generous bound, since a page that never gets there is the failure.
+    fn wait_for(&mut self, expr: &str, what: &str) {
+        for _ in 0..600 {
+            if self.eval(expr) == json!(true) {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        panic!(
+            "the page never showed {what}; body: {}",
+            self.eval("document.body.innerText")
+        );
+    }
+
+    fn screenshot(&mut self) -> Vec<u8> {
+        let session = self.session.clone();
+        let r = self.call(
+            Some(&session),
+            "Page.captureScreenshot",
+            json!({"format": "png"}),
+        );
+        base64::engine::general_purpose::STANDARD
+            .decode(r["data"].as_str().unwrap())
+            .unwrap()
+    }
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// What the page shows of the job and the worker, as JSON.
+const SUMMARY: &str = r#"JSON.stringify((() => {
+  const card = document.querySelector('.job');
+  const row = document.querySelector('#workers tbody tr');
+  return {
+    state: card && card.dataset.state,
+    name: card && card.querySelector('.name').textContent,
+    bar: card && card.querySelector('.bar > div').style.width,
+    stats: card && card.querySelector('.stats').textContent,
+    frames: card ? [...card.querySelectorAll('.frames figure')].map(f => Number(f.dataset.frame)) : [],
+    thumbs: card ? [...card.querySelectorAll('.frames img')].map(i => i.complete ? i.naturalWidth : 0) : [],
+    worker: row ? [...row.children].map(td => td.textContent) : [],
+    live: document.getElementById('live').className,
+  };
+})())"#;
+
+fn summary(b: &mut Browser) -> Value {
+    serde_json::from_str(b.eval(SUMMARY).as_str().unwrap()).unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn dashboard_shows_jobs_frames_and_workers_live_in_chromium() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let mut spec = JobSpec::new(scene.digest.clone());
+    spec.name = Some("hallway".into());
+    spec.frames = Some(FrameRange {
+        start: 1,
+        end: 2,
+        step: 1,
+    });
+    (spec.width, spec.height, spec.tile_size, spec.spp) = (64, 48, Some(32), 4);
+    let job = create_job(&s, &c, &spec).await;
+    let mut w = SimWorker::register(&s, "render-node-7").await;
+    // Frame 1 done before the page loads; frame 2's tiles rendered but held back, their
+    // leases live, so the worker has a current task.
+    let mut held = vec![];
+    while let Some(lease) = w.lease(&s).await {
+        let (exr, _) = w.render(&s, &lease).await;
+        if lease.frame == 1 {
+            assert_eq!(w.upload(&s, &lease, exr).await.status(), StatusCode::OK);
+        } else {
+            held.push((lease, exr));
+        }
+    }
+    assert_eq!(held.len(), 4);
+
+    let url = format!("{}/", s.base);
+    let (mut browser, before) = tokio::task::spawn_blocking(move || {
+        let mut b = Browser::open(&url);
+        b.wait_for("document.body.dataset.loaded === 'true' && document.getElementById('live').className === 'on'", "the loaded, live page");
+        b.wait_for("[...document.querySelectorAll('.frames img')].every(i => i.complete && i.naturalWidth > 0)", "the thumbnails");
+        let before = summary(&mut b);
+        (b, before)
+    })
+    .await
+    .unwrap();
+    assert_eq!(before["state"], json!("running"), "{before}");
+    assert_eq!(before["name"], json!(format!("#{} hallway", job.id)));
+    assert_eq!(before["bar"], json!("50%"), "{before}");
+    assert_eq!(before["frames"], json!([1]), "{before}");
+    assert_eq!(before["thumbs"], json!([64]), "{before}");
+    let worker = before["worker"].as_array().unwrap();
+    assert_eq!(worker[0], json!("render-node-7"));
+    assert_eq!(worker[1], json!("2"));
+    assert!(
+        worker[3]
+            .as_str()
+            .unwrap()
+            .starts_with(&format!("job {} · frame 2", job.id)),
+        "{before}"
+    );
+    assert!(
+        before["stats"].as_str().unwrap().contains("frames 1/2"),
+        "{before}"
+    );
+
+    // Finish the job while the page is open: only the event stream can tell it.
+    for (lease, exr) in held {
+        assert_eq!(w.upload(&s, &lease, exr).await.status(), StatusCode::OK);
+    }
+    let (after, png) = tokio::task::spawn_blocking(move || {
+        browser.wait_for("document.querySelector('.job').dataset.state === 'done'", "the job done");
+        browser.wait_for("document.querySelectorAll('.frames img').length === 2 && [...document.querySelectorAll('.frames img')].every(i => i.complete && i.naturalWidth > 0)", "both thumbnails");
+        browser.wait_for("document.querySelector('#workers tbody tr').children[3].textContent === 'idle'", "the worker idle");
+        let after = summary(&mut browser);
+        (after, browser.screenshot())
+    })
+    .await
+    .unwrap();
+    assert_eq!(after["bar"], json!("100%"), "{after}");
+    assert_eq!(after["frames"], json!([1, 2]), "{after}");
+    assert_eq!(after["thumbs"], json!([64, 64]), "{after}");
+    assert!(
+        after["stats"].as_str().unwrap().contains("frames 2/2"),
+        "{after}"
+    );
+    assert_eq!(after["worker"][4], json!("8"), "{after}");
+    assert_eq!(after["live"], json!("on"));
+
+    let shot = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("dashboard.png");
+    std::fs::write(&shot, &png).unwrap();
+    assert!(png.starts_with(b"\x89PNG"));
+    eprintln!("dashboard screenshot: {}", shot.display());
+}

@@ -1,0 +1,414 @@
+//! Restarts, pause, cancel, failures, expiry and duplicates, over HTTP.
+
+use std::collections::HashSet;
+use std::time::Duration;
+
+use proto::{FailureAck, FrameRange, JobSpec, JobState, JobStatus, ResultAck};
+use reqwest::StatusCode;
+
+use crate::common::*;
+
+fn small(digest: &str, frames: i32) -> JobSpec {
+    let mut spec = JobSpec::new(digest);
+    spec.frames = Some(FrameRange {
+        start: 1,
+        end: frames,
+        step: 1,
+    });
+    spec.width = 16;
+    spec.height = 16;
+    spec.tile_size = Some(8);
+    spec.spp = 2;
+    spec.max_depth = 2;
+    spec
+}
+
+async fn status(s: &TestServer, c: &reqwest::Client, job: u64) -> JobStatus {
+    c.get(s.url(&format!("/jobs/{job}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn kill_and_restart_mid_job_keeps_accepted_tiles_and_finishes_every_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path());
+    let s = TestServer::start(cfg.clone());
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    // 3 frames × 4 tiles.
+    let job = create_job(&s, &c, &small(&scene.digest, 3)).await;
+    let mut w = SimWorker::register(&s, "sim").await;
+    let mut leases = vec![];
+    for _ in 0..6 {
+        leases.push(w.lease(&s).await.unwrap());
+    }
+    // Five tiles accepted (frame 1 complete and assembled, one of frame 2), one lease live.
+    let mut accepted = HashSet::new();
+    for lease in &leases[..5] {
+        let (exr, _) = w.render(&s, lease).await;
+        assert_eq!(w.upload(&s, lease, exr).await.status(), StatusCode::OK);
+        accepted.insert(lease.token.task_id);
+    }
+    let live = leases[5].clone();
+    s.crash();
+
+    let s = TestServer::start(cfg);
+    // The live lease was taken back at startup: its heartbeat is refused.
+    let res = w.heartbeat(&s, &live).await;
+    let err = error_body(res, StatusCode::CONFLICT).await;
+    assert_eq!(err.error, "lease_gone");
+    let after = status(&s, &c, job.id).await;
+    assert_eq!(
+        (after.tasks.done, after.tasks.queued, after.tasks.leased),
+        (5, 7, 0)
+    );
+    assert_eq!(after.frames_done, 1);
+
+    let rest = w.work_until_idle(&s).await;
+    assert_eq!(rest.len(), 7);
+    assert!(
+        rest.iter().all(|l| !accepted.contains(&l.token.task_id)),
+        "an accepted tile was leased again"
+    );
+    // The revoked task came back with a new attempt: its old token is fenced off.
+    let again = rest
+        .iter()
+        .find(|l| l.token.task_id == live.token.task_id)
+        .unwrap();
+    assert_eq!(again.token.attempt, live.token.attempt + 1);
+    let done = status(&s, &c, job.id).await;
+    assert_eq!(
+        (done.state, done.frames_done, done.tasks.done),
+        (JobState::Done, 3, 12)
+    );
+    for f in 1..=3 {
+        assert!(s
+            .data
+            .join(format!("jobs/{}/frame_{f:04}.exr", job.id))
+            .is_file());
+    }
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_frame_whose_tiles_were_in_but_not_assembled_is_assembled_at_startup() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path());
+    let s = TestServer::start(cfg.clone());
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let job = create_job(&s, &c, &small(&scene.digest, 1)).await;
+    let mut w = SimWorker::register(&s, "sim").await;
+    let mut pending = vec![];
+    while let Some(lease) = w.lease(&s).await {
+        let (exr, _) = w.render(&s, &lease).await;
+        pending.push((lease, exr));
+    }
+    let (last, last_exr) = pending.pop().unwrap();
+    for (lease, exr) in pending {
+        assert_eq!(w.upload(&s, &lease, exr).await.status(), StatusCode::OK);
+    }
+    s.crash();
+    // What a crash between the last tile's commit and the frame's write leaves: the tile
+    // file stored, the task done, the frame complete but not assembled.
+    let tile = cfg
+        .data_dir
+        .join(format!("tiles/{}/{}.exr", job.id, last.token.task_id));
+    std::fs::write(&tile, &last_exr).unwrap();
+    let db = rusqlite::Connection::open(cfg.data_dir.join("tessera.db")).unwrap();
+    db.execute(
+        "UPDATE tasks SET state = 'done', done_ms = 1 WHERE id = ?1",
+        [last.token.task_id],
+    )
+    .unwrap();
+    db.execute("UPDATE frames SET tasks_done = tasks_total", [])
+        .unwrap();
+    drop(db);
+
+    let s = TestServer::start(cfg.clone());
+    let done = status(&s, &c, job.id).await;
+    assert_eq!((done.state, done.frames_done), (JobState::Done, 1));
+    assert!(cfg
+        .data_dir
+        .join(format!("jobs/{}/frame_0001.exr", job.id))
+        .is_file());
+    assert!(cfg
+        .data_dir
+        .join(format!("jobs/{}/frame_0001.png", job.id))
+        .is_file());
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn pause_and_cancel_reach_a_working_worker_as_409() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let job = create_job(&s, &c, &small(&scene.digest, 1)).await;
+    let mut w = SimWorker::register(&s, "sim").await;
+    let lease = w.lease(&s).await.unwrap();
+    assert_eq!(w.heartbeat(&s, &lease).await.status(), StatusCode::OK);
+
+    let paused: JobStatus = c
+        .post(s.url(&format!("/jobs/{}/pause", job.id)))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(paused.state, JobState::Paused);
+    let err = error_body(w.heartbeat(&s, &lease).await, StatusCode::CONFLICT).await;
+    assert_eq!(err.error, "lease_gone");
+    assert!(err.message.contains("paused"), "{}", err.message);
+    // Its tile is refused too, and nothing is leased while paused.
+    let (exr, _) = w.render(&s, &lease).await;
+    assert_eq!(
+        w.upload(&s, &lease, exr).await.status(),
+        StatusCode::CONFLICT
+    );
+    assert!(w.lease(&s).await.is_none());
+
+    c.post(s.url(&format!("/jobs/{}/resume", job.id)))
+        .send()
+        .await
+        .unwrap();
+    let again = w.lease(&s).await.unwrap();
+    assert_eq!(again.token.task_id, lease.token.task_id);
+    assert_eq!(again.token.attempt, 2);
+
+    let cancelled: JobStatus = c
+        .post(s.url(&format!("/jobs/{}/cancel", job.id)))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(cancelled.state, JobState::Cancelled);
+    let err = error_body(w.heartbeat(&s, &again).await, StatusCode::CONFLICT).await;
+    assert!(err.message.contains("cancelled"), "{}", err.message);
+    let res = c
+        .post(s.url(&format!("/jobs/{}/resume", job.id)))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        error_body(res, StatusCode::CONFLICT).await.error,
+        "conflict"
+    );
+    assert!(w.lease(&s).await.is_none());
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_second_upload_is_accepted_once_and_ignored_after() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    create_job(&s, &c, &small(&scene.digest, 1)).await;
+    let mut w = SimWorker::register(&s, "sim").await;
+    let lease = w.lease(&s).await.unwrap();
+    let (exr, _) = w.render(&s, &lease).await;
+    let first: ResultAck = w
+        .upload(&s, &lease, exr.clone())
+        .await
+        .json()
+        .await
+        .unwrap();
+    assert!(first.accepted);
+    let second = w.upload(&s, &lease, exr).await;
+    assert_eq!(second.status(), StatusCode::OK);
+    let second: ResultAck = second.json().await.unwrap();
+    assert!(!second.accepted);
+    let metrics = c
+        .get(format!("{}/metrics", s.base))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        metrics.contains("tessera_tiles_received_total 1\n"),
+        "{metrics}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn failures_past_max_attempts_fail_the_job_and_retry_finishes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let mut spec = small(&scene.digest, 2);
+    spec.max_attempts = 1;
+    let job = create_job(&s, &c, &spec).await;
+    let mut w = SimWorker::register(&s, "sim").await;
+    let lease = w.lease(&s).await.unwrap();
+    let ack: FailureAck = w
+        .fail(&s, &lease, "out of memory")
+        .await
+        .json()
+        .await
+        .unwrap();
+    assert!(ack.task_failed && !ack.requeued);
+    // The job is failed, but the other frame still finishes.
+    assert_eq!(w.work_until_idle(&s).await.len(), 7);
+    let st = status(&s, &c, job.id).await;
+    assert_eq!(
+        (st.state, st.frames_done, st.frames_failed, st.tasks.failed),
+        (JobState::Failed, 1, 1, 1)
+    );
+    // A failure report for a lease that is no longer current is refused.
+    assert_eq!(
+        w.fail(&s, &lease, "again").await.status(),
+        StatusCode::CONFLICT
+    );
+
+    let retried: JobStatus = c
+        .post(s.url(&format!("/jobs/{}/retry", job.id)))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(retried.tasks.queued, 1);
+    assert_eq!(w.work_until_idle(&s).await.len(), 1);
+    let st = status(&s, &c, job.id).await;
+    assert_eq!((st.state, st.frames_done), (JobState::Done, 2));
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn an_expired_lease_is_requeued_and_its_worker_hears_409() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(dir.path());
+    cfg.lease = Duration::from_secs(1);
+    cfg.sweep_interval = Duration::from_millis(50);
+    let s = TestServer::start(cfg);
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let job = create_job(&s, &c, &small(&scene.digest, 1)).await;
+    let w = SimWorker::register(&s, "sim").await;
+    let lease = w.lease(&s).await.unwrap();
+    // Wait, without heartbeats, until the sweeper has taken the lease back.
+    loop {
+        let st = status(&s, &c, job.id).await;
+        if st.tasks.leased == 0 {
+            assert_eq!(st.tasks.queued, 4);
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    let err = error_body(w.heartbeat(&s, &lease).await, StatusCode::CONFLICT).await;
+    assert!(err.message.contains("expired"), "{}", err.message);
+    // It counts as this worker's failed attempt: with no other worker, it comes back to
+    // it last, as attempt 2.
+    let mut leases = vec![];
+    while let Some(l) = w.lease(&s).await {
+        leases.push(l.token);
+    }
+    assert_eq!(leases.len(), 4);
+    assert_eq!(
+        leases[3],
+        proto::TaskToken {
+            task_id: lease.token.task_id,
+            attempt: 2
+        }
+    );
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_waiting_lease_request_wakes_when_a_job_arrives() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let w = SimWorker::register(&s, "sim").await;
+    assert!(w.lease(&s).await.is_none());
+    let url = s.url(&format!("/workers/{}/lease", w.id));
+    let waiting = tokio::spawn(async move {
+        client()
+            .post(url)
+            .json(&proto::LeaseRequest { wait_seconds: 30 })
+            .send()
+            .await
+            .unwrap()
+    });
+    let job = create_job(&s, &c, &small(&scene.digest, 1)).await;
+    let res = waiting.await.unwrap();
+    assert_eq!(res.status(), StatusCode::OK);
+    let lease: proto::Lease = res.json().await.unwrap();
+    assert_eq!(lease.job_id, job.id);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn delete_removes_the_job_and_its_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let job = create_job(&s, &c, &small(&scene.digest, 1)).await;
+    let mut w = SimWorker::register(&s, "sim").await;
+    w.work_until_idle(&s).await;
+    let out = s.data.join(format!("jobs/{}", job.id));
+    assert!(out.join("frame_0001.exr").is_file());
+    let res = c
+        .delete(s.url(&format!("/jobs/{}", job.id)))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(res.status(), StatusCode::NO_CONTENT);
+    assert!(!out.exists());
+    let res = c
+        .get(s.url(&format!("/jobs/{}", job.id)))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        error_body(res, StatusCode::NOT_FOUND).await.error,
+        "not_found"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_frame_that_failed_to_write_is_assembled_once_the_disk_recovers() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(dir.path());
+    cfg.sweep_interval = Duration::from_millis(50);
+    let s = TestServer::start(cfg);
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let job = create_job(&s, &c, &small(&scene.digest, 1)).await;
+    // A file where the job's output folder should be: writing the frame fails.
+    let out = s.data.join(format!("jobs/{}", job.id));
+    std::fs::write(&out, b"in the way").unwrap();
+    let mut w = SimWorker::register(&s, "sim").await;
+    let mut last = None;
+    while let Some(lease) = w.lease(&s).await {
+        let (exr, _) = w.render(&s, &lease).await;
+        last = Some((w.upload(&s, &lease, exr.clone()).await.status(), lease, exr));
+    }
+    let (status_code, lease, exr) = last.unwrap();
+    assert_eq!(status_code, StatusCode::INTERNAL_SERVER_ERROR);
+    // The tile itself was accepted: sending it again is a duplicate.
+    let again: ResultAck = w.upload(&s, &lease, exr).await.json().await.unwrap();
+    assert!(!again.accepted);
+    assert_eq!(status(&s, &c, job.id).await.frames_done, 0);
+    // The disk recovers; the sweeper writes the frame.
+    std::fs::remove_file(&out).unwrap();
+    loop {
+        let st = status(&s, &c, job.id).await;
+        if st.frames_done == 1 {
+            assert_eq!(st.state, JobState::Done);
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(out.join("frame_0001.exr").is_file());
+}
