@@ -158,6 +158,56 @@ fn probe_points(
     points
 }
 
+/// The requested camera's projection and world placement at `center` (mid-shutter), with
+/// the index of the node instance placing it; a camera framing the scene over its whole
+/// animation when the default camera is asked for and the scene has none.
+fn find_camera(
+    scene: &Scene,
+    choice: &CameraChoice,
+    center: &Posed,
+    animations: &[usize],
+    aspect: f32,
+) -> Result<(Projection, DMat4, Option<usize>), RenderError> {
+    let wanted = match choice {
+        CameraChoice::Default => (!scene.cameras.is_empty()).then_some(0),
+        CameraChoice::Index(i) if *i < scene.cameras.len() => Some(*i),
+        CameraChoice::Index(i) => {
+            return Err(RenderError::Camera(format!(
+                "{i} does not exist: the scene has {} camera(s)",
+                scene.cameras.len()
+            )))
+        }
+        CameraChoice::Name(name) => Some(
+            scene
+                .cameras
+                .iter()
+                .position(|c| c.name.as_deref() == Some(name.as_str()))
+                .ok_or_else(|| RenderError::Camera(format!("'{name}' does not exist")))?,
+        ),
+    };
+    let placed = wanted.and_then(|cam| {
+        center
+            .instances
+            .iter()
+            .position(|(n, _)| scene.nodes[*n as usize].camera == Some(cam as u32))
+            .map(|j| (cam, j))
+    });
+    match (wanted, placed) {
+        (Some(_), Some((cam, j))) => Ok((
+            scene.cameras[cam].projection,
+            center.instances[j].1,
+            Some(j),
+        )),
+        (Some(cam), None) if *choice != CameraChoice::Default => Err(RenderError::Camera(format!(
+            "{cam} is not placed by any node of the scene"
+        ))),
+        _ => {
+            let (projection, world) = framing_camera(&animated_bounds(scene, animations), aspect);
+            Ok((projection, world, None))
+        }
+    }
+}
+
 /// Flattens `scene` for one frame.
 pub fn prepare_frame(
     scene: Arc<Scene>,
@@ -192,45 +242,13 @@ pub fn prepare_frame(
     };
     let center = posed_at(0.5);
 
-    // Camera: the node instance placing the requested camera, at mid-shutter.
-    let wanted = match &options.camera {
-        CameraChoice::Default => (!scene.cameras.is_empty()).then_some(0),
-        CameraChoice::Index(i) if *i < scene.cameras.len() => Some(*i),
-        CameraChoice::Index(i) => {
-            return Err(RenderError::Camera(format!(
-                "{i} does not exist: the scene has {} camera(s)",
-                scene.cameras.len()
-            )))
-        }
-        CameraChoice::Name(name) => Some(
-            scene
-                .cameras
-                .iter()
-                .position(|c| c.name.as_deref() == Some(name.as_str()))
-                .ok_or_else(|| RenderError::Camera(format!("'{name}' does not exist")))?,
-        ),
-    };
-    let camera_instance = wanted.and_then(|cam| {
-        center
-            .instances
-            .iter()
-            .position(|(n, _)| scene.nodes[*n as usize].camera == Some(cam as u32))
-            .map(|j| (cam, j))
-    });
-    let (projection, camera_world) = match (wanted, camera_instance) {
-        (Some(_), Some((cam, j))) => (scene.cameras[cam].projection, center.instances[j].1),
-        (Some(cam), None) if options.camera != CameraChoice::Default => {
-            return Err(RenderError::Camera(format!(
-                "{cam} is not placed by any node of the scene"
-            )))
-        }
-        _ => framing_camera(&animated_bounds(&scene, &animations), aspect),
-    };
+    let (projection, camera_world, camera_instance) =
+        find_camera(&scene, &options.camera, &center, &animations, aspect)?;
     let (camera_origin, camera_rotation) = rigid(&camera_world);
     // Everything moves by -camera_origin, in double precision, before rounding to f32.
     let relative = DMat4::from_translation(-camera_origin);
     let camera_at = |posed: &Posed| match camera_instance {
-        Some((_, j)) => rigid(&(relative * posed.instances[j].1)),
+        Some(j) => rigid(&(relative * posed.instances[j].1)),
         None => (DVec3::ZERO, camera_rotation),
     };
 
