@@ -326,14 +326,7 @@ async fn bad_tiles_are_refused_and_the_lease_stays_good() {
     // The lease is still good: the real tile is accepted.
     let ack: ResultAck = w.upload(&s, &lease, good).await.json().await.unwrap();
     assert!(ack.accepted);
-    let metrics = c
-        .get(format!("{}/metrics", s.base))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let metrics = metrics(&s, &c).await;
     assert!(
         metrics.contains("tessera_tiles_refused_total 5"),
         "{metrics}"
@@ -353,38 +346,23 @@ async fn worker_calls_with_bad_ids_or_fields_are_refused() {
         .unwrap();
     let err = error_body(res, StatusCode::NOT_FOUND).await;
     assert!(err.message.contains("register"), "{}", err.message);
-    let res = c
-        .post(s.url("/workers"))
-        .json(&proto::WorkerRegistration {
-            name: String::new(),
-            threads: 4,
-            version: "1".into(),
-        })
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(
-        error_body(res, StatusCode::UNPROCESSABLE_ENTITY)
+    for (name, threads, field) in [("", 4, "name"), ("w", 0, "threads")] {
+        let res = c
+            .post(s.url("/workers"))
+            .json(&proto::WorkerRegistration {
+                name: name.into(),
+                threads,
+                version: "1".into(),
+            })
+            .send()
             .await
-            .field
-            .as_deref(),
-        Some("name")
-    );
-    let res = c
-        .post(s.url("/workers"))
-        .json(&proto::WorkerRegistration {
-            name: "w".into(),
-            threads: 0,
-            version: "1".into(),
-        })
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(
-        error_body(res, StatusCode::UNPROCESSABLE_ENTITY)
-            .await
-            .field
-            .as_deref(),
-        Some("threads")
-    );
+            .unwrap();
+        assert_eq!(
+            error_body(res, StatusCode::UNPROCESSABLE_ENTITY)
+                .await
+                .field
+                .as_deref(),
+            Some(field)
+        );
+    }
 }

@@ -391,6 +391,12 @@ pub fn tile_exr(lease: &Lease, layers: &Layers) -> Vec<u8> {
     encode_exr((lease.width, lease.height), layers, &meta).unwrap()
 }
 
+/// The server's Prometheus text.
+pub async fn metrics(s: &TestServer, c: &reqwest::Client) -> String {
+    let res = c.get(format!("{}/metrics", s.base)).send().await.unwrap();
+    res.text().await.unwrap()
+}
+
 /// Reads an error body and checks its kind.
 pub async fn error_body(res: reqwest::Response, status: StatusCode) -> proto::ErrorBody {
     assert_eq!(res.status(), status);

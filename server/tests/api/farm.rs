@@ -143,14 +143,7 @@ async fn single_pass_frames_equal_the_direct_render_bit_for_bit() {
         .all(|f| f.state == FrameState::Done && f.tasks_done == 6));
     assert_eq!(frames.frames[0].file, "frame_0001.exr");
 
-    let metrics = c
-        .get(format!("{}/metrics", s.base))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let metrics = metrics(&s, &c).await;
     assert!(
         metrics.contains("tessera_tiles_received_total 12"),
         "{metrics}"

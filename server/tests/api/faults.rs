@@ -225,14 +225,7 @@ async fn a_second_upload_is_accepted_once_and_ignored_after() {
     assert_eq!(second.status(), StatusCode::OK);
     let second: ResultAck = second.json().await.unwrap();
     assert!(!second.accepted);
-    let metrics = c
-        .get(format!("{}/metrics", s.base))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let metrics = metrics(&s, &c).await;
     assert!(
         metrics.contains("tessera_tiles_received_total 1\n"),
         "{metrics}"
