@@ -7,6 +7,7 @@
 //! | [`deform`] | morph targets and linear blend skinning of a primitive for one pose |
 //! | [`loader`] | glTF 2.0 (.gltf/.glb) into a [`scene::Scene`], with errors naming the element |
 //! | [`demo`] | the built-in demo scene, authored in code |
+//! | [`export`] | a [`scene::Scene`] into a self-contained GLB that the loader reads back |
 //! | [`shapes`] | quads, cubes and spheres as triangle primitives |
 //! | [`geometry`] | rays, hits, boxes, shading frames, the self-intersection offset |
 //! | [`triangle`] | the watertight ray/triangle test |
@@ -40,6 +41,7 @@ pub mod bvh;
 pub mod camera;
 pub mod deform;
 pub mod demo;
+pub mod export;
 pub mod film;
 pub mod geometry;
 pub mod integrator;

@@ -5,6 +5,7 @@
 //! [`render_tile`] traces any rectangle and sample range of that frame; its result depends
 //! on nothing else.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use glam::{DVec3, Vec3, Vec4};
@@ -367,11 +368,29 @@ pub fn render_tile(
     rect: TileRect,
     samples: SampleRange,
 ) -> TileBuffer {
-    let rows: Vec<TileBuffer> = (0..rect.height)
+    let never = AtomicBool::new(false);
+    render_tile_cancellable(frame, settings, rect, samples, &never)
+        .expect("a render nobody cancels finishes")
+}
+
+/// [`render_tile`] that gives up, returning `None`, soon after `cancel` is set: each pixel
+/// checks it, so a worker whose lease is gone stops within one pixel's samples per thread.
+/// When it finishes, the tile is bit-identical to [`render_tile`]'s.
+pub fn render_tile_cancellable(
+    frame: &PreparedFrame,
+    settings: &RenderSettings,
+    rect: TileRect,
+    samples: SampleRange,
+    cancel: &AtomicBool,
+) -> Option<TileBuffer> {
+    let rows: Option<Vec<TileBuffer>> = (0..rect.height)
         .into_par_iter()
         .map(|row| {
             let mut buf = TileBuffer::new(TileRect::new(rect.x, rect.y + row, rect.width, 1));
             for col in 0..rect.width {
+                if cancel.load(Ordering::Relaxed) {
+                    return None;
+                }
                 for index in samples.start..samples.end {
                     let s = integrator::trace_sample(
                         frame,
@@ -383,12 +402,12 @@ pub fn render_tile(
                     buf.add(col as usize, &s);
                 }
             }
-            buf
+            Some(buf)
         })
         .collect();
     let mut tile = TileBuffer::new(rect);
-    rows.iter().for_each(|row| tile.paste(row));
-    tile
+    rows?.iter().for_each(|row| tile.paste(row));
+    Some(tile)
 }
 
 /// Renders `rect` split into `tile_size` tiles, in parallel, calling `tile_done` after

@@ -1,6 +1,7 @@
 //! Whole renders against known answers: white furnace, closed-form irradiance, and the
 //! determinism of tiles, sample ranges and regions.
 
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
@@ -10,7 +11,8 @@ use tracer::film::{Layers, SampleRange, TileBuffer, TileRect};
 use tracer::light::{Environment, PunctualLight};
 use tracer::material::Material;
 use tracer::render::{
-    prepare_frame, render_region, render_tile, FrameOptions, PreparedFrame, RenderSettings,
+    prepare_frame, render_region, render_tile, render_tile_cancellable, FrameOptions,
+    PreparedFrame, RenderSettings,
 };
 use tracer::scene::{CameraDef, Scene, SceneBuilder};
 use tracer::shapes::{quad, uv_sphere};
@@ -242,6 +244,19 @@ fn any_tile_split_is_bit_identical_to_the_whole_frame() {
     }
     assert!(whole == columns, "one-pixel columns differ");
     assert_eq!(whole.dropped, 0);
+}
+
+#[test]
+fn a_cancellable_render_finishes_identically_or_stops_when_cancelled() {
+    let f = demo_frame();
+    let settings = RenderSettings::default();
+    let rect = TileRect::new(2, 3, 10, 7);
+    let samples = SampleRange::new(0, 3);
+    let go = AtomicBool::new(false);
+    let finished = render_tile_cancellable(&f, &settings, rect, samples, &go);
+    assert!(finished == Some(render_tile(&f, &settings, rect, samples)));
+    let stop = AtomicBool::new(true);
+    assert!(render_tile_cancellable(&f, &settings, rect, samples, &stop).is_none());
 }
 
 #[test]

@@ -16,7 +16,7 @@ use super::materials::{convert_material, TextureTable};
 use super::meshes::{convert_mesh, fit_weights, MeshOut, SkinLimit};
 use super::SUPPORTED_EXTENSIONS;
 use crate::camera::Projection;
-use crate::light::PunctualLight;
+use crate::light::{Environment, PunctualLight};
 use crate::material::{AlphaMode, Material};
 use crate::scene::{CameraDef, Features, Mesh, Node, Scene, Skin, Trs};
 
@@ -103,7 +103,7 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         textures,
         cameras,
         lights,
-        environment: None,
+        environment: tessera_environment(doc, &mut warnings),
         animations,
         skins,
         features: Features::default(),
@@ -293,6 +293,39 @@ fn check_node_deformers(nodes: &mut [Node], meshes: &[Mesh], warnings: &mut Vec<
                 ));
                 node.skin = None;
             }
+        }
+    }
+}
+
+/// The environment Tessera's exporter keeps in the default scene's extras,
+/// `{"tessera": {"environment": [r, g, b]}}` (glTF itself has no environment light). A
+/// malformed one is ignored with a warning: extras belong to whichever tool wrote them.
+fn tessera_environment(doc: &gltf::Document, warnings: &mut Vec<String>) -> Option<Environment> {
+    let scene = doc.default_scene().or_else(|| doc.scenes().next())?;
+    let raw = scene.extras().as_ref()?;
+    let extras: Value = gltf::json::deserialize::from_str(raw.get()).ok()?;
+    let value = extras.get("tessera")?.get("environment")?;
+    let rgb: Option<Vec<f32>> = value.as_array().filter(|a| a.len() == 3).map(|a| {
+        a.iter()
+            .filter_map(|v| v.as_f64())
+            .map(|v| v as f32)
+            .collect()
+    });
+    match rgb {
+        Some(c) if c.len() == 3 && c.iter().all(|v| v.is_finite() && *v >= 0.0) => {
+            let c = Vec3::new(c[0], c[1], c[2]);
+            Some(if c == Vec3::ZERO {
+                Environment::Black
+            } else {
+                Environment::Constant(c)
+            })
+        }
+        _ => {
+            warnings.push(format!(
+                "scene extras: tessera.environment must be three finite non-negative numbers, \
+                 not {value}; ignored"
+            ));
+            None
         }
     }
 }
