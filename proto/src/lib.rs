@@ -28,7 +28,7 @@ pub use job::{
 pub use scene::{AnimationInfo, CameraInfo, SceneInfo};
 pub use worker::{
     FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, Rect, ResultAck,
-    ResultMetadata, SampleSpan, TaskToken, WorkerInfo, WorkerList, WorkerRegistered,
+    ResultMetadata, SampleSpan, TaskToken, WorkerInfo, WorkerLeft, WorkerList, WorkerRegistered,
     WorkerRegistration,
 };
 

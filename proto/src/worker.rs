@@ -7,6 +7,7 @@
 //! | heartbeat | [`HeartbeatAck`] | — | lease gone (paused, cancelled, expired): stop |
 //! | result | [`ResultAck`] (also for a duplicate, ignored) | — | lease gone: drop the tile |
 //! | failure | [`FailureAck`] | — | lease gone |
+//! | leave | [`WorkerLeft`] | — | — |
 
 use serde::{Deserialize, Serialize};
 
@@ -59,7 +60,7 @@ pub struct WorkerInfo {
     pub current_frame: Option<i32>,
     /// When it last called the server.
     pub last_seen_ms: i64,
-    /// Whether it called within the last two lease periods.
+    /// Whether it called within the last two lease periods and has not left.
     pub online: bool,
     /// Tasks it has finished.
     pub tasks_done: u64,
@@ -198,6 +199,15 @@ pub struct FailureAck {
     pub task_failed: bool,
     /// This worker has now failed too many tasks of the job and gets no more of them.
     pub blocked_from_job: bool,
+}
+
+/// The answer to `POST /workers/{id}/leave`: the worker is gone and the leases it held
+/// are queued again.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct WorkerLeft {
+    /// Jobs whose tasks it gave back.
+    pub jobs: Vec<u64>,
 }
 
 /// What the server did with an uploaded tile.

@@ -123,7 +123,7 @@ pub fn snapshot(conn: &Connection, now: i64, lease_ms: i64) -> Result<Snapshot> 
         }
     }
     let (workers_total, workers_online) = conn.query_row(
-        "SELECT count(*), coalesce(sum(last_seen_ms >= ?1), 0) FROM workers",
+        "SELECT count(*), coalesce(sum(last_seen_ms >= ?1 AND left_ms IS NULL), 0) FROM workers",
         [now - 2 * lease_ms],
         |r| Ok((r.get(0)?, r.get(1)?)),
     )?;

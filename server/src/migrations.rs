@@ -91,6 +91,8 @@ const MIGRATIONS: &[&str] = &[
         detail  TEXT NOT NULL
     );
     "#,
+    // 2: a worker that shuts down says so; its leases go back to the queue at once.
+    "ALTER TABLE workers ADD COLUMN left_ms INTEGER;",
 ];
 
 /// The schema version this build writes.

@@ -133,16 +133,16 @@ pub fn update_finished(tx: &Transaction, job: u64, now: i64) -> Result<()> {
     Ok(())
 }
 
-/// Records that `worker` called now; fails if it never registered.
+/// Records that `worker` called now; fails if it never registered or has left.
 fn touch_worker(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
     let n = tx.execute(
-        "UPDATE workers SET last_seen_ms = ?2 WHERE id = ?1",
+        "UPDATE workers SET last_seen_ms = ?2 WHERE id = ?1 AND left_ms IS NULL",
         params![worker, now],
     )?;
     if n == 0 {
         return Err(Error::NotFound(format!(
-            "worker {worker} is not registered (the server's data folder may have been \
-             replaced); register again"
+            "worker {worker} is not registered or has left (the server's data folder may \
+             have been replaced); register again"
         )));
     }
     Ok(())
@@ -253,7 +253,7 @@ fn next_task_in_job(
              WHERE t.state = 'queued' AND t.job_id = ?1
                AND NOT EXISTS (
                    SELECT 1 FROM workers w
-                   WHERE w.id != ?2 AND w.last_seen_ms >= ?3
+                   WHERE w.id != ?2 AND w.last_seen_ms >= ?3 AND w.left_ms IS NULL
                      AND NOT EXISTS (SELECT 1 FROM task_failures f
                                      WHERE f.task_id = t.id AND f.worker_id = w.id)
                      AND NOT EXISTS (SELECT 1 FROM job_blocks b
@@ -661,6 +661,41 @@ pub fn revoke_all_leases(conn: &mut Connection, now: i64) -> Result<usize> {
     }
     tx.commit()?;
     Ok(leased.len())
+}
+
+/// A worker shuts down: every lease it holds goes back to the queue (no attempt counted:
+/// it gave the task back rather than failing it) and it gets no more work. Returns the
+/// jobs touched.
+pub fn leave(conn: &mut Connection, worker: u64, now: i64) -> Result<Vec<u64>> {
+    let tx = conn.transaction()?;
+    touch_worker(&tx, worker, now)?;
+    let held: Vec<TaskRow> = {
+        let mut stmt = tx.prepare(&format!(
+            "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased' AND worker_id = ?1"
+        ))?;
+        let rows = stmt.query_map([worker], task_from_row)?;
+        rows.collect::<rusqlite::Result<_>>()?
+    };
+    let mut jobs = Vec::new();
+    for task in &held {
+        revoke(&tx, task)?;
+        if !jobs.contains(&task.job_id) {
+            jobs.push(task.job_id);
+        }
+    }
+    tx.execute(
+        "UPDATE workers SET left_ms = ?2 WHERE id = ?1",
+        params![worker, now],
+    )?;
+    log(
+        &tx,
+        now,
+        None,
+        "worker_left",
+        &format!("{worker}, {} leases given back", held.len()),
+    )?;
+    tx.commit()?;
+    Ok(jobs)
 }
 
 fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {

@@ -208,7 +208,7 @@ pub fn frame_status(conn: &Connection, job: u64, frame: i32) -> Result<FrameStat
 
 const WORKER_QUERY: &str =
     "SELECT w.id, w.name, w.threads, w.version, w.last_seen_ms, w.tasks_done,
-        t.id, t.attempt, t.job_id, t.frame
+        t.id, t.attempt, t.job_id, t.frame, w.left_ms
      FROM workers w
      LEFT JOIN tasks t ON t.id = (SELECT id FROM tasks WHERE worker_id = w.id AND state = 'leased'
                                   ORDER BY leased_ms DESC LIMIT 1)";
@@ -222,7 +222,7 @@ fn worker_from_row(r: &rusqlite::Row, now: i64, lease_ms: i64) -> rusqlite::Resu
         threads: r.get(2)?,
         version: r.get(3)?,
         last_seen_ms,
-        online: last_seen_ms >= now - 2 * lease_ms,
+        online: last_seen_ms >= now - 2 * lease_ms && r.get::<_, Option<i64>>(10)?.is_none(),
         tasks_done: r.get(5)?,
         current_task: match task {
             Some(task_id) => Some(TaskToken {

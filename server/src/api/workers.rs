@@ -9,7 +9,7 @@ use axum::response::{IntoResponse, Response};
 use axum::Json;
 use proto::{
     FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, ResultAck,
-    ResultMetadata, TaskToken, WorkerList, WorkerRegistered, WorkerRegistration,
+    ResultMetadata, TaskToken, WorkerLeft, WorkerList, WorkerRegistered, WorkerRegistration,
 };
 
 use super::error::{read_body, JsonBody, PathParams};
@@ -141,6 +141,33 @@ pub async fn heartbeat(
     Ok(Json(HeartbeatAck {
         deadline_ms: deadline,
     }))
+}
+
+/// A worker shuts down: the leases it holds are queued again at once (no attempt is
+/// counted), and its id takes no more calls.
+#[utoipa::path(
+    post,
+    path = "/workers/{id}/leave",
+    tag = "workers",
+    params(("id" = u64, Path, description = "worker id")),
+    responses((status = 200, body = WorkerLeft), (status = 404, body = proto::ErrorBody)),
+    security(("worker_token" = []))
+)]
+pub async fn leave(
+    State(app): State<AppState>,
+    PathParams(worker): PathParams<u64>,
+) -> Result<Json<WorkerLeft>> {
+    let now = now_ms();
+    let jobs = app
+        .db
+        .run(move |c| scheduler::leave(c, worker, now))
+        .await?;
+    app.work.notify_waiters();
+    for &job in &jobs {
+        app.publish_job(job).await;
+    }
+    app.publish_worker(worker).await;
+    Ok(Json(WorkerLeft { jobs }))
 }
 
 /// Uploads a rendered tile: the body is the EXR, the `x-tessera-*` headers carry the

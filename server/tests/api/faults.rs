@@ -317,6 +317,62 @@ async fn an_expired_lease_is_requeued_and_its_worker_hears_409() {
 }
 
 #[tokio::test(flavor = "multi_thread")]
+async fn a_worker_that_leaves_gives_its_lease_back_at_once_without_an_attempt() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    // One attempt only: had leaving counted as a failure, the task would now be failed.
+    let mut spec = small(&scene.digest, 1);
+    spec.max_attempts = 1;
+    let job = create_job(&s, &c, &spec).await;
+    let leaving = SimWorker::register(&s, "leaving").await;
+    let lease = leaving.lease(&s).await.unwrap();
+    assert_eq!(status(&s, &c, job.id).await.tasks.leased, 1);
+
+    let res = leaving
+        .client
+        .post(s.url(&format!("/workers/{}/leave", leaving.id)))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(res.status(), StatusCode::OK);
+    let left: proto::WorkerLeft = res.json().await.unwrap();
+    assert_eq!(left.jobs, vec![job.id]);
+    let st = status(&s, &c, job.id).await;
+    assert_eq!(
+        (st.tasks.leased, st.tasks.queued, st.tasks.failed),
+        (0, 4, 0)
+    );
+    assert_ne!(st.state, JobState::Failed);
+
+    // The id takes no more calls, and the list shows it offline.
+    let err = error_body(leaving.heartbeat(&s, &lease).await, StatusCode::NOT_FOUND).await;
+    assert!(err.message.contains("left"), "{}", err.message);
+    let workers: proto::WorkerList = c
+        .get(s.url("/workers"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let info = workers.workers.iter().find(|w| w.id == leaving.id).unwrap();
+    assert!(!info.online && info.current_task.is_none());
+
+    // Another worker takes the task under a new fencing token and finishes the job.
+    let mut other = SimWorker::register(&s, "other").await;
+    let done = other.work_until_idle(&s).await;
+    assert_eq!(done.len(), 4);
+    let again = done
+        .iter()
+        .find(|l| l.token.task_id == lease.token.task_id)
+        .unwrap();
+    assert_eq!(again.token.attempt, lease.token.attempt + 1);
+    assert_eq!(status(&s, &c, job.id).await.state, JobState::Done);
+}
+
+#[tokio::test(flavor = "multi_thread")]
 async fn a_waiting_lease_request_wakes_when_a_job_arrives() {
     let dir = tempfile::tempdir().unwrap();
     let s = TestServer::start(config(dir.path()));

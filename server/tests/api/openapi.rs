@@ -49,6 +49,7 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         ("GET", "/api/v1/workers"),
         ("POST", "/api/v1/workers/{id}/lease"),
         ("POST", "/api/v1/workers/{id}/heartbeat"),
+        ("POST", "/api/v1/workers/{id}/leave"),
         ("POST", "/api/v1/workers/{id}/tasks/{task}/result"),
         ("POST", "/api/v1/workers/{id}/tasks/{task}/failure"),
         ("GET", "/api/v1/events"),
