@@ -2,8 +2,15 @@
 
 mod args;
 mod bench;
+mod client;
+mod control;
+mod demo;
+mod progress;
 mod render;
 mod server;
+mod signal;
+mod submit;
+mod worker;
 
 use clap::{Parser, Subcommand};
 
@@ -17,12 +24,31 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a whole farm on this machine and render a short animation with it.
+    Demo(demo::DemoArgs),
     /// Render one frame of a glTF scene (or the built-in demo) to a multi-layer EXR.
     Render(render::RenderArgs),
     /// Measure the tracer: rays per second, and time and error against samples per pixel.
     Bench(bench::BenchArgs),
     /// Run the farm server: REST API, scheduler, tile assembly, dashboard.
     Server(server::ServerArgs),
+    /// Run a worker: lease tiles from a farm server, render them, upload them.
+    Worker(worker::WorkerArgs),
+    /// Pack a scene, upload it to the farm and create a render job (--wait: follow it and
+    /// download the frames).
+    Submit(submit::SubmitArgs),
+    /// Show the farm's jobs, or one job in detail.
+    Status(control::StatusArgs),
+    /// Cancel a job: its unfinished tasks will not run.
+    Cancel(control::ControlArgs),
+    /// Pause a job: nothing more is leased until it resumes.
+    Pause(control::ControlArgs),
+    /// Resume a paused job.
+    Resume(control::ControlArgs),
+    /// Queue a job's failed tasks again, with fresh attempts.
+    Retry(control::ControlArgs),
+    /// List the farm's workers.
+    Workers(control::WorkersArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -30,5 +56,14 @@ fn main() -> anyhow::Result<()> {
         Command::Render(args) => render::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Server(args) => server::run(args),
+        Command::Worker(args) => worker::run(args),
+        Command::Submit(args) => submit::run(args),
+        Command::Status(args) => control::status(args),
+        Command::Cancel(args) => control::control(args, client::Control::Cancel),
+        Command::Pause(args) => control::control(args, client::Control::Pause),
+        Command::Resume(args) => control::control(args, client::Control::Resume),
+        Command::Retry(args) => control::control(args, client::Control::Retry),
+        Command::Workers(args) => control::workers(args),
+        Command::Demo(args) => demo::run(args),
     }
 }

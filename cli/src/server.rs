@@ -1,4 +1,4 @@
-//! `tessera server`: flags into a [`server::Config`], then [`server::serve`] until Ctrl-C.
+//! `tessera server`: flags into a [`server::Config`], then [`server::serve`] until SIGINT or SIGTERM.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -62,10 +62,7 @@ pub fn run(args: ServerArgs) -> anyhow::Result<()> {
             listener.local_addr()?,
             config.data_dir.display()
         );
-        let shutdown = async {
-            let _ = tokio::signal::ctrl_c().await;
-        };
-        server::serve(listener, config, shutdown).await?;
+        server::serve(listener, config, crate::signal::interrupted()).await?;
         anyhow::Ok(())
     })
 }

@@ -1,1 +1,395 @@
-//! End-to-end tests live in `tests/tests/`; this library only hosts shared helpers.
+//! A farm of real `tessera` processes on 127.0.0.1, for the end-to-end tests in
+//! `tests/tests/`: a server, workers and the client commands, each its own process, as a
+//! user runs them.
+//!
+//! The tests run the `tessera` binary that `cargo test --workspace` builds for the `cli`
+//! package's own tests (`target/<profile>/tessera`, beside this test binary's `deps`
+//! folder). Every process logs to a file in the farm's folder; a failed assertion prints
+//! those logs.
+
+use std::fs;
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use proto::{JobStatus, WorkerList};
+
+/// The `tessera` binary next to this test executable.
+pub fn tessera_bin() -> PathBuf {
+    let exe = std::env::current_exe().expect("the test knows its own path");
+    // target/<profile>/deps/<test> -> target/<profile>/tessera
+    let bin = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("the test binary lies in target/<profile>/deps")
+        .join(format!("tessera{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        bin.exists(),
+        "{} is missing: run the end-to-end tests with `cargo test --workspace` (which builds \
+         the binary), or `cargo build -p cli` first",
+        bin.display()
+    );
+    bin
+}
+
+/// A loopback port nothing listens on right now.
+pub fn free_port() -> u16 {
+    let l = TcpListener::bind("127.0.0.1:0").expect("binding a free port");
+    l.local_addr().unwrap().port()
+}
+
+/// Runs `tessera args` in `dir` to completion.
+pub fn tessera(args: &[&str], dir: &Path) -> Output {
+    Command::new(tessera_bin())
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("tessera runs")
+}
+
+/// Runs `tessera args` in `dir` and panics with its output unless it succeeds; returns
+/// its standard output.
+pub fn tessera_ok(args: &[&str], dir: &Path) -> String {
+    let o = tessera(args, dir);
+    assert!(
+        o.status.success(),
+        "tessera {} failed ({}):\n{}\n{}",
+        args.join(" "),
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// A long-running `tessera` process (server or worker) whose output goes to a log file.
+/// Dropping it kills it, so a failing test leaves no process behind.
+pub struct Process {
+    name: String,
+    child: Child,
+    log: PathBuf,
+    status: Option<ExitStatus>,
+}
+
+impl Process {
+    /// Starts `tessera args` in `dir`, logging to `dir/<name>.log`.
+    pub fn start(name: &str, args: &[&str], dir: &Path) -> Process {
+        let log = dir.join(format!("{name}.log"));
+        let out = fs::File::create(&log).expect("creating a log file");
+        let err = out.try_clone().unwrap();
+        let child = Command::new(tessera_bin())
+            .args(args)
+            .current_dir(dir)
+            .env("RUST_LOG", "info")
+            .stdin(Stdio::null())
+            .stdout(out)
+            .stderr(err)
+            .spawn()
+            .expect("starting tessera");
+        Process {
+            name: name.into(),
+            child,
+            log,
+            status: None,
+        }
+    }
+
+    /// Its process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// What it has logged so far.
+    pub fn log(&self) -> String {
+        fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Whether it is still running.
+    pub fn running(&mut self) -> bool {
+        if self.status.is_none() {
+            self.status = self.child.try_wait().expect("polling a child");
+        }
+        self.status.is_none()
+    }
+
+    /// Sends `signal` (a `libc::SIG*` number).
+    pub fn signal(&self, signal: i32) {
+        // SAFETY: kill(2) with the pid of our own child; no memory is involved.
+        let rc = unsafe { libc::kill(self.child.id() as i32, signal) };
+        assert_eq!(rc, 0, "signalling {}", self.name);
+    }
+
+    /// Sends SIGTERM and waits up to `timeout` for it to exit; returns how it exited.
+    pub fn terminate(&mut self, timeout: Duration) -> ExitStatus {
+        self.signal(libc::SIGTERM);
+        self.wait(timeout)
+    }
+
+    /// Kills it with SIGKILL (`kill -9`): no chance to clean up.
+    pub fn kill9(&mut self) {
+        self.signal(libc::SIGKILL);
+        self.wait(Duration::from_secs(10));
+    }
+
+    /// Waits up to `timeout` for it to exit.
+    pub fn wait(&mut self, timeout: Duration) -> ExitStatus {
+        let until = Instant::now() + timeout;
+        while self.running() {
+            assert!(
+                Instant::now() < until,
+                "{} did not exit within {timeout:?}; its log:\n{}",
+                self.name,
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        self.status.unwrap()
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        if self.running() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Polls `done` every 100 ms until it holds; panics after `timeout` naming `what`, with
+/// `logs()` for context.
+pub fn wait_until(
+    what: &str,
+    timeout: Duration,
+    mut done: impl FnMut() -> bool,
+    logs: impl Fn() -> String,
+) {
+    let until = Instant::now() + timeout;
+    while !done() {
+        assert!(
+            Instant::now() < until,
+            "timed out after {timeout:?} waiting for {what}\n{}",
+            logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// A farm on one loopback port with its folder: the server's data, the workers' caches,
+/// the logs, scenes and downloaded frames all live under it.
+pub struct Farm {
+    /// The folder (removed when the farm is dropped).
+    pub dir: tempfile::TempDir,
+    /// The server's port.
+    pub port: u16,
+    /// The server process, while one runs.
+    pub server: Option<Process>,
+    /// Worker processes started so far.
+    pub workers: Vec<Process>,
+    servers_started: usize,
+}
+
+impl Default for Farm {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Farm {
+    /// A farm with nothing running yet.
+    pub fn new() -> Farm {
+        Farm {
+            dir: tempfile::tempdir().expect("a temp folder"),
+            port: free_port(),
+            server: None,
+            workers: vec![],
+            servers_started: 0,
+        }
+    }
+
+    /// The farm's folder.
+    pub fn path(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// The server's base URL.
+    pub fn url(&self) -> String {
+        format!("http://127.0.0.1:{}", self.port)
+    }
+
+    /// Starts `tessera server` (data in `data/`, leases of `lease_seconds`) and waits until
+    /// it answers.
+    pub fn start_server(&mut self, lease_seconds: u64) {
+        self.servers_started += 1;
+        let listen = format!("127.0.0.1:{}", self.port);
+        let lease = lease_seconds.to_string();
+        let name = format!("server-{}", self.servers_started);
+        let server = Process::start(
+            &name,
+            &[
+                "server",
+                "--listen",
+                &listen,
+                "--data",
+                "data",
+                "--lease-seconds",
+                &lease,
+            ],
+            self.path(),
+        );
+        self.server = Some(server);
+        let url = self.url();
+        let dir = self.path().to_path_buf();
+        wait_until(
+            "the server to answer",
+            Duration::from_secs(30),
+            || {
+                tessera(&["status", "--server", &url], &dir)
+                    .status
+                    .success()
+            },
+            || self.logs(),
+        );
+    }
+
+    /// Starts `tessera worker` named `name` with `threads` render threads.
+    pub fn start_worker(&mut self, name: &str, threads: u32) -> usize {
+        let url = self.url();
+        let threads = threads.to_string();
+        let cache = format!("cache-{name}");
+        let worker = Process::start(
+            name,
+            &[
+                "worker",
+                "--server",
+                &url,
+                "--threads",
+                &threads,
+                "--cache",
+                &cache,
+                "--name",
+                name,
+            ],
+            self.path(),
+        );
+        self.workers.push(worker);
+        self.workers.len() - 1
+    }
+
+    /// Runs a client command against this farm's server (`--server` added).
+    pub fn client(&self, args: &[&str]) -> String {
+        let url = self.url();
+        let mut all = args.to_vec();
+        all.extend(["--server", url.as_str()]);
+        let o = tessera(&all, self.path());
+        assert!(
+            o.status.success(),
+            "tessera {} failed ({}):\n{}\n{}\n{}",
+            all.join(" "),
+            o.status,
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr),
+            self.logs()
+        );
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    }
+
+    /// `tessera submit args...` (with `--server`); returns the job id it prints.
+    pub fn submit(&self, args: &[&str]) -> u64 {
+        let mut all = vec!["submit"];
+        all.extend(args);
+        let out = self.client(&all);
+        job_id_in(&out).unwrap_or_else(|| panic!("no job id in the output of submit:\n{out}"))
+    }
+
+    /// The job's status, through `tessera status JOB --json` (`{"job": ..., "frames": ...}`).
+    pub fn job(&self, id: u64) -> JobStatus {
+        #[derive(serde::Deserialize)]
+        struct Detail {
+            job: JobStatus,
+        }
+        let id = id.to_string();
+        let out = self.client(&["status", &id, "--json"]);
+        let detail: Detail =
+            serde_json::from_str(&out).unwrap_or_else(|e| panic!("status --json: {e}:\n{out}"));
+        detail.job
+    }
+
+    /// The workers, through `tessera workers --json`.
+    pub fn worker_list(&self) -> WorkerList {
+        let out = self.client(&["workers", "--json"]);
+        serde_json::from_str(&out).unwrap_or_else(|e| panic!("workers --json: {e}:\n{out}"))
+    }
+
+    /// Waits until job `id` has ended (done, failed or cancelled); returns its status.
+    pub fn wait_for_job(&self, id: u64, timeout: Duration) -> JobStatus {
+        let mut last = None;
+        wait_until(
+            &format!("job {id} to end"),
+            timeout,
+            || {
+                let st = self.job(id);
+                let ended = st.finished_ms.is_some();
+                last = Some(st);
+                ended
+            },
+            || self.logs(),
+        );
+        last.unwrap()
+    }
+
+    /// Every log of the farm's processes, for failure messages.
+    pub fn logs(&self) -> String {
+        let mut out = String::new();
+        let mut entries: Vec<_> = fs::read_dir(self.path())
+            .map(|d| d.flatten().map(|e| e.path()).collect())
+            .unwrap_or_default();
+        entries.sort();
+        for path in entries {
+            if path.extension().is_some_and(|e| e == "log") {
+                let text = fs::read_to_string(&path).unwrap_or_default();
+                let tail: Vec<&str> = text.lines().rev().take(40).collect();
+                out += &format!("--- {} (last 40 lines)\n", path.display());
+                for line in tail.into_iter().rev() {
+                    out += line;
+                    out.push('\n');
+                }
+            }
+        }
+        out
+    }
+
+    /// Writes the built-in animated demo scene as `demo.glb` in the farm's folder.
+    pub fn demo_scene(&self) -> PathBuf {
+        let glb = tracer::export::scene_to_glb(&tracer::demo::animated_demo_scene())
+            .expect("the demo scene exports");
+        let path = self.path().join("demo.glb");
+        fs::write(&path, glb).unwrap();
+        path
+    }
+}
+
+/// The first number after the word "job" in `text` (how `tessera submit` names the job).
+pub fn job_id_in(text: &str) -> Option<u64> {
+    text.split("job").skip(1).find_map(|rest| {
+        let digits: String = rest
+            .trim_start_matches([' ', '#', ':'])
+            .chars()
+            .take_while(char::is_ascii_digit)
+            .collect();
+        digits.parse().ok()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::job_id_in;
+
+    #[test]
+    fn finds_the_job_id() {
+        assert_eq!(job_id_in("submitted job 12 (3 frames)"), Some(12));
+        assert_eq!(job_id_in("scene abc\njob #7 queued"), Some(7));
+        assert_eq!(job_id_in("no id here"), None);
+    }
+}

@@ -1,2 +1,28 @@
-//! Tessera's worker daemon (lease, fetch scene, render, upload, heartbeat). Filled by the
-//! worker issue.
+//! Tessera's worker daemon: register with a farm server, lease tile tasks, fetch each
+//! scene once (cached on disk by SHA-256), render with the tracer on a rayon pool while
+//! heartbeating, upload the tile as EXR; retry through network trouble, and on shutdown
+//! hand every lease back at once.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`config`] | [`WorkerConfig`]: server URL, token, threads, cache folder, name |
+//! | [`api`] | the worker routes as typed calls (one outcome enum per call) and the retry loop |
+//! | [`backoff`] | exponential backoff with jitter, and the wait constants |
+//! | [`cache`] | scenes on disk as `<digest>.glb`: verified on read, written atomically |
+//! | [`render`] | a [`proto::Lease`] into tracer frame options, a tile render, its EXR bytes |
+//! | `stop` | the shutdown signal every wait listens to |
+//! | `daemon` | [`run`]: the register / lease / render / upload loop |
+//!
+//! A binary (or a test) calls [`run`] with a config and a shutdown future; it returns a
+//! [`RunSummary`] when the future completes and the server has been told.
+
+pub mod api;
+pub mod backoff;
+pub mod cache;
+pub mod config;
+mod daemon;
+pub mod render;
+mod stop;
+
+pub use config::WorkerConfig;
+pub use daemon::{run, RunSummary};

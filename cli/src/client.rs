@@ -1,0 +1,397 @@
+//! A small client of the farm's REST API (`/api/v1`), for `submit`, `status`, the job
+//! controls, `workers` and `demo`: one method per route, typed with the `proto` wire types.
+//! Every failure becomes a [`ClientError`] whose message a person can act on: the server's
+//! own `message` (and the field at fault) for an error answer, and a hint to start
+//! `tessera server` when nothing answers.
+
+use std::fmt;
+use std::time::Duration;
+
+use proto::{ErrorBody, FrameList, JobList, JobSpec, JobStatus, SceneInfo, WorkerList};
+use reqwest::{Method, RequestBuilder, StatusCode};
+use serde::de::DeserializeOwned;
+
+/// Where `submit`, `status` and the rest look for the server when not told.
+pub const DEFAULT_SERVER: &str = "http://127.0.0.1:8700";
+
+/// How long to wait for a TCP connection before calling the server unreachable.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
+/// The longest a JSON request may take. Uploads and downloads have no total limit: a
+/// large scene on a slow link may take minutes, and the connection itself reports death.
+const JSON_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// Why a request failed.
+#[derive(Debug)]
+pub enum ClientError {
+    /// Nothing answered at the server's address (refused, unresolvable, timed out).
+    Unreachable {
+        /// The server's base URL.
+        server: String,
+        /// What the network layer said.
+        detail: String,
+    },
+    /// The server answered with an error status.
+    Api {
+        /// The HTTP status.
+        status: StatusCode,
+        /// The JSON error body, when the answer had one.
+        body: Option<ErrorBody>,
+        /// What was asked, e.g. `POST /api/v1/jobs`.
+        request: String,
+    },
+    /// The request failed after connecting, or the answer could not be read.
+    Transport {
+        /// What was asked.
+        request: String,
+        /// What went wrong.
+        detail: String,
+    },
+}
+
+impl ClientError {
+    /// The HTTP status of an error answer.
+    pub fn status(&self) -> Option<StatusCode> {
+        match self {
+            ClientError::Api { status, .. } => Some(*status),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for ClientError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ClientError::Unreachable { server, detail } => write!(
+                f,
+                "cannot reach the Tessera server at {server}: {detail}; is `tessera server` \
+                 running? (set the address with --server or TESSERA_SERVER)"
+            ),
+            ClientError::Api {
+                status: StatusCode::UNAUTHORIZED,
+                ..
+            } => write!(
+                f,
+                "the server refused the client token (401 Unauthorized): pass the server's \
+                 --client-token with --token or TESSERA_CLIENT_TOKEN"
+            ),
+            ClientError::Api {
+                status,
+                body: Some(body),
+                ..
+            } => {
+                write!(f, "{}", body.message)?;
+                // The server's message usually starts with the field already.
+                if let Some(field) = &body.field {
+                    if !body.message.starts_with(field.as_str()) {
+                        write!(f, " (field `{field}`)")?;
+                    }
+                }
+                write!(f, " [{}]", status.as_u16())
+            }
+            ClientError::Api {
+                status,
+                body: None,
+                request,
+            } => write!(f, "{request}: the server answered {status}"),
+            ClientError::Transport { request, detail } => write!(f, "{request}: {detail}"),
+        }
+    }
+}
+
+impl std::error::Error for ClientError {}
+
+/// The innermost cause of an error: for a refused connection "Connection refused (os
+/// error 111)" rather than reqwest's "error sending request for url ...".
+fn root_cause(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut cause = e;
+    while let Some(next) = cause.source() {
+        cause = next;
+    }
+    cause.to_string()
+}
+
+/// Where the server is and how to prove who we are: the flags every client command takes.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ServerOpts {
+    /// The farm server's URL.
+    #[arg(long, env = "TESSERA_SERVER", default_value = DEFAULT_SERVER)]
+    pub server: String,
+    /// The server's client token (its --client-token), sent as a bearer token.
+    #[arg(long, env = "TESSERA_CLIENT_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+}
+
+impl ServerOpts {
+    /// A client of that server.
+    pub fn client(&self) -> anyhow::Result<Client> {
+        Client::new(&self.server, self.token.clone())
+    }
+}
+
+/// A job control: `POST /jobs/{id}/{control}`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Control {
+    /// Unfinished tasks will not run.
+    Cancel,
+    /// Nothing more is leased until it resumes.
+    Pause,
+    /// Leasing starts again.
+    Resume,
+    /// Failed tasks are queued again with fresh attempts.
+    Retry,
+}
+
+impl Control {
+    /// The last path segment of its route.
+    pub fn verb(self) -> &'static str {
+        match self {
+            Control::Cancel => "cancel",
+            Control::Pause => "pause",
+            Control::Resume => "resume",
+            Control::Retry => "retry",
+        }
+    }
+}
+
+/// A frame file the server serves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameFile {
+    /// The assembled multi-layer EXR.
+    Exr,
+    /// The tone-mapped PNG preview.
+    Png,
+}
+
+impl FrameFile {
+    /// The file extension, which is also the route's last segment.
+    pub fn extension(self) -> &'static str {
+        match self {
+            FrameFile::Exr => "exr",
+            FrameFile::Png => "png",
+        }
+    }
+}
+
+/// The farm's API at one server, with an optional client token.
+#[derive(Clone, Debug)]
+pub struct Client {
+    http: reqwest::Client,
+    /// The server's base URL without a trailing slash, e.g. `http://127.0.0.1:8700`.
+    base: String,
+    token: Option<String>,
+}
+
+impl Client {
+    /// A client of the server at `base` (`http://host:port`; a missing scheme means http).
+    pub fn new(base: &str, token: Option<String>) -> anyhow::Result<Client> {
+        let base = base.trim();
+        if base.is_empty() {
+            anyhow::bail!("--server is empty; give the server's URL, e.g. {DEFAULT_SERVER}");
+        }
+        let base = if base.contains("://") {
+            base.to_string()
+        } else {
+            format!("http://{base}")
+        };
+        let url = reqwest::Url::parse(&base)
+            .map_err(|e| anyhow::anyhow!("--server {base}: not a URL ({e})"))?;
+        if !matches!(url.scheme(), "http" | "https") || url.host_str().is_none_or(str::is_empty) {
+            anyhow::bail!("--server {base}: expected http://HOST:PORT, e.g. {DEFAULT_SERVER}");
+        }
+        let base = base.trim_end_matches('/').to_string();
+        let http = reqwest::Client::builder()
+            .connect_timeout(CONNECT_TIMEOUT)
+            .user_agent(concat!("tessera-cli/", env!("CARGO_PKG_VERSION")))
+            .build()
+            .map_err(|e| anyhow::anyhow!("setting up the HTTP client: {e}"))?;
+        Ok(Client {
+            http,
+            base,
+            token: token.filter(|t| !t.is_empty()),
+        })
+    }
+
+    /// The server's base URL.
+    pub fn base(&self) -> &str {
+        &self.base
+    }
+
+    /// The web dashboard's address.
+    pub fn dashboard_url(&self) -> String {
+        format!("{}/", self.base)
+    }
+
+    fn request(&self, method: Method, path: &str) -> (RequestBuilder, String) {
+        let path = format!("{}{path}", proto::API_PREFIX);
+        let what = format!("{method} {path}");
+        let mut req = self.http.request(method, format!("{}{path}", self.base));
+        if let Some(token) = &self.token {
+            req = req.bearer_auth(token);
+        }
+        (req, what)
+    }
+
+    /// Sends a request and turns every failure into a [`ClientError`].
+    async fn send(
+        &self,
+        req: RequestBuilder,
+        what: &str,
+    ) -> Result<reqwest::Response, ClientError> {
+        let answer = req.send().await.map_err(|e| {
+            if e.is_connect() || (e.is_timeout() && e.status().is_none()) {
+                ClientError::Unreachable {
+                    server: self.base.clone(),
+                    detail: root_cause(&e),
+                }
+            } else {
+                ClientError::Transport {
+                    request: what.to_string(),
+                    detail: root_cause(&e),
+                }
+            }
+        })?;
+        let status = answer.status();
+        if status.is_success() {
+            return Ok(answer);
+        }
+        let bytes = answer.bytes().await.unwrap_or_default();
+        Err(ClientError::Api {
+            status,
+            body: serde_json::from_slice::<ErrorBody>(&bytes).ok(),
+            request: what.to_string(),
+        })
+    }
+
+    async fn json<T: DeserializeOwned>(
+        &self,
+        req: RequestBuilder,
+        what: &str,
+    ) -> Result<T, ClientError> {
+        let answer = self.send(req.timeout(JSON_TIMEOUT), what).await?;
+        let bytes = answer.bytes().await.map_err(|e| ClientError::Transport {
+            request: what.to_string(),
+            detail: format!("reading the answer: {}", root_cause(&e)),
+        })?;
+        serde_json::from_slice(&bytes).map_err(|e| ClientError::Transport {
+            request: what.to_string(),
+            detail: format!(
+                "the answer is not what this version of tessera expects ({e}); are the \
+                 server and the CLI the same version?"
+            ),
+        })
+    }
+
+    async fn get<T: DeserializeOwned>(&self, path: &str) -> Result<T, ClientError> {
+        let (req, what) = self.request(Method::GET, path);
+        self.json(req, &what).await
+    }
+
+    /// `POST /scenes`: uploads a GLB; the server checks and summarises it.
+    pub async fn upload_scene(&self, glb: Vec<u8>) -> Result<SceneInfo, ClientError> {
+        let (req, what) = self.request(Method::POST, "/scenes");
+        let req = req
+            .header(reqwest::header::CONTENT_TYPE, "model/gltf-binary")
+            .body(glb);
+        let answer = self.send(req, &what).await?;
+        answer.json().await.map_err(|e| ClientError::Transport {
+            request: what,
+            detail: format!("reading the answer: {}", root_cause(&e)),
+        })
+    }
+
+    /// `POST /jobs`: creates a job.
+    pub async fn create_job(&self, spec: &JobSpec) -> Result<JobStatus, ClientError> {
+        let (req, what) = self.request(Method::POST, "/jobs");
+        self.json(req.json(spec), &what).await
+    }
+
+    /// `GET /jobs`: every job, newest first.
+    pub async fn jobs(&self) -> Result<JobList, ClientError> {
+        self.get("/jobs").await
+    }
+
+    /// `GET /jobs/{id}`.
+    pub async fn job(&self, id: u64) -> Result<JobStatus, ClientError> {
+        self.get(&format!("/jobs/{id}")).await
+    }
+
+    /// `POST /jobs/{id}/{cancel,pause,resume,retry}`.
+    pub async fn control(&self, id: u64, control: Control) -> Result<JobStatus, ClientError> {
+        let (req, what) = self.request(Method::POST, &format!("/jobs/{id}/{}", control.verb()));
+        self.json(req, &what).await
+    }
+
+    /// `GET /jobs/{id}/frames`.
+    pub async fn frames(&self, id: u64) -> Result<FrameList, ClientError> {
+        self.get(&format!("/jobs/{id}/frames")).await
+    }
+
+    /// `GET /jobs/{id}/frames/{frame}/{exr,png}`: the file's bytes.
+    pub async fn frame_file(
+        &self,
+        id: u64,
+        frame: i32,
+        file: FrameFile,
+    ) -> Result<Vec<u8>, ClientError> {
+        let path = format!("/jobs/{id}/frames/{frame}/{}", file.extension());
+        let (req, what) = self.request(Method::GET, &path);
+        let answer = self.send(req, &what).await?;
+        let bytes = answer.bytes().await.map_err(|e| ClientError::Transport {
+            request: what,
+            detail: format!("downloading: {}", root_cause(&e)),
+        })?;
+        Ok(bytes.to_vec())
+    }
+
+    /// `GET /workers`.
+    pub async fn workers(&self) -> Result<WorkerList, ClientError> {
+        self.get("/workers").await
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn error_answers_show_the_servers_message_and_field() {
+        let e = ClientError::Api {
+            status: StatusCode::UNPROCESSABLE_ENTITY,
+            body: Some(ErrorBody {
+                error: "invalid_field".into(),
+                message: "spp: must be 1 to 65536, got 0".into(),
+                field: Some("spp".into()),
+            }),
+            request: "POST /api/v1/jobs".into(),
+        };
+        assert_eq!(e.to_string(), "spp: must be 1 to 65536, got 0 [422]");
+        let e = ClientError::Api {
+            status: StatusCode::NOT_FOUND,
+            body: Some(ErrorBody {
+                error: "not_found".into(),
+                message: "no job 7".into(),
+                field: Some("id".into()),
+            }),
+            request: "GET /api/v1/jobs/7".into(),
+        };
+        assert_eq!(e.to_string(), "no job 7 (field `id`) [404]");
+        let e = ClientError::Api {
+            status: StatusCode::UNAUTHORIZED,
+            body: None,
+            request: "GET /api/v1/jobs".into(),
+        };
+        assert!(e.to_string().contains("--token"), "{e}");
+    }
+
+    #[test]
+    fn base_urls_are_normalised() {
+        let c = Client::new("127.0.0.1:8700/", None).unwrap();
+        assert_eq!(c.base(), "http://127.0.0.1:8700");
+        assert_eq!(c.dashboard_url(), "http://127.0.0.1:8700/");
+        assert!(Client::new("  ", None).is_err());
+        assert!(Client::new("http://", None).is_err());
+        assert!(Client::new("ftp://farm:21", None).is_err());
+        let c = Client::new("https://farm.example:443", Some(String::new())).unwrap();
+        assert!(c.token.is_none());
+    }
+}

@@ -1,0 +1,483 @@
+//! `tessera status [JOB]`, `tessera cancel|pause|resume|retry JOB` and `tessera workers`:
+//! read and steer the farm. Plain aligned tables, or the JSON with `--json`.
+
+use anyhow::Context;
+use clap::Args;
+use proto::{FrameList, FrameState, JobList, JobStatus, WorkerList};
+use serde::Serialize;
+
+use crate::client::{Client, Control, ServerOpts};
+use crate::progress::{duration, rate, state_name};
+
+/// Show the jobs on the farm, or one job in detail.
+#[derive(Args, Debug)]
+pub struct StatusArgs {
+    /// A job id: its settings, tasks by state and every frame's state.
+    pub job: Option<u64>,
+    #[command(flatten)]
+    pub server: ServerOpts,
+    /// Print JSON instead: the job list, or `{"job": ..., "frames": [...]}` for one job.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Cancel, pause, resume or retry a job.
+#[derive(Args, Debug)]
+pub struct ControlArgs {
+    /// The job id.
+    pub job: u64,
+    #[command(flatten)]
+    pub server: ServerOpts,
+    /// Print the job's new status as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// List the workers the server knows.
+#[derive(Args, Debug)]
+pub struct WorkersArgs {
+    #[command(flatten)]
+    pub server: ServerOpts,
+    /// Print the worker list as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `f` with a client on a small single-threaded runtime.
+fn with_client<F, Fut>(opts: &ServerOpts, f: F) -> anyhow::Result<()>
+where
+    F: FnOnce(Client) -> Fut,
+    Fut: std::future::Future<Output = anyhow::Result<()>>,
+{
+    let client = opts.client()?;
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?
+        .block_on(f(client))
+}
+
+/// `status JOB --json`: the job and its frames, in that order.
+#[derive(Serialize)]
+struct JobDetails<'a> {
+    job: &'a JobStatus,
+    frames: &'a [proto::FrameStatus],
+}
+
+fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
+    println!("{}", serde_json::to_string_pretty(value)?);
+    Ok(())
+}
+
+fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+/// `3s ago`, `2m 10s ago`; `just now` for a time at or after `now` (clocks differ a little).
+fn ago(then_ms: i64, now_ms: i64) -> String {
+    let seconds = (now_ms - then_ms) as f64 / 1000.0;
+    if seconds < 1.0 {
+        "just now".into()
+    } else {
+        format!("{} ago", duration(seconds))
+    }
+}
+
+/// Rows under a header, each column as wide as its widest cell, two spaces apart; no
+/// trailing spaces.
+pub fn table(header: &[&str], rows: &[Vec<String>]) -> String {
+    let mut widths: Vec<usize> = header.iter().map(|h| h.chars().count()).collect();
+    for row in rows {
+        for (w, cell) in widths.iter_mut().zip(row) {
+            *w = (*w).max(cell.chars().count());
+        }
+    }
+    let line = |cells: Vec<&str>| {
+        let mut s = String::new();
+        for (i, (cell, w)) in cells.iter().zip(&widths).enumerate() {
+            if i > 0 {
+                s.push_str("  ");
+            }
+            s.push_str(cell);
+            if i + 1 < cells.len() {
+                s.push_str(&" ".repeat(w - cell.chars().count()));
+            }
+        }
+        s.trim_end().to_string()
+    };
+    let mut out = line(header.to_vec());
+    for row in rows {
+        out.push('\n');
+        out.push_str(&line(row.iter().map(String::as_str).collect()));
+    }
+    out
+}
+
+/// The job list as a table.
+pub fn jobs_table(jobs: &JobList) -> String {
+    let rows: Vec<Vec<String>> = jobs
+        .jobs
+        .iter()
+        .map(|j| {
+            vec![
+                j.id.to_string(),
+                j.name.clone(),
+                state_name(j.state).to_string(),
+                format!("{}/{}", j.frames_done, j.frames_total),
+                format!("{:.1}%", j.progress * 100.0),
+                j.eta_seconds.map_or("-".into(), duration),
+            ]
+        })
+        .collect();
+    table(&["ID", "NAME", "STATE", "FRAMES", "PROGRESS", "ETA"], &rows)
+}
+
+fn frame_state_name(state: FrameState) -> &'static str {
+    match state {
+        FrameState::Queued => "queued",
+        FrameState::Rendering => "rendering",
+        FrameState::Failed => "failed",
+        FrameState::Cancelled => "cancelled",
+        FrameState::Done => "done",
+    }
+}
+
+/// One job in detail: settings, tasks by state, progress, then every frame.
+pub fn job_details(j: &JobStatus, frames: &FrameList, now_ms: i64) -> String {
+    let s = &j.spec;
+    let frames_range = s.frames.map_or("-".into(), |f| {
+        if f.step == 1 {
+            format!("{}-{}", f.start, f.end)
+        } else {
+            format!("{}-{}:{}", f.start, f.end, f.step)
+        }
+    });
+    let t = &j.tasks;
+    let mut progress = format!("{:.1}%", j.progress * 100.0);
+    if j.samples_per_second > 0.0 {
+        progress.push_str(&format!(", {}", rate(j.samples_per_second)));
+    }
+    if let Some(eta) = j.eta_seconds {
+        progress.push_str(&format!(", ETA {}", duration(eta)));
+    }
+    let mut when = format!("created {}", ago(j.created_ms, now_ms));
+    if let Some(f) = j.finished_ms {
+        when.push_str(&format!(
+            ", finished {} (took {})",
+            ago(f, now_ms),
+            duration((f - j.created_ms) as f64 / 1000.0)
+        ));
+    }
+    let fields = [
+        ("scene", s.scene.chars().take(16).collect::<String>()),
+        (
+            "frames",
+            format!(
+                "{frames_range} at {} fps: {} of {} done, {} failed",
+                s.fps, j.frames_done, j.frames_total, j.frames_failed
+            ),
+        ),
+        (
+            "render",
+            format!(
+                "{}x{}, {} spp in {} pass(es), tile {}, max depth {}, seed {}, shutter {},{}",
+                s.width,
+                s.height,
+                s.spp,
+                s.sample_passes,
+                s.tile_size.map_or("auto".into(), |t| t.to_string()),
+                s.max_depth,
+                s.seed,
+                s.shutter[0],
+                s.shutter[1]
+            ),
+        ),
+        (
+            "tasks",
+            format!(
+                "{} done, {} leased, {} queued, {} failed, {} cancelled (of {})",
+                t.done,
+                t.leased,
+                t.queued,
+                t.failed,
+                t.cancelled,
+                t.total()
+            ),
+        ),
+        ("progress", progress),
+        ("time", when),
+    ];
+    let mut out = format!("job {} \"{}\": {}\n", j.id, j.name, state_name(j.state));
+    for (k, v) in fields {
+        out.push_str(&format!("  {k:<9} {v}\n"));
+    }
+    out.push('\n');
+    let rows: Vec<Vec<String>> = frames
+        .frames
+        .iter()
+        .map(|f| {
+            vec![
+                f.frame.to_string(),
+                frame_state_name(f.state).to_string(),
+                format!("{}/{}", f.tasks_done, f.tasks_total),
+                f.file.clone(),
+            ]
+        })
+        .collect();
+    out.push_str(&table(&["FRAME", "STATE", "TASKS", "FILE"], &rows));
+    out
+}
+
+/// The worker list as a table.
+pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
+    let rows: Vec<Vec<String>> = workers
+        .workers
+        .iter()
+        .map(|w| {
+            let current = match (w.current_job, w.current_frame) {
+                (Some(job), Some(frame)) => format!("job {job} frame {frame}"),
+                (Some(job), None) => format!("job {job}"),
+                _ => "-".into(),
+            };
+            vec![
+                w.id.to_string(),
+                w.name.clone(),
+                w.threads.to_string(),
+                if w.online { "yes" } else { "no" }.to_string(),
+                current,
+                w.tasks_done.to_string(),
+                ago(w.last_seen_ms, now_ms),
+            ]
+        })
+        .collect();
+    table(
+        &[
+            "ID",
+            "NAME",
+            "THREADS",
+            "ONLINE",
+            "CURRENT",
+            "TASKS DONE",
+            "LAST SEEN",
+        ],
+        &rows,
+    )
+}
+
+pub fn status(args: StatusArgs) -> anyhow::Result<()> {
+    with_client(&args.server, |client| async move {
+        match args.job {
+            None => {
+                let jobs = client.jobs().await?;
+                if args.json {
+                    print_json(&jobs)
+                } else if jobs.jobs.is_empty() {
+                    println!(
+                        "no jobs on {}; submit one with `tessera submit`",
+                        client.base()
+                    );
+                    Ok(())
+                } else {
+                    println!("{}", jobs_table(&jobs));
+                    Ok(())
+                }
+            }
+            Some(id) => {
+                let job = client.job(id).await?;
+                let frames = client.frames(id).await?;
+                if args.json {
+                    print_json(&JobDetails {
+                        job: &job,
+                        frames: &frames.frames,
+                    })
+                } else {
+                    println!("{}", job_details(&job, &frames, now_ms()));
+                    Ok(())
+                }
+            }
+        }
+    })
+}
+
+pub fn control(args: ControlArgs, control: Control) -> anyhow::Result<()> {
+    with_client(&args.server, |client| async move {
+        let job = client
+            .control(args.job, control)
+            .await
+            .with_context(|| format!("{} job {}", control.verb(), args.job))?;
+        if args.json {
+            return print_json(&job);
+        }
+        let what = match control {
+            Control::Cancel => "cancelled: unfinished tasks will not run",
+            Control::Pause => "paused: nothing more is leased until `tessera resume`",
+            Control::Resume => "resumed",
+            Control::Retry => "failed tasks queued again",
+        };
+        println!(
+            "job {} {what} (now {}, frames {}/{})",
+            job.id,
+            state_name(job.state),
+            job.frames_done,
+            job.frames_total
+        );
+        Ok(())
+    })
+}
+
+pub fn workers(args: WorkersArgs) -> anyhow::Result<()> {
+    with_client(&args.server, |client| async move {
+        let workers = client.workers().await?;
+        if args.json {
+            print_json(&workers)
+        } else if workers.workers.is_empty() {
+            println!(
+                "no workers have registered with {}; start one with `tessera worker --server {}`",
+                client.base(),
+                client.base()
+            );
+            Ok(())
+        } else {
+            println!("{}", workers_table(&workers, now_ms()));
+            Ok(())
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proto::{FrameStatus, JobSpec, JobState, TaskCounts, TaskToken, WorkerInfo};
+
+    fn job(id: u64, name: &str, state: JobState, eta: Option<f64>) -> JobStatus {
+        JobStatus {
+            id,
+            name: name.into(),
+            state,
+            spec: JobSpec::new("0123456789abcdef0123"),
+            created_ms: 1_000,
+            finished_ms: None,
+            tasks: TaskCounts {
+                queued: 3,
+                leased: 1,
+                done: 4,
+                failed: 0,
+                cancelled: 0,
+            },
+            frames_total: 24,
+            frames_done: 3,
+            frames_failed: 0,
+            progress: 0.125,
+            samples_per_second: 2.5e6,
+            eta_seconds: eta,
+        }
+    }
+
+    #[test]
+    fn tables_align_columns_without_trailing_spaces() {
+        let t = table(
+            &["A", "LONG HEADER", "C"],
+            &[
+                vec!["1".into(), "x".into(), "".into()],
+                vec!["wide cell".into(), "y".into(), "z".into()],
+            ],
+        );
+        assert_eq!(
+            t,
+            "A          LONG HEADER  C\n\
+             1          x\n\
+             wide cell  y            z"
+        );
+    }
+
+    #[test]
+    fn the_job_table_shows_frames_progress_and_eta() {
+        let jobs = JobList {
+            jobs: vec![
+                job(12, "shot 1", JobState::Running, Some(65.0)),
+                job(3, "job 3", JobState::Done, None),
+            ],
+        };
+        assert_eq!(
+            jobs_table(&jobs),
+            "ID  NAME    STATE    FRAMES  PROGRESS  ETA\n\
+             12  shot 1  running  3/24    12.5%     1m 05s\n\
+             3   job 3   done     3/24    12.5%     -"
+        );
+    }
+
+    #[test]
+    fn job_details_list_tasks_and_frames() {
+        let frames = FrameList {
+            frames: vec![
+                FrameStatus {
+                    frame: 1,
+                    state: FrameState::Done,
+                    tasks_total: 8,
+                    tasks_done: 8,
+                    file: "frame_0001.exr".into(),
+                },
+                FrameStatus {
+                    frame: 2,
+                    state: FrameState::Rendering,
+                    tasks_total: 8,
+                    tasks_done: 3,
+                    file: "frame_0002.exr".into(),
+                },
+            ],
+        };
+        let text = job_details(
+            &job(7, "walk", JobState::Running, Some(30.0)),
+            &frames,
+            61_000,
+        );
+        assert!(text.starts_with("job 7 \"walk\": running\n"), "{text}");
+        assert!(
+            text.contains("4 done, 1 leased, 3 queued, 0 failed, 0 cancelled (of 8)"),
+            "{text}"
+        );
+        assert!(text.contains("12.5%, 2.50 M samples/s, ETA 30s"), "{text}");
+        assert!(text.contains("created 1m 00s ago"), "{text}");
+        assert!(
+            text.ends_with(
+                "FRAME  STATE      TASKS  FILE\n\
+                 1      done       8/8    frame_0001.exr\n\
+                 2      rendering  3/8    frame_0002.exr"
+            ),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn the_worker_table_shows_what_each_is_doing() {
+        let worker = |id, name: &str, online, job: Option<u64>, frame| WorkerInfo {
+            id,
+            name: name.into(),
+            threads: 8,
+            version: "0.1.0".into(),
+            current_task: job.map(|_| TaskToken {
+                task_id: 5,
+                attempt: 1,
+            }),
+            current_job: job,
+            current_frame: frame,
+            last_seen_ms: 58_000,
+            online,
+            tasks_done: 17,
+        };
+        let list = WorkerList {
+            workers: vec![
+                worker(1, "render-01", true, Some(3), Some(12)),
+                worker(2, "b", false, None, None),
+            ],
+        };
+        assert_eq!(
+            workers_table(&list, 60_000),
+            "ID  NAME       THREADS  ONLINE  CURRENT         TASKS DONE  LAST SEEN\n\
+             1   render-01  8        yes     job 3 frame 12  17          2s ago\n\
+             2   b          8        no      -               17          2s ago"
+        );
+    }
+}

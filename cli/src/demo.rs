@@ -1,0 +1,551 @@
+//! `tessera demo`: a whole farm on this machine, from nothing. A server runs in this
+//! process on a free loopback port, N `tessera worker` child processes lease from it, the
+//! animated demo scene is uploaded and rendered with motion blur, the frames are downloaded
+//! and everything is shut down again, also on Ctrl-C, on an error and on a panic.
+//!
+//! Workers are real processes, not threads, so the demo exercises exactly what a farm of
+//! machines does: HTTP leases, scene downloads, tile uploads.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+use proto::JobStatus;
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+
+use crate::args::{parse_frames, parse_shutter, parse_size, FrameRange};
+use crate::client::{Client, Control};
+use crate::progress::{self, has_ended, Followed};
+use crate::submit::{upload_and_create, JobArgs};
+
+/// How long workers get to give their leases back after SIGTERM before they are killed.
+const WORKER_GRACE: Duration = Duration::from_secs(5);
+/// How long the server gets to finish its open requests after the workers are gone.
+const SERVER_GRACE: Duration = Duration::from_secs(5);
+/// The demo's shutter: open a quarter frame either side of each frame, so the bouncing,
+/// turning and sliding objects blur.
+const DEMO_SHUTTER: &str = "-0.25,0.25";
+/// Sample passes per tile: the dashboard's previews refine once before each tile is final.
+const DEMO_PASSES: u32 = 2;
+/// Fewest tiles per frame the demo aims for, so that workers share frames.
+const DEMO_MIN_TILES: u32 = 4;
+/// The demo's lease: shorter than a farm's, so a crashed worker's tile is re-queued soon.
+const DEMO_LEASE: Duration = Duration::from_secs(20);
+
+/// Run a whole render farm on this machine: a server, worker processes, and a short
+/// motion-blurred animation of the demo scene.
+#[derive(Args, Debug)]
+pub struct DemoArgs {
+    /// Worker processes [default: one per core].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub workers: Option<u32>,
+    /// Frames to render, A-B or A-B:STEP, at 24 fps (the loop is frames 0-48).
+    #[arg(long, default_value = "1-24", value_parser = parse_frames)]
+    pub frames: FrameRange,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "256x192", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=65_536))]
+    pub spp: u32,
+    /// Folder for the demo's server data (data/), worker caches (cache/), logs (logs/) and
+    /// the downloaded frames (frames/).
+    #[arg(long, default_value = "./tessera-demo")]
+    pub dir: PathBuf,
+}
+
+/// The largest power-of-two tile side (at most 256) that still cuts a `w`×`h` frame into
+/// at least [`DEMO_MIN_TILES`] tiles, so that several workers share a frame.
+pub fn demo_tile_size(w: u32, h: u32) -> u32 {
+    let tiles = |t: u32| w.div_ceil(t) * h.div_ceil(t);
+    let mut t = 256;
+    while t > 8 && tiles(t) < DEMO_MIN_TILES {
+        t /= 2;
+    }
+    t
+}
+
+/// The demo job's settings, through the same mapping as `tessera submit`.
+pub fn demo_job(args: &DemoArgs) -> JobArgs {
+    let (w, h) = args.size;
+    JobArgs {
+        frames: Some(args.frames),
+        fps: Some(24.0),
+        spp: Some(args.spp),
+        size: Some(args.size),
+        tile: Some(demo_tile_size(w, h)),
+        shutter: Some(parse_shutter(DEMO_SHUTTER).expect("the demo shutter is valid")),
+        passes: Some(DEMO_PASSES.min(args.spp)),
+        name: Some("tessera demo".into()),
+        ..JobArgs::default()
+    }
+}
+
+/// One worker child process.
+struct WorkerProcess {
+    name: String,
+    child: Child,
+    log: PathBuf,
+    /// Set once it has exited (and been reaped).
+    exited: Option<ExitStatus>,
+}
+
+/// The demo's worker processes. Dropping it stops them, so that no worker outlives the demo
+/// on an error or a panic; on Linux they also get SIGTERM if the demo itself is killed.
+struct Workers {
+    procs: Vec<WorkerProcess>,
+}
+
+impl Workers {
+    /// Starts `n` workers of `threads` threads each against `server`.
+    fn spawn(
+        server: &str,
+        n: u32,
+        threads: u32,
+        cache: &Path,
+        logs: &Path,
+    ) -> anyhow::Result<Workers> {
+        let exe = std::env::current_exe().context("finding the tessera executable")?;
+        let mut workers = Workers { procs: Vec::new() };
+        for k in 1..=n {
+            let name = format!("demo-{k}");
+            let log = logs.join(format!("worker-{k}.log"));
+            let out = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+            let err = out.try_clone()?;
+            let mut cmd = Command::new(&exe);
+            cmd.arg("worker")
+                .arg("--server")
+                .arg(server)
+                .arg("--threads")
+                .arg(threads.to_string())
+                .arg("--cache")
+                .arg(cache)
+                .arg("--name")
+                .arg(&name)
+                // Plain text in the log files.
+                .env("NO_COLOR", "1")
+                .stdin(Stdio::null())
+                .stdout(out)
+                .stderr(err);
+            configure_child(&mut cmd);
+            let child = cmd
+                .spawn()
+                .with_context(|| format!("starting worker {name} ({})", exe.display()))?;
+            workers.procs.push(WorkerProcess {
+                name,
+                child,
+                log,
+                exited: None,
+            });
+        }
+        Ok(workers)
+    }
+
+    /// Workers that have exited since the last call, reaped.
+    fn newly_exited(&mut self) -> Vec<&WorkerProcess> {
+        let mut fresh = Vec::new();
+        for (i, p) in self.procs.iter_mut().enumerate() {
+            if p.exited.is_none() {
+                if let Ok(Some(status)) = p.child.try_wait() {
+                    p.exited = Some(status);
+                    fresh.push(i);
+                }
+            }
+        }
+        fresh.into_iter().map(|i| &self.procs[i]).collect()
+    }
+
+    fn running(&self) -> usize {
+        self.procs.iter().filter(|p| p.exited.is_none()).count()
+    }
+
+    /// SIGTERM to every running worker (each gives its lease back and exits), then waits up
+    /// to `grace`; whoever is still running after that is killed. Returns the names of the
+    /// killed ones.
+    fn stop(&mut self, grace: Duration) -> Vec<String> {
+        for p in &mut self.procs {
+            if p.exited.is_none() {
+                if let Ok(Some(status)) = p.child.try_wait() {
+                    p.exited = Some(status);
+                } else {
+                    terminate(&mut p.child);
+                }
+            }
+        }
+        let deadline = Instant::now() + grace;
+        while self.running() > 0 && Instant::now() < deadline {
+            self.newly_exited();
+            std::thread::sleep(Duration::from_millis(25));
+        }
+        let mut killed = Vec::new();
+        for p in &mut self.procs {
+            if p.exited.is_none() {
+                let _ = p.child.kill();
+                p.exited = p.child.wait().ok();
+                killed.push(p.name.clone());
+            }
+        }
+        killed
+    }
+}
+
+impl Drop for Workers {
+    fn drop(&mut self) {
+        self.stop(Duration::from_secs(2));
+    }
+}
+
+/// Workers run in their own process group, so a Ctrl-C at the terminal reaches only the
+/// demo, which then stops them in order; on Linux they are also sent SIGTERM when the demo
+/// dies without cleaning up (SIGKILL, say).
+#[cfg(unix)]
+fn configure_child(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    cmd.process_group(0);
+    #[cfg(target_os = "linux")]
+    // SAFETY: prctl is async-signal-safe and touches only the child's own settings. The
+    // parent-death signal fires when the spawning *thread* exits: workers are spawned from
+    // the main thread, which lives as long as the process.
+    unsafe {
+        cmd.pre_exec(|| {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+}
+
+#[cfg(not(unix))]
+fn configure_child(_cmd: &mut Command) {}
+
+/// Asks a worker to stop: SIGTERM, so it gives its lease back first.
+#[cfg(unix)]
+fn terminate(child: &mut Child) {
+    // SAFETY: kill(2) with a pid we spawned and have not reaped yet (so it cannot have been
+    // reused).
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGTERM);
+    }
+}
+
+#[cfg(not(unix))]
+fn terminate(child: &mut Child) {
+    let _ = child.kill();
+}
+
+/// The last `n` lines of a log file, for an error message.
+fn tail(path: &Path, n: usize) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().collect();
+    lines[lines.len().saturating_sub(n)..].join("\n")
+}
+
+/// The farm server, running on this process's runtime.
+struct LocalServer {
+    url: String,
+    task: JoinHandle<Result<(), server::StartError>>,
+    stop: Option<oneshot::Sender<()>>,
+}
+
+impl LocalServer {
+    async fn start(data: &Path) -> anyhow::Result<LocalServer> {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .context("binding a loopback port for the demo server")?;
+        let url = format!("http://{}", listener.local_addr()?);
+        let mut config = server::Config::new(data);
+        config.listen = listener.local_addr()?;
+        config.lease = DEMO_LEASE;
+        let (stop, stopped) = oneshot::channel::<()>();
+        tracing::info!("Tessera demo farm on {url} (data in {})", data.display());
+        let task = tokio::spawn(server::serve(listener, config, async {
+            let _ = stopped.await;
+        }));
+        Ok(LocalServer {
+            url,
+            task,
+            stop: Some(stop),
+        })
+    }
+
+    /// Stops accepting, lets open requests finish for up to [`SERVER_GRACE`].
+    async fn shutdown(mut self) -> anyhow::Result<()> {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        match tokio::time::timeout(SERVER_GRACE, &mut self.task).await {
+            Ok(Ok(result)) => result.context("the demo server"),
+            Ok(Err(join)) => Err(anyhow::anyhow!("the demo server panicked: {join}")),
+            // A browser keeping the dashboard's event stream open, say.
+            Err(_) => {
+                self.task.abort();
+                Ok(())
+            }
+        }
+    }
+}
+
+/// Logs of the in-process server go to a file, so the progress bar stays clean.
+fn log_to_file(path: &Path) -> anyhow::Result<()> {
+    let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,tower_http=warn".into()),
+        )
+        .with_ansi(false)
+        .with_writer(std::sync::Mutex::new(file))
+        .try_init();
+    Ok(())
+}
+
+/// Removes the frame files a previous demo left, so the folder holds only this run's.
+fn clear_old_frames(dir: &Path) -> anyhow::Result<()> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with("frame_") && (name.ends_with(".exr") || name.ends_with(".png")) {
+            std::fs::remove_file(entry.path())
+                .with_context(|| format!("removing {}", entry.path().display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// What the demo's session came to.
+enum Outcome {
+    Finished {
+        status: Box<JobStatus>,
+        downloaded: progress::Downloaded,
+        elapsed: Duration,
+    },
+    Interrupted,
+}
+
+pub fn run(args: DemoArgs) -> anyhow::Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get() as u32);
+    let n = args.workers.unwrap_or(cores);
+    let threads = (cores / n).max(1);
+    let dir = &args.dir;
+    let [data, cache, logs, frames] = ["data", "cache", "logs", "frames"].map(|d| dir.join(d));
+    for d in [&data, &cache, &logs, &frames] {
+        std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+    }
+    clear_old_frames(&frames)?;
+    log_to_file(&logs.join("server.log"))?;
+    let glb = tracer::export::scene_to_glb(&tracer::demo::animated_demo_scene())
+        .map_err(|e| anyhow::anyhow!("exporting the demo scene to GLB: {e}"))?;
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let server = runtime.block_on(LocalServer::start(&data))?;
+    println!(
+        "Tessera demo: server on {} (data in {}), {n} worker(s) × {threads} thread(s)",
+        server.url,
+        data.display()
+    );
+    // Spawned from the main thread: see `configure_child`.
+    let mut workers = Workers::spawn(&server.url, n, threads, &cache, &logs)?;
+    let client = Client::new(&server.url, None)?;
+
+    let outcome = runtime.block_on(session(
+        &args,
+        &client,
+        glb,
+        &frames,
+        &logs,
+        &mut workers,
+        &server,
+    ));
+
+    // Shut down in order: workers first (they give their leases back), then the server.
+    let killed = workers.stop(WORKER_GRACE);
+    if !killed.is_empty() {
+        eprintln!(
+            "killed worker(s) {} after {}s without exiting",
+            killed.join(", "),
+            WORKER_GRACE.as_secs()
+        );
+    }
+    let stopped = runtime.block_on(server.shutdown());
+    runtime.shutdown_timeout(Duration::from_secs(1));
+    if let Err(e) = stopped {
+        eprintln!("warning: {e:#}; see {}", logs.join("server.log").display());
+    }
+
+    match outcome? {
+        Outcome::Interrupted => {
+            eprintln!(
+                "demo interrupted; workers and server stopped. Its server data stays in {}: \
+                 `tessera server --data {}` serves it again",
+                data.display(),
+                data.display()
+            );
+            std::process::exit(130);
+        }
+        Outcome::Finished {
+            status,
+            downloaded,
+            elapsed,
+        } => {
+            let (w, h) = args.size;
+            let samples = downloaded.frames.len() as f64 * w as f64 * h as f64 * args.spp as f64;
+            println!(
+                "{} frames of {w}x{h} at {} spp in {:.1} s on {n} worker(s): {} (farm: {})",
+                downloaded.frames.len(),
+                args.spp,
+                elapsed.as_secs_f64(),
+                progress::rate(samples / elapsed.as_secs_f64().max(1e-3)),
+                progress::rate(status.samples_per_second),
+            );
+            progress::require_done(&status, &downloaded, &client.dashboard_url())
+        }
+    }
+}
+
+/// Upload, submit, follow and download, watching the workers; Ctrl-C at any point ends it.
+async fn session(
+    args: &DemoArgs,
+    client: &Client,
+    glb: Vec<u8>,
+    frames_dir: &Path,
+    logs: &Path,
+    workers: &mut Workers,
+    server: &LocalServer,
+) -> anyhow::Result<Outcome> {
+    let setup = async {
+        cancel_leftover_jobs(client).await?;
+        upload_and_create(client, glb, &demo_job(args), "the demo scene").await
+    };
+    let job = tokio::select! {
+        job = setup => job?,
+        _ = crate::signal::interrupted() => return Ok(Outcome::Interrupted),
+    };
+    println!(
+        "dashboard: {} (while the demo runs; worker logs in {})",
+        client.dashboard_url(),
+        logs.display()
+    );
+    let started = Instant::now();
+    let total = workers.procs.len();
+    let check = |status: &JobStatus| -> anyhow::Result<Option<String>> {
+        if server.task.is_finished() {
+            anyhow::bail!(
+                "the demo server stopped unexpectedly; see {}",
+                logs.join("server.log").display()
+            );
+        }
+        let notes: Vec<String> = workers
+            .newly_exited()
+            .into_iter()
+            .map(|p| {
+                format!(
+                    "worker {} exited early ({}); its log: {}",
+                    p.name,
+                    p.exited.map_or("?".into(), |s| s.to_string()),
+                    p.log.display()
+                )
+            })
+            .collect();
+        if workers.running() == 0 && !has_ended(status) {
+            let first = &workers.procs[0];
+            anyhow::bail!(
+                "all {total} worker(s) exited before the job finished ({}/{} frames done). \
+                 The end of {}:\n{}",
+                status.frames_done,
+                status.frames_total,
+                first.log.display(),
+                tail(&first.log, 8)
+            );
+        }
+        Ok((!notes.is_empty()).then(|| notes.join("\n")))
+    };
+    match progress::follow(client, job, frames_dir, check).await? {
+        Followed::Interrupted(_) => Ok(Outcome::Interrupted),
+        Followed::Ended { status, downloaded } => {
+            let elapsed = started.elapsed();
+            println!(
+                "{} frame(s) in {}",
+                downloaded.frames.len(),
+                downloaded.dir.display()
+            );
+            Ok(Outcome::Finished {
+                status: Box::new(status),
+                downloaded,
+                elapsed,
+            })
+        }
+    }
+}
+
+/// Cancels jobs a previous, interrupted demo left unfinished in the same data folder, so
+/// that the workers render this run's job.
+async fn cancel_leftover_jobs(client: &Client) -> anyhow::Result<()> {
+    for job in client.jobs().await?.jobs {
+        if !has_ended(&job) && job.state != proto::JobState::Cancelled {
+            client.control(job.id, Control::Cancel).await?;
+            eprintln!(
+                "cancelled job {} left unfinished by an earlier demo",
+                job.id
+            );
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        demo: DemoArgs,
+    }
+
+    #[test]
+    fn tiles_split_every_frame_several_ways() {
+        assert_eq!(demo_tile_size(256, 192), 128);
+        assert_eq!(demo_tile_size(1920, 1080), 256);
+        assert_eq!(demo_tile_size(32, 32), 16);
+        assert_eq!(demo_tile_size(8, 8), 8);
+    }
+
+    #[test]
+    fn the_demo_job_blurs_and_refines_at_the_given_size() {
+        let args = Cli::try_parse_from(["demo"]).unwrap().demo;
+        let job = demo_job(&args);
+        assert_eq!(
+            job.frames,
+            Some(FrameRange {
+                start: 1,
+                end: 24,
+                step: 1
+            })
+        );
+        assert_eq!(
+            (job.size, job.spp, job.fps),
+            (Some((256, 192)), Some(16), Some(24.0))
+        );
+        assert_eq!(job.tile, Some(128));
+        assert_eq!(job.passes, Some(2));
+        let s = job.shutter.unwrap();
+        assert_eq!((s.open, s.close), (-0.25, 0.25));
+        assert!(Cli::try_parse_from(["demo", "--workers", "0"]).is_err());
+        assert!(Cli::try_parse_from(["demo", "--spp", "0"]).is_err());
+        let one = Cli::try_parse_from(["demo", "--spp", "1"]).unwrap().demo;
+        assert_eq!(demo_job(&one).passes, Some(1));
+    }
+}

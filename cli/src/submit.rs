@@ -1,0 +1,445 @@
+//! `tessera submit`: pack a scene into a GLB, upload it, create a job; with `--wait`, follow
+//! it with a progress bar and download the frames. [`JobArgs::to_spec`] is the one place
+//! where command-line settings become a [`JobSpec`] (the demo builds its job with it too).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+use proto::{CameraSpec, JobSpec, SceneInfo};
+use tracer::motion::Shutter;
+use tracer::render::CameraChoice;
+
+use crate::args::{parse_camera, parse_frames, parse_shutter, parse_size, FrameRange};
+use crate::client::{Client, ServerOpts};
+use crate::progress::{self, Followed};
+
+/// The render settings of a job. Every one left out keeps the server's default
+/// (`JobSpec::new`): frames = the scene's animation range, 24 fps, 1280x720, 64 spp.
+#[derive(Args, Clone, Debug, Default, PartialEq)]
+pub struct JobArgs {
+    /// Frames A-B or A-B:STEP (default: the scene's animation range at --fps; frame 0 for
+    /// a still scene).
+    #[arg(long, value_parser = parse_frames)]
+    pub frames: Option<FrameRange>,
+    /// Frames per second: frame f shows time f / fps [default: 24].
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// Samples per pixel [default: 64].
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Image size WIDTHxHEIGHT [default: 1280x720].
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Tile side in pixels [default: the server picks one so a task is a few seconds].
+    #[arg(long)]
+    pub tile: Option<u32>,
+    /// Shutter OPEN,CLOSE in frames around each frame's time, e.g. -0.25,0.25 (a 180°
+    /// shutter) for motion blur [default: 0,0].
+    #[arg(long, value_parser = parse_shutter, allow_hyphen_values = true)]
+    pub shutter: Option<Shutter>,
+    /// Split each tile's samples into this many passes, for progressive previews
+    /// [default: 1].
+    #[arg(long)]
+    pub passes: Option<u32>,
+    /// Higher runs first [default: 0].
+    #[arg(long, allow_hyphen_values = true)]
+    pub priority: Option<i32>,
+    /// Camera by glTF index or name [default: the scene's first].
+    #[arg(long, value_parser = parse_camera)]
+    pub camera: Option<CameraChoice>,
+    /// Maximum bounces [default: 8].
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Seed mixed into every random number [default: 0].
+    #[arg(long)]
+    pub seed: Option<u32>,
+    /// Motion steps across an open shutter [default: the tracer decides].
+    #[arg(long)]
+    pub motion_steps: Option<u32>,
+    /// Play only this animation, by glTF name or index [default: all of them].
+    #[arg(long)]
+    pub animation: Option<String>,
+    /// A name for the job [default: `job <id>`].
+    #[arg(long)]
+    pub name: Option<String>,
+}
+
+impl JobArgs {
+    /// The job spec for `scene` (as the server described it on upload): the given
+    /// settings, the spec's defaults for the rest. An `--animation` given as an index is
+    /// turned into that animation's name (the spec names animations).
+    pub fn to_spec(&self, scene: &SceneInfo) -> anyhow::Result<JobSpec> {
+        let mut spec = JobSpec::new(scene.digest.clone());
+        spec.name = self.name.clone();
+        spec.frames = self.frames.map(|r| proto::FrameRange {
+            start: r.start,
+            end: r.end,
+            step: r.step,
+        });
+        if let Some(fps) = self.fps {
+            spec.fps = fps;
+        }
+        if let Some((w, h)) = self.size {
+            (spec.width, spec.height) = (w, h);
+        }
+        if let Some(spp) = self.spp {
+            spec.spp = spp;
+        }
+        if let Some(depth) = self.max_depth {
+            spec.max_depth = depth;
+        }
+        if let Some(seed) = self.seed {
+            spec.seed = seed;
+        }
+        if let Some(s) = self.shutter {
+            spec.shutter = [s.open, s.close];
+        }
+        if let Some(passes) = self.passes {
+            spec.sample_passes = passes;
+        }
+        if let Some(priority) = self.priority {
+            spec.priority = priority;
+        }
+        spec.camera = match &self.camera {
+            None | Some(CameraChoice::Default) => CameraSpec::Default,
+            Some(CameraChoice::Index(i)) => CameraSpec::Index(
+                u32::try_from(*i).with_context(|| format!("--camera {i}: index too large"))?,
+            ),
+            Some(CameraChoice::Name(n)) => CameraSpec::Name(n.clone()),
+        };
+        spec.motion_steps = self.motion_steps;
+        spec.tile_size = self.tile;
+        spec.animation = match &self.animation {
+            None => None,
+            Some(a) => Some(animation_name(a, scene)?),
+        };
+        Ok(spec)
+    }
+}
+
+/// `--animation` as the spec wants it: a name. A number that is not itself a name is the
+/// animation's glTF index.
+fn animation_name(given: &str, scene: &SceneInfo) -> anyhow::Result<String> {
+    let by_name = scene
+        .animations
+        .iter()
+        .any(|a| a.name.as_deref() == Some(given));
+    match given.parse::<u32>() {
+        Ok(index) if !by_name => {
+            let a = scene
+                .animations
+                .iter()
+                .find(|a| a.index == index)
+                .with_context(|| {
+                    format!(
+                        "--animation {index}: the scene has {} animation(s)",
+                        scene.animations.len()
+                    )
+                })?;
+            a.name.clone().with_context(|| {
+                format!(
+                    "--animation {index}: that animation has no name, and a job names the \
+                     animation it plays; leave --animation out to play all of them"
+                )
+            })
+        }
+        _ => Ok(given.to_string()),
+    }
+}
+
+/// Pack a scene, upload it to the farm and create a render job.
+#[derive(Args, Debug)]
+pub struct SubmitArgs {
+    /// The scene: a .gltf (its .bin and images are packed in) or a .glb.
+    pub scene: PathBuf,
+    #[command(flatten)]
+    pub server: ServerOpts,
+    #[command(flatten)]
+    pub job: JobArgs,
+    /// Wait for the job with a progress bar, then download its frames.
+    #[arg(long)]
+    pub wait: bool,
+    /// With --wait: where the frames go [default: ./<job name>, or ./job-<id>].
+    #[arg(long, requires = "wait")]
+    pub out: Option<PathBuf>,
+}
+
+/// A folder name from a job name: letters, digits, `-`, `_` and `.` kept, the rest `_`.
+pub fn folder_name(name: &str) -> String {
+    let s: String = name
+        .trim()
+        .chars()
+        .map(|c| {
+            if c.is_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let s = s.trim_matches('.').to_string();
+    if s.is_empty() {
+        "job".into()
+    } else {
+        s
+    }
+}
+
+/// Packs the scene at `path` into one GLB, with a message that names the file.
+pub fn pack_scene(path: &Path) -> anyhow::Result<Vec<u8>> {
+    if !path.exists() {
+        anyhow::bail!(
+            "{}: no such file; give a .gltf (with its .bin and images beside it) or a .glb",
+            path.display()
+        );
+    }
+    tracer::loader::pack_glb(path).map_err(|e| anyhow::anyhow!("packing {}: {e}", path.display()))
+}
+
+/// Uploads `glb` and creates the job `job` describes; prints what was found and the job id.
+pub async fn upload_and_create(
+    client: &Client,
+    glb: Vec<u8>,
+    job: &JobArgs,
+    what: &str,
+) -> anyhow::Result<proto::JobStatus> {
+    let size = glb.len();
+    let scene = client
+        .upload_scene(glb)
+        .await
+        .with_context(|| format!("uploading {what}"))?;
+    for warning in &scene.warnings {
+        eprintln!("warning: {what}: {warning}");
+    }
+    let spec = job.to_spec(&scene)?;
+    let status = client.create_job(&spec).await.context("creating the job")?;
+    let frames = status.spec.frames.map_or(String::new(), |f| {
+        if f.step == 1 {
+            format!("{}-{}", f.start, f.end)
+        } else {
+            format!("{}-{}:{}", f.start, f.end, f.step)
+        }
+    });
+    println!(
+        "scene {} ({:.1} MB, {} triangles); job {} \"{}\": frames {frames} ({}), {}x{} at {} spp, \
+         {} tasks",
+        &scene.digest[..scene.digest.len().min(12)],
+        size as f64 / 1e6,
+        scene.triangles,
+        status.id,
+        status.name,
+        status.frames_total,
+        status.spec.width,
+        status.spec.height,
+        status.spec.spp,
+        status.tasks.total()
+    );
+    Ok(status)
+}
+
+pub fn run(args: SubmitArgs) -> anyhow::Result<()> {
+    // The scene is checked before the server is asked anything.
+    let glb = pack_scene(&args.scene)?;
+    let client = args.server.client()?;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(async {
+        let what = args.scene.display().to_string();
+        let job = upload_and_create(&client, glb, &args.job, &what).await?;
+        let id = job.id;
+        println!("job {id} submitted; dashboard: {}", client.dashboard_url());
+        if !args.wait {
+            println!(
+                "follow it with `tessera status {id}{}`",
+                server_flag(&args.server)
+            );
+            return Ok(());
+        }
+        let out = args.out.clone().unwrap_or_else(|| {
+            PathBuf::from(match &args.job.name {
+                Some(name) => folder_name(name),
+                None => format!("job-{id}"),
+            })
+        });
+        match progress::follow(&client, job, &out, |_| Ok(None)).await? {
+            Followed::Interrupted(status) => {
+                eprintln!(
+                    "stopped waiting; job {id} keeps running on the farm ({}, frames {}/{}). \
+                     Check on it with `tessera status {id}{}`",
+                    progress::state_name(status.state),
+                    status.frames_done,
+                    status.frames_total,
+                    server_flag(&args.server)
+                );
+                // The conventional status of a command ended by Ctrl-C.
+                std::process::exit(130);
+            }
+            Followed::Ended { status, downloaded } => {
+                println!(
+                    "{} frame(s) in {}",
+                    downloaded.frames.len(),
+                    downloaded.dir.display()
+                );
+                progress::require_done(&status, &downloaded, client.base())
+            }
+        }
+    })
+}
+
+/// ` --server URL` when the server is not the default, for commands we suggest.
+pub fn server_flag(opts: &ServerOpts) -> String {
+    if opts.server.trim_end_matches('/') == crate::client::DEFAULT_SERVER {
+        String::new()
+    } else {
+        format!(" --server {}", opts.server)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use proto::AnimationInfo;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        job: JobArgs,
+    }
+
+    fn parse(args: &[&str]) -> JobArgs {
+        Cli::try_parse_from([&["submit"], args].concat())
+            .map_err(|e| e.to_string())
+            .unwrap()
+            .job
+    }
+
+    fn scene() -> SceneInfo {
+        SceneInfo {
+            digest: "ab".repeat(32),
+            size: 1,
+            cameras: vec![],
+            animations: vec![
+                AnimationInfo {
+                    index: 0,
+                    name: Some("Walk".into()),
+                    start_seconds: 0.0,
+                    end_seconds: 1.0,
+                },
+                AnimationInfo {
+                    index: 1,
+                    name: None,
+                    start_seconds: 0.0,
+                    end_seconds: 1.0,
+                },
+            ],
+            duration_seconds: 1.0,
+            triangles: 12,
+            lights: 0,
+            meshes: 1,
+            instances: 1,
+            materials: 1,
+            textures: 0,
+            features: vec![],
+            warnings: vec![],
+        }
+    }
+
+    #[test]
+    fn no_flags_keep_every_default() {
+        let spec = parse(&[]).to_spec(&scene()).unwrap();
+        assert_eq!(spec, JobSpec::new("ab".repeat(32)));
+        assert_eq!(spec.frames, None, "the server picks the animation range");
+    }
+
+    #[test]
+    fn every_flag_lands_in_its_field() {
+        let spec = parse(&[
+            "--frames",
+            "1-48:2",
+            "--fps",
+            "30",
+            "--spp",
+            "16",
+            "--size",
+            "320x240",
+            "--tile",
+            "64",
+            "--shutter",
+            "-0.25,0.25",
+            "--passes",
+            "4",
+            "--priority",
+            "-3",
+            "--camera",
+            "Main",
+            "--max-depth",
+            "5",
+            "--seed",
+            "9",
+            "--motion-steps",
+            "3",
+            "--animation",
+            "Walk",
+            "--name",
+            "shot 1",
+        ])
+        .to_spec(&scene())
+        .unwrap();
+        let mut want = JobSpec::new("ab".repeat(32));
+        want.frames = Some(proto::FrameRange {
+            start: 1,
+            end: 48,
+            step: 2,
+        });
+        want.fps = 30.0;
+        want.spp = 16;
+        (want.width, want.height) = (320, 240);
+        want.tile_size = Some(64);
+        want.shutter = [-0.25, 0.25];
+        want.sample_passes = 4;
+        want.priority = -3;
+        want.camera = CameraSpec::Name("Main".into());
+        want.max_depth = 5;
+        want.seed = 9;
+        want.motion_steps = Some(3);
+        want.animation = Some("Walk".into());
+        want.name = Some("shot 1".into());
+        assert_eq!(spec, want);
+    }
+
+    #[test]
+    fn camera_and_animation_indices() {
+        let spec = parse(&["--camera", "2", "--animation", "0"])
+            .to_spec(&scene())
+            .unwrap();
+        assert_eq!(spec.camera, CameraSpec::Index(2));
+        assert_eq!(spec.animation.as_deref(), Some("Walk"));
+        let e = parse(&["--animation", "1"]).to_spec(&scene()).unwrap_err();
+        assert!(e.to_string().contains("no name"), "{e}");
+        let e = parse(&["--animation", "5"]).to_spec(&scene()).unwrap_err();
+        assert!(e.to_string().contains("2 animation(s)"), "{e}");
+        // An unknown name goes to the server, which lists the names it has.
+        let spec = parse(&["--animation", "Run"]).to_spec(&scene()).unwrap();
+        assert_eq!(spec.animation.as_deref(), Some("Run"));
+    }
+
+    #[test]
+    fn bad_values_are_refused_by_the_shared_parsers() {
+        let cli = |args: &[&str]| Cli::try_parse_from([&["submit"], args].concat()).is_err();
+        assert!(cli(&["--size", "0x10"]));
+        assert!(cli(&["--frames", "5-1"]));
+        assert!(cli(&["--shutter", "0.5,0"]));
+    }
+
+    #[test]
+    fn job_names_become_safe_folder_names() {
+        assert_eq!(folder_name("shot 1/take:2"), "shot_1_take_2");
+        assert_eq!(folder_name(".."), "job");
+        assert_eq!(folder_name("  "), "job");
+        assert_eq!(folder_name("walk-cycle_v2.1"), "walk-cycle_v2.1");
+    }
+}

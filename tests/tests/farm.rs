@@ -1,0 +1,270 @@
+//! The whole farm as a user runs it: `tessera server`, `tessera worker` processes and the
+//! client commands on 127.0.0.1, rendering the built-in animated demo exported as a GLB.
+
+use std::path::Path;
+use std::time::Duration;
+
+use proto::JobState;
+use tests::{tessera_ok, Farm};
+use tracer::film::Layers;
+use tracer::output::read_exr;
+
+/// Small enough for CI's two cores: 32x24 pixels, 4 frames, tiles of 16 (four per frame),
+/// motion blur on, so the moving demo objects take the motion path.
+const SIZE: &str = "32x24";
+const FRAMES: &str = "1-4";
+const SHUTTER: &str = "-0.25,0.25";
+const MAX_DEPTH: &str = "4";
+const SEED: &str = "7";
+
+/// The render settings both the farm and `tessera render` get.
+fn settings(spp: &str) -> Vec<&str> {
+    vec![
+        "--fps",
+        "24",
+        "--size",
+        SIZE,
+        "--spp",
+        spp,
+        "--shutter",
+        SHUTTER,
+        "--max-depth",
+        MAX_DEPTH,
+        "--seed",
+        SEED,
+    ]
+}
+
+/// `tessera render` of `frame` of `scene`, as the reference the farm must match.
+fn render_directly(scene: &Path, frame: i32, spp: &str, dir: &Path) -> Layers {
+    let out = dir.join(format!("direct_{frame}.exr"));
+    let frame = frame.to_string();
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "--frame",
+        &frame,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(settings(spp));
+    tessera_ok(&args, dir);
+    read_exr(&out).unwrap().layers
+}
+
+fn assert_close(what: &str, a: &[f32], b: &[f32], tolerance: f32) {
+    assert_eq!(a.len(), b.len(), "{what}: sizes differ");
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        assert!(
+            (x - y).abs() <= tolerance * x.abs().max(y.abs()).max(1.0),
+            "{what}[{i}]: {x} vs {y}"
+        );
+    }
+}
+
+fn flat(layers: &Layers) -> (Vec<f32>, Vec<f32>) {
+    let beauty = layers.beauty.iter().flat_map(|v| v.to_array()).collect();
+    let albedo = layers.albedo.iter().flat_map(|v| v.to_array()).collect();
+    (beauty, albedo)
+}
+
+#[test]
+fn two_workers_render_every_frame_as_tessera_render_does() {
+    let mut farm = Farm::new();
+    farm.start_server(60);
+    farm.start_worker("w1", 1);
+    farm.start_worker("w2", 1);
+    let scene = farm.demo_scene();
+    let scene = scene.to_str().unwrap();
+
+    // One sample pass: tiles only, so every frame must be bit-identical.
+    let mut args = vec![scene, "--frames", FRAMES, "--tile", "16", "--passes", "1"];
+    args.extend(settings("4"));
+    args.extend(["--wait", "--out", "tiles"]);
+    let tiles_job = farm.submit(&args);
+    // Two sample passes merged by sample weight: equal within float rounding.
+    let mut args = vec![scene, "--frames", FRAMES, "--tile", "16", "--passes", "2"];
+    args.extend(settings("4"));
+    args.extend(["--wait", "--out", "passes"]);
+    let passes_job = farm.submit(&args);
+
+    for job in [tiles_job, passes_job] {
+        let st = farm.job(job);
+        assert_eq!(st.state, JobState::Done, "job {job}: {st:?}");
+        assert_eq!((st.frames_done, st.frames_total), (4, 4));
+    }
+    // Both workers took part.
+    let workers = farm.worker_list().workers;
+    assert_eq!(workers.len(), 2);
+    assert!(
+        workers.iter().all(|w| w.tasks_done > 0),
+        "a worker stayed idle: {workers:?}"
+    );
+
+    for frame in 1..=4 {
+        let direct = render_directly(Path::new(scene), frame, "4", farm.path());
+        let name = proto::job::frame_file_name(frame, "exr");
+        let tiled = read_exr(&farm.path().join("tiles").join(&name)).unwrap();
+        assert_eq!(tiled.frame_size, (32, 24));
+        assert!(
+            tiled.layers == direct,
+            "frame {frame}: the tiled farm render differs from tessera render"
+        );
+        let merged = read_exr(&farm.path().join("passes").join(&name)).unwrap();
+        let (b0, a0) = flat(&direct);
+        let (b1, a1) = flat(&merged.layers);
+        assert_close(&format!("frame {frame} beauty"), &b0, &b1, 1e-5);
+        assert_close(&format!("frame {frame} albedo"), &a0, &a1, 1e-5);
+        assert!(
+            farm.path()
+                .join("passes")
+                .join(proto::job::frame_file_name(frame, "png"))
+                .exists(),
+            "the PNG preview of frame {frame} was downloaded"
+        );
+    }
+}
+
+#[test]
+fn a_worker_started_before_the_server_waits_and_then_works() {
+    let mut farm = Farm::new();
+    let w = farm.start_worker("early", 1);
+    // The worker retries against a port nothing listens on yet.
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(farm.workers[w].running(), "{}", farm.workers[w].log());
+    farm.start_server(60);
+    let scene = farm.demo_scene();
+    let mut args = vec![scene.to_str().unwrap(), "--frames", "1-2", "--tile", "16"];
+    args.extend(settings("2"));
+    let job = farm.submit(&args);
+    let st = farm.wait_for_job(job, Duration::from_secs(120));
+    assert_eq!(st.state, JobState::Done, "{st:?}");
+    let log = farm.workers[w].log();
+    assert!(
+        log.contains("unreachable"),
+        "the worker said it waited:\n{log}"
+    );
+}
+
+#[test]
+fn sigterm_mid_task_gives_the_lease_back_and_loses_nothing() {
+    let mut farm = Farm::new();
+    farm.start_server(60);
+    let scene = farm.demo_scene();
+    // Enough samples per task that the worker is caught mid-render.
+    let mut args = vec![scene.to_str().unwrap(), "--frames", "1-2", "--tile", "32"];
+    args.extend(settings("512"));
+    let job = farm.submit(&args);
+    let w = farm.start_worker("stopping", 1);
+    tests::wait_until(
+        "the worker to hold a lease",
+        Duration::from_secs(60),
+        || farm.job(job).tasks.leased == 1,
+        || farm.logs(),
+    );
+    let status = farm.workers[w].terminate(Duration::from_secs(20));
+    assert!(status.success(), "SIGTERM exits 0: {status}");
+    // The lease went back at once, not after the 60 s lease period.
+    let st = farm.job(job);
+    assert_eq!(st.tasks.leased, 0, "{st:?}");
+    assert_eq!(st.tasks.failed, 0);
+
+    farm.start_worker("finisher", 2);
+    let st = farm.wait_for_job(job, Duration::from_secs(300));
+    assert_eq!(st.state, JobState::Done, "{st:?}");
+    assert_eq!(st.frames_done, 2);
+}
+
+#[test]
+fn kill_9_of_the_server_mid_job_keeps_accepted_tiles_and_finishes() {
+    let mut farm = Farm::new();
+    farm.start_server(60);
+    let scene = farm.demo_scene();
+    let mut args = vec![scene.to_str().unwrap(), "--frames", "1-4", "--tile", "8"];
+    args.extend(settings("256"));
+    let job = farm.submit(&args);
+    farm.start_worker("survivor", 1);
+    tests::wait_until(
+        "some tiles to be done",
+        Duration::from_secs(120),
+        || farm.job(job).tasks.done >= 6,
+        || farm.logs(),
+    );
+    let before = farm.job(job).tasks;
+    farm.server.as_mut().unwrap().kill9();
+    let done_before = before.done;
+    assert!(done_before < before.total(), "killed mid-job: {before:?}");
+
+    // The worker keeps retrying; a new server on the same data takes the job up again.
+    std::thread::sleep(Duration::from_millis(500));
+    farm.start_server(60);
+    let after_restart = farm.job(job);
+    assert!(
+        after_restart.tasks.done >= done_before,
+        "accepted tiles survive: {} before, {} after",
+        done_before,
+        after_restart.tasks.done
+    );
+    let st = farm.wait_for_job(job, Duration::from_secs(300));
+    assert_eq!(st.state, JobState::Done, "{st:?}");
+    assert_eq!(st.frames_done, 4);
+    let frames = farm.client(&["status", &job.to_string()]);
+    assert!(frames.contains("done"), "{frames}");
+    // No tile accepted before the kill was rendered again: a task leased once has attempt 1.
+    let db = rusqlite::Connection::open(farm.path().join("data").join("tessera.db")).unwrap();
+    let again: u64 = db
+        .query_row(
+            "SELECT count(*) FROM tasks WHERE job_id = ?1 AND attempt > 1",
+            [job],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert!(
+        again <= 1,
+        "only the one task leased at the kill may be rendered again, {again} were"
+    );
+}
+
+#[test]
+fn tessera_demo_runs_a_farm_and_leaves_frames_and_nothing_running() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tessera_ok(
+        &[
+            "demo",
+            "--workers",
+            "2",
+            "--frames",
+            "1-2",
+            "--size",
+            "32x24",
+            "--spp",
+            "2",
+            "--dir",
+            "demo",
+        ],
+        dir.path(),
+    );
+    assert!(
+        out.contains("http://127.0.0.1:"),
+        "the dashboard URL: {out}"
+    );
+    let frames = dir.path().join("demo").join("frames");
+    for frame in 1..=2 {
+        let exr = read_exr(&frames.join(proto::job::frame_file_name(frame, "exr"))).unwrap();
+        assert_eq!(exr.frame_size, (32, 24));
+        assert!(frames
+            .join(proto::job::frame_file_name(frame, "png"))
+            .exists());
+    }
+    // Both workers were stopped by the demo and said goodbye to the server.
+    for k in 1..=2 {
+        let log = std::fs::read_to_string(
+            dir.path()
+                .join("demo")
+                .join("logs")
+                .join(format!("worker-{k}.log")),
+        )
+        .unwrap();
+        assert!(log.contains("left"), "worker {k} left the farm:\n{log}");
+    }
+}
