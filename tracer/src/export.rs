@@ -30,6 +30,7 @@ use gltf::json::Value;
 use crate::animation::{Animation, Interpolation, Target};
 use crate::camera::Projection;
 use crate::light::{Environment, PunctualLight};
+use crate::loader::write_glb;
 use crate::material::{AlphaMode, Material};
 use crate::scene::{CameraDef, Mesh, Node, Primitive, Scene};
 
@@ -180,7 +181,9 @@ pub fn scene_to_glb(scene: &Scene) -> Result<Vec<u8>, ExportError> {
     }
     let json = gltf::json::serialize::to_vec(&root.build())
         .expect("a JSON value of finite numbers serialises");
-    glb(json, bin.bytes)
+    let bin = (!bin.bytes.is_empty()).then_some(&bin.bytes[..]);
+    write_glb(&json, bin)
+        .ok_or_else(|| ExportError::TooLarge((json.len() + bin.map_or(0, <[u8]>::len)) as u64))
 }
 
 /// The one glTF scene: the root nodes, and a black or constant environment in the extras
@@ -199,31 +202,6 @@ fn default_scene(scene: &Scene) -> Value {
         obj = obj.with("extras", Obj::default().with("tessera", tessera).build());
     }
     obj.build()
-}
-
-/// The GLB container: a 12-byte header, the JSON chunk padded with spaces and the BIN
-/// chunk (when there is one) padded with zeros, each to a multiple of 4 bytes.
-fn glb(mut json: Vec<u8>, mut bin: Vec<u8>) -> Result<Vec<u8>, ExportError> {
-    json.resize(json.len().next_multiple_of(4), b' ');
-    bin.resize(bin.len().next_multiple_of(4), 0);
-    let bin_chunk = if bin.is_empty() { 0 } else { 8 + bin.len() };
-    let total = 12 + 8 + json.len() + bin_chunk;
-    let too_large = || ExportError::TooLarge(total as u64);
-    let total32 = u32::try_from(total).map_err(|_| too_large())?;
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&total32.to_le_bytes());
-    // Both chunk lengths are below `total`, which fits in 32 bits.
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
-    if !bin.is_empty() {
-        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(&bin);
-    }
-    Ok(out)
 }
 
 // ---------------------------------------------------------------------------------------

@@ -53,6 +53,7 @@ mod materials;
 mod meshes;
 mod tangents;
 
+pub use container::write_glb;
 pub use error::{Element, SceneError};
 pub use framing::{framing_camera, mesh_bounds, mesh_instances, scene_bounds};
 

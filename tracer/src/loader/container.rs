@@ -440,18 +440,21 @@ pub(crate) fn pack(path: &Path) -> Result<Vec<u8>, SceneError> {
     }
     let json = gltf::json::serialize::to_vec(&root)
         .map_err(|e| SceneError::Json(format!("cannot serialise the packed document: {e}")))?;
-    Ok(write_glb(
-        &json,
-        (!bin.is_empty() || !buffers.is_empty()).then_some(&bin[..]),
-    ))
+    let bin = (!bin.is_empty() || !buffers.is_empty()).then_some(&bin[..]);
+    write_glb(&json, bin).ok_or_else(|| {
+        SceneError::NotGltf("the packed scene would be larger than a GLB can be (4 GiB)".into())
+    })
 }
 
 /// Writes a GLB: header, JSON chunk padded with spaces, optional BIN chunk padded with
-/// zeros.
-pub(crate) fn write_glb(json: &[u8], bin: Option<&[u8]>) -> Vec<u8> {
+/// zeros, each to a multiple of 4 bytes. `None` when the file would pass the format's
+/// 32-bit length (4 GiB).
+pub fn write_glb(json: &[u8], bin: Option<&[u8]>) -> Option<Vec<u8>> {
     let json_len = json.len().next_multiple_of(4);
     let bin_len = bin.map_or(0, |b| b.len().next_multiple_of(4));
     let total = 12 + 8 + json_len + bin.map_or(0, |_| 8 + bin_len);
+    // Both chunk lengths are below `total`, so they fit when it does.
+    u32::try_from(total).ok()?;
     let mut out = Vec::with_capacity(total);
     out.extend_from_slice(GLB_MAGIC);
     out.extend_from_slice(&2u32.to_le_bytes());
@@ -466,7 +469,7 @@ pub(crate) fn write_glb(json: &[u8], bin: Option<&[u8]>) -> Vec<u8> {
         out.extend_from_slice(bin);
         out.resize(total, 0);
     }
-    out
+    Some(out)
 }
 
 #[cfg(test)]
@@ -490,7 +493,7 @@ mod tests {
 
     #[test]
     fn glb_round_trips_and_truncation_is_named() {
-        let glb = write_glb(br#"{"asset":{"version":"2.0"}}"#, Some(&[1, 2, 3]));
+        let glb = write_glb(br#"{"asset":{"version":"2.0"}}"#, Some(&[1, 2, 3])).unwrap();
         let c = split(&glb).unwrap();
         assert!(c.json.starts_with(b"{\"asset\""));
         assert_eq!(&c.bin.unwrap()[..3], &[1, 2, 3]);

@@ -5,12 +5,13 @@ use crate::common::*;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn scenes_are_downloaded_once_and_a_corrupt_copy_is_replaced() {
-    init_logs();
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(server_config(dir.path()));
-    let c = client();
-    let glb = spinning_quad();
-    let scene = upload_scene(&s, &c, glb.clone()).await;
+    let Setup {
+        dir,
+        s,
+        c,
+        glb,
+        scene,
+    } = setup().await;
     let cache = dir.path().join("cache");
     let file = cache.join(format!("{}.glb", scene.digest));
 

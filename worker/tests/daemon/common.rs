@@ -148,30 +148,36 @@ impl TestWorker {
     }
 }
 
+/// A server with the spinning quad uploaded: what most tests start from.
+pub struct Setup {
+    /// The server's data (and the workers' caches, in `cache/`).
+    pub dir: tempfile::TempDir,
+    pub s: TestServer,
+    pub c: reqwest::Client,
+    /// The scene's GLB, for direct renders.
+    pub glb: Vec<u8>,
+    pub scene: SceneInfo,
+}
+
+pub async fn setup() -> Setup {
+    init_logs();
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(server_config(dir.path()));
+    let c = client();
+    let glb = spinning_quad();
+    let scene = upload_scene(&s, &c, glb.clone()).await;
+    Setup {
+        dir,
+        s,
+        c,
+        glb,
+        scene,
+    }
+}
+
 /// A GLB from glTF JSON and a BIN chunk.
 pub fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
-    let mut j = json.as_bytes().to_vec();
-    while !j.len().is_multiple_of(4) {
-        j.push(b' ');
-    }
-    let mut b = bin.to_vec();
-    while !b.len().is_multiple_of(4) {
-        b.push(0);
-    }
-    let total = 12 + 8 + j.len() + if b.is_empty() { 0 } else { 8 + b.len() };
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(j.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&j);
-    if !b.is_empty() {
-        out.extend_from_slice(&(b.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(&b);
-    }
-    out
+    tracer::loader::write_glb(json.as_bytes(), (!bin.is_empty()).then_some(bin)).unwrap()
 }
 
 /// A coloured quad in front of a camera named `Main`, lit by the default environment,

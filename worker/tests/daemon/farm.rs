@@ -9,12 +9,13 @@ use crate::common::*;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn frames_rendered_by_the_worker_equal_the_direct_render() {
-    init_logs();
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(server_config(dir.path()));
-    let c = client();
-    let glb = spinning_quad();
-    let scene = upload_scene(&s, &c, glb.clone()).await;
+    let Setup {
+        dir,
+        s,
+        c,
+        glb,
+        scene,
+    } = setup().await;
     // One pass: bit-identical. Two passes: merged by the server, equal within rounding.
     let single = spec(&scene.digest, 2, 4, 1);
     let passes = spec(&scene.digest, 2, 4, 2);

@@ -11,12 +11,9 @@ const SLOW_SPP: u32 = 2048;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn shutdown_mid_task_gives_the_lease_back_at_once() {
-    init_logs();
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(server_config(dir.path()));
-    let c = client();
-    let glb = spinning_quad();
-    let scene = upload_scene(&s, &c, glb.clone()).await;
+    let Setup {
+        dir, s, c, scene, ..
+    } = setup().await;
     let mut slow = spec(&scene.digest, 2, SLOW_SPP, 1);
     slow.width = 16;
     slow.height = 16;
