@@ -7,15 +7,10 @@
 
 use std::path::Path;
 
-use exr::image::{AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer};
-use exr::math::Vec2;
-use exr::meta::attribute::{AttributeValue, IntegerBounds, Text};
-use exr::meta::header::{ImageAttributes, LayerAttributes};
-use exr::prelude::traits::WritableImage;
 use glam::{Vec3, Vec4};
 use proto::{JobSpec, OutputLayer, ResultMetadata};
 use tracer::film::{Layers, TileRect, NO_HIT_DEPTH};
-use tracer::output::{self, ExrMetadata};
+use tracer::output::{self, ExrMetadata, ImageLayer};
 
 use crate::error::{Error, Result};
 use crate::scheduler::TaskRow;
@@ -147,65 +142,24 @@ pub fn write_preview(
         .map_err(|e| Error::Internal(format!("writing preview: {e}")))
 }
 
-/// The EXR bytes of `layers` with only the `wanted` layers: the tracer's own encoder when
-/// all are wanted, else the same channel names and encoding without the others.
+/// The EXR bytes of `layers` with only the `wanted` layers (beauty always).
 fn encode_layers(
     size: (u32, u32),
     layers: &Layers,
     wanted: &[OutputLayer],
     meta: &ExrMetadata,
 ) -> Result<Vec<u8>> {
-    if OutputLayer::ALL.iter().all(|l| wanted.contains(l)) {
-        return output::encode_exr(size, layers, meta)
-            .map_err(|e| Error::Internal(format!("encoding frame: {e}")));
-    }
-    let n = layers.rect.area();
-    let mut channels: Vec<AnyChannel<FlatSamples>> = Vec::new();
-    let mut add = |name: &str, values: Vec<f32>| {
-        channels.push(AnyChannel::new(name, FlatSamples::F32(values)));
-    };
-    let comp4 = |c: usize| (0..n).map(|i| layers.beauty[i][c]).collect::<Vec<f32>>();
-    for (c, name) in ["R", "G", "B", "A"].into_iter().enumerate() {
-        add(name, comp4(c));
-    }
-    if wanted.contains(&OutputLayer::Albedo) {
-        for (c, name) in ["albedo.R", "albedo.G", "albedo.B"].into_iter().enumerate() {
-            add(name, (0..n).map(|i| layers.albedo[i][c]).collect());
-        }
-    }
-    if wanted.contains(&OutputLayer::Normal) {
-        for (c, name) in ["N.X", "N.Y", "N.Z"].into_iter().enumerate() {
-            add(name, (0..n).map(|i| layers.normal[i][c]).collect());
-        }
-    }
-    if wanted.contains(&OutputLayer::Depth) {
-        add("Z", layers.depth.clone());
-    }
-    let mut attributes = LayerAttributes {
-        layer_position: Vec2(layers.rect.x as i32, layers.rect.y as i32),
-        software_name: Some(Text::from(concat!("Tessera ", env!("CARGO_PKG_VERSION")))),
-        ..LayerAttributes::default()
-    };
-    for (name, value) in &meta.attributes {
-        attributes.other.insert(
-            Text::from_slice_unchecked(name.as_bytes()),
-            AttributeValue::Text(Text::from_slice_unchecked(value.as_bytes())),
-        );
-    }
-    let display = IntegerBounds::new(Vec2(0, 0), Vec2(size.0 as usize, size.1 as usize));
-    let layer = Layer::new(
-        Vec2(layers.rect.width as usize, layers.rect.height as usize),
-        attributes,
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(channels.into()),
-    );
-    let image = Image::new(ImageAttributes::new(display), layer);
-    let mut out = std::io::Cursor::new(Vec::new());
-    image
-        .write()
-        .to_buffered(&mut out)
-        .map_err(|e| Error::Internal(format!("encoding frame: {e}")))?;
-    Ok(out.into_inner())
+    let wanted: Vec<ImageLayer> = wanted
+        .iter()
+        .map(|l| match l {
+            OutputLayer::Beauty => ImageLayer::Beauty,
+            OutputLayer::Albedo => ImageLayer::Albedo,
+            OutputLayer::Normal => ImageLayer::Normal,
+            OutputLayer::Depth => ImageLayer::Depth,
+        })
+        .collect();
+    output::encode_exr_layers(size, layers, meta, &wanted)
+        .map_err(|e| Error::Internal(format!("encoding frame: {e}")))
 }
 
 #[cfg(test)]

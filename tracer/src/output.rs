@@ -22,8 +22,8 @@ use std::path::PathBuf;
 use crate::film::{Layers, TileRect};
 
 pub use self::exr::{
-    check_finite, decode_exr, encode_exr, read_exr, validate_tile, write_exr, ExrImage,
-    ExrMetadata, CHANNEL_NAMES,
+    check_finite, decode_exr, encode_exr, encode_exr_layers, read_exr, validate_tile, write_exr,
+    ExrImage, ExrMetadata, ImageLayer, CHANNEL_NAMES,
 };
 pub use self::preview::{
     aces_filmic, encode_preview_png, preview_rgba8, srgb_oetf, write_preview_png,

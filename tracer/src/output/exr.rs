@@ -38,6 +38,29 @@ const SLOTS: [Slot; 11] = [
     Slot::Depth,
 ];
 
+/// A layer of a Tessera EXR: the channels of one of [`Layers`]' fields.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ImageLayer {
+    /// `R G B A`: always written.
+    Beauty,
+    /// `albedo.R albedo.G albedo.B`.
+    Albedo,
+    /// `N.X N.Y N.Z`.
+    Normal,
+    /// `Z`.
+    Depth,
+}
+
+impl ImageLayer {
+    /// Every layer, in file order.
+    pub const ALL: [ImageLayer; 4] = [
+        ImageLayer::Beauty,
+        ImageLayer::Albedo,
+        ImageLayer::Normal,
+        ImageLayer::Depth,
+    ];
+}
+
 /// One component of one layer.
 #[derive(Clone, Copy)]
 enum Slot {
@@ -48,6 +71,16 @@ enum Slot {
 }
 
 impl Slot {
+    /// The layer this component belongs to.
+    fn layer(self) -> ImageLayer {
+        match self {
+            Slot::Beauty(_) => ImageLayer::Beauty,
+            Slot::Albedo(_) => ImageLayer::Albedo,
+            Slot::Normal(_) => ImageLayer::Normal,
+            Slot::Depth => ImageLayer::Depth,
+        }
+    }
+
     /// The value of this component at pixel `i`.
     fn get(self, layers: &Layers, i: usize) -> f32 {
         match self {
@@ -157,6 +190,16 @@ pub fn encode_exr(
     layers: &Layers,
     meta: &ExrMetadata,
 ) -> Result<Vec<u8>, OutputError> {
+    encode_exr_layers(frame_size, layers, meta, &ImageLayer::ALL)
+}
+
+/// [`encode_exr`] with only the `wanted` layers' channels (beauty is always written).
+pub fn encode_exr_layers(
+    frame_size: (u32, u32),
+    layers: &Layers,
+    meta: &ExrMetadata,
+    wanted: &[ImageLayer],
+) -> Result<Vec<u8>, OutputError> {
     check_shape(frame_size, layers)?;
     let rect = layers.rect;
     let n = rect.area();
@@ -165,6 +208,9 @@ pub fn encode_exr(
         CHANNEL_NAMES
             .iter()
             .zip(SLOTS)
+            .filter(|(_, slot)| {
+                slot.layer() == ImageLayer::Beauty || wanted.contains(&slot.layer())
+            })
             .map(|(&name, slot)| {
                 let values = (0..n).map(|i| slot.get(layers, i)).collect();
                 AnyChannel::new(name, FlatSamples::F32(values))
