@@ -14,6 +14,53 @@ use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use proto::{JobStatus, WorkerList};
+use tracer::film::Layers;
+use tracer::output::read_exr;
+
+/// Small enough for CI's two cores: 32x24 pixels, tiles of 16 (four per frame), motion
+/// blur on, so the moving demo objects take the motion path.
+pub const SIZE: &str = "32x24";
+/// The frames most jobs render.
+pub const FRAMES: &str = "1-4";
+const SHUTTER: &str = "-0.25,0.25";
+const MAX_DEPTH: &str = "4";
+const SEED: &str = "7";
+
+/// The render settings both a farm job and `tessera render` get, at `spp` samples.
+pub fn settings(spp: &str) -> Vec<&str> {
+    vec![
+        "--fps",
+        "24",
+        "--size",
+        SIZE,
+        "--spp",
+        spp,
+        "--shutter",
+        SHUTTER,
+        "--max-depth",
+        MAX_DEPTH,
+        "--seed",
+        SEED,
+    ]
+}
+
+/// `tessera render` of `frame` of `scene` with [`settings`], as the reference a farm's
+/// frame must match.
+pub fn render_directly(scene: &Path, frame: i32, spp: &str, dir: &Path) -> Layers {
+    let out = dir.join(format!("direct_{frame}_{spp}.exr"));
+    let frame = frame.to_string();
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "--frame",
+        &frame,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(settings(spp));
+    tessera_ok(&args, dir);
+    read_exr(&out).unwrap().layers
+}
 
 /// The `tessera` binary next to this test executable.
 pub fn tessera_bin() -> PathBuf {
@@ -24,13 +71,47 @@ pub fn tessera_bin() -> PathBuf {
         .and_then(Path::parent)
         .expect("the test binary lies in target/<profile>/deps")
         .join(format!("tessera{}", std::env::consts::EXE_SUFFIX));
-    assert!(
-        bin.exists(),
-        "{} is missing: run the end-to-end tests with `cargo test --workspace` (which builds \
-         the binary), or `cargo build -p cli` first",
-        bin.display()
-    );
+    let built = fs::metadata(&bin).and_then(|m| m.modified());
+    let Ok(built) = built else {
+        panic!(
+            "{} is missing: run the end-to-end tests with `cargo test --workspace` (which \
+             builds the binary), or `cargo build -p cli` first",
+            bin.display()
+        );
+    };
+    // `cargo test -p tests` alone does not rebuild the binary: refuse to test an old one.
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    if let Some(newer) = newest_source(workspace).filter(|(t, _)| *t > built) {
+        panic!(
+            "{} is older than {}: run the end-to-end tests with `cargo test --workspace`, or \
+             `cargo build -p cli` first",
+            bin.display(),
+            newer.1.display()
+        );
+    }
     bin
+}
+
+/// The most recently modified file the binary is built from, with its time.
+fn newest_source(workspace: &Path) -> Option<(std::time::SystemTime, PathBuf)> {
+    fn walk(path: &Path, newest: &mut Option<(std::time::SystemTime, PathBuf)>) {
+        if let Ok(entries) = fs::read_dir(path) {
+            for entry in entries.flatten() {
+                walk(&entry.path(), newest);
+            }
+        } else if let Ok(t) = fs::metadata(path).and_then(|m| m.modified()) {
+            if newest.as_ref().is_none_or(|(n, _)| t > *n) {
+                *newest = Some((t, path.to_path_buf()));
+            }
+        }
+    }
+    let mut newest = None;
+    for krate in ["cli", "server", "worker", "tracer", "proto"] {
+        walk(&workspace.join(krate).join("src"), &mut newest);
+        walk(&workspace.join(krate).join("Cargo.toml"), &mut newest);
+    }
+    walk(&workspace.join("server").join("assets"), &mut newest);
+    newest
 }
 
 /// A loopback port nothing listens on right now.
@@ -358,6 +439,19 @@ impl Farm {
             }
         }
         out
+    }
+
+    /// The frame the server assembled for `job`, read from its data folder.
+    pub fn server_frame(&self, job: u64, frame: i32) -> Layers {
+        let path = self
+            .path()
+            .join("data")
+            .join("jobs")
+            .join(job.to_string())
+            .join(proto::job::frame_file_name(frame, "exr"));
+        read_exr(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .layers
     }
 
     /// Writes the built-in animated demo scene as `demo.glb` in the farm's folder.

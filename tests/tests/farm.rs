@@ -5,52 +5,9 @@ use std::path::Path;
 use std::time::Duration;
 
 use proto::JobState;
-use tests::{tessera_ok, Farm};
+use tests::{render_directly, settings, tessera_ok, Farm, FRAMES};
 use tracer::film::Layers;
 use tracer::output::read_exr;
-
-/// Small enough for CI's two cores: 32x24 pixels, 4 frames, tiles of 16 (four per frame),
-/// motion blur on, so the moving demo objects take the motion path.
-const SIZE: &str = "32x24";
-const FRAMES: &str = "1-4";
-const SHUTTER: &str = "-0.25,0.25";
-const MAX_DEPTH: &str = "4";
-const SEED: &str = "7";
-
-/// The render settings both the farm and `tessera render` get.
-fn settings(spp: &str) -> Vec<&str> {
-    vec![
-        "--fps",
-        "24",
-        "--size",
-        SIZE,
-        "--spp",
-        spp,
-        "--shutter",
-        SHUTTER,
-        "--max-depth",
-        MAX_DEPTH,
-        "--seed",
-        SEED,
-    ]
-}
-
-/// `tessera render` of `frame` of `scene`, as the reference the farm must match.
-fn render_directly(scene: &Path, frame: i32, spp: &str, dir: &Path) -> Layers {
-    let out = dir.join(format!("direct_{frame}.exr"));
-    let frame = frame.to_string();
-    let mut args = vec![
-        "render",
-        scene.to_str().unwrap(),
-        "--frame",
-        &frame,
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend(settings(spp));
-    tessera_ok(&args, dir);
-    read_exr(&out).unwrap().layers
-}
 
 fn assert_close(what: &str, a: &[f32], b: &[f32], tolerance: f32) {
     assert_eq!(a.len(), b.len(), "{what}: sizes differ");
