@@ -25,6 +25,9 @@ pub struct WorkerArgs {
     /// A name shown on the dashboard (default: the host name).
     #[arg(long)]
     pub name: Option<String>,
+    /// Misbehave on purpose, for the farm's fault tests: `fail-job=JOB`.
+    #[arg(long, hide = true)]
+    pub inject_fault: Option<worker::Fault>,
 }
 
 pub fn run(args: WorkerArgs) -> anyhow::Result<()> {
@@ -48,6 +51,7 @@ pub fn run(args: WorkerArgs) -> anyhow::Result<()> {
         threads,
         cache_dir: args.cache.unwrap_or_else(default_cache_dir),
         name: args.name.unwrap_or_else(host_name),
+        fault: args.inject_fault,
     };
     tracing::info!(
         "Tessera worker `{}` for {} ({} threads, scenes cached in {})",

@@ -334,26 +334,30 @@ impl Farm {
         );
     }
 
-    /// Starts `tessera worker` named `name` with `threads` render threads.
+    /// Starts `tessera worker` named `name` with `threads` render threads; returns its
+    /// index in [`Farm::workers`].
     pub fn start_worker(&mut self, name: &str, threads: u32) -> usize {
+        self.start_worker_with(name, threads, &[])
+    }
+
+    /// [`Farm::start_worker`] with more flags (`--inject-fault ...`).
+    pub fn start_worker_with(&mut self, name: &str, threads: u32, extra: &[&str]) -> usize {
         let url = self.url();
         let threads = threads.to_string();
         let cache = format!("cache-{name}");
-        let worker = Process::start(
+        let mut args = vec![
+            "worker",
+            "--server",
+            &url,
+            "--threads",
+            &threads,
+            "--cache",
+            &cache,
+            "--name",
             name,
-            &[
-                "worker",
-                "--server",
-                &url,
-                "--threads",
-                &threads,
-                "--cache",
-                &cache,
-                "--name",
-                name,
-            ],
-            self.path(),
-        );
+        ];
+        args.extend(extra);
+        let worker = Process::start(name, &args, self.path());
         self.workers.push(worker);
         self.workers.len() - 1
     }

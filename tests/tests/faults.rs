@@ -85,3 +85,42 @@ fn a_hung_worker_loses_its_task_and_its_late_upload_is_ignored() {
     let status = farm.workers[hung].terminate(Duration::from_secs(20));
     assert!(status.success(), "{status}");
 }
+
+#[test]
+fn a_worker_that_always_fails_one_job_is_blocked_from_it_and_renders_the_others() {
+    let mut farm = Farm::new();
+    farm.start_server(60);
+    let scene = farm.demo_scene();
+    let mut args = vec![scene.to_str().unwrap(), "--frames", "1-2", "--tile", "16"];
+    args.extend(settings("2"));
+    let failing = farm.submit(&args);
+    let other = farm.submit(&args);
+    let fault = format!("fail-job={failing}");
+    farm.start_worker_with("flaky", 1, &["--inject-fault", &fault]);
+
+    // The older job comes first: three failures (on three different tasks) block the
+    // worker from it, and it renders the other job whole.
+    let st = farm.wait_for_job(other, Duration::from_secs(120));
+    assert_eq!(st.state, JobState::Done, "{st:?}");
+    let st = farm.job(failing);
+    assert_eq!((st.tasks.done, st.tasks.failed), (0, 0), "{st:?}");
+    let db = rusqlite::Connection::open(farm.path().join("data").join("tessera.db")).unwrap();
+    let (blocks, failures): (u64, u64) = db
+        .query_row(
+            "SELECT (SELECT count(*) FROM job_blocks WHERE job_id = ?1),
+                    (SELECT count(*) FROM task_failures WHERE job_id = ?1)",
+            [failing],
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )
+        .unwrap();
+    assert_eq!((blocks, failures), (1, 3));
+
+    // A healthy worker finishes the blocked job; its frames are as tessera render makes them.
+    farm.start_worker("healthy", 1);
+    let st = farm.wait_for_job(failing, Duration::from_secs(120));
+    assert_eq!(st.state, JobState::Done, "{st:?}");
+    for frame in 1..=2 {
+        let direct = render_directly(&scene, frame, "2", farm.path());
+        assert!(farm.server_frame(failing, frame) == direct, "frame {frame}");
+    }
+}

@@ -17,6 +17,31 @@ pub struct WorkerConfig {
     pub cache_dir: PathBuf,
     /// A name for people: shown in `GET /workers` and the dashboard.
     pub name: String,
+    /// A fault to inject, for testing how the farm copes with a bad worker; `None` for
+    /// every real worker.
+    pub fault: Option<Fault>,
+}
+
+/// A fault a worker can be told to inject (`tessera worker --inject-fault`, hidden from
+/// its help): the farm's defences are tested against real processes that misbehave.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// Report every task of this job as failed, without rendering it.
+    FailJob(u64),
+}
+
+impl std::str::FromStr for Fault {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.split_once('=') {
+            Some(("fail-job", job)) => job
+                .parse()
+                .map(Fault::FailJob)
+                .map_err(|_| format!("fail-job takes a job id, not `{job}`")),
+            _ => Err(format!("unknown fault `{s}` (known: fail-job=JOB)")),
+        }
+    }
 }
 
 impl WorkerConfig {
@@ -42,7 +67,18 @@ mod tests {
             threads: 1,
             cache_dir: PathBuf::from("cache"),
             name: "w".into(),
+            fault: None,
         }
+    }
+
+    #[test]
+    fn faults_parse_or_say_what_is_known() {
+        assert_eq!("fail-job=7".parse(), Ok(Fault::FailJob(7)));
+        assert!("fail-job=x"
+            .parse::<Fault>()
+            .unwrap_err()
+            .contains("job id"));
+        assert!("melt".parse::<Fault>().unwrap_err().contains("fail-job"));
     }
 
     #[test]

@@ -38,7 +38,7 @@ use crate::api::{
 };
 use crate::backoff::{jitter, seconds, Backoff, IDLE_PAUSE};
 use crate::cache::{is_digest, sha256_hex, Cached, SceneCache};
-use crate::config::WorkerConfig;
+use crate::config::{Fault, WorkerConfig};
 use crate::render::{encode_tile, frame_key, frame_options, render_lease, RenderedTile};
 use crate::stop::Stop;
 
@@ -92,6 +92,7 @@ pub async fn run(
     });
     let mut daemon = Daemon {
         api,
+        fault: config.fault,
         registration: WorkerRegistration {
             name: config.name.clone(),
             threads: config.threads.min(u32::MAX as usize) as u32,
@@ -113,6 +114,7 @@ pub async fn run(
 
 struct Daemon {
     api: Api,
+    fault: Option<Fault>,
     registration: WorkerRegistration,
     registered: Option<WorkerRegistered>,
     stop: Stop,
@@ -341,6 +343,12 @@ impl Daemon {
         lease: &Lease,
         cancel: &Arc<AtomicBool>,
     ) -> Result<RenderedTile, TaskError> {
+        if self.fault == Some(Fault::FailJob(lease.job_id)) {
+            return Err(TaskError::Failed(format!(
+                "injected fault: every task of job {} fails",
+                lease.job_id
+            )));
+        }
         let frame = self.frame(lease).await?;
         let (pool, job, cancel) = (self.pool.clone(), lease.clone(), cancel.clone());
         let rendered = tokio::task::spawn_blocking(move || {

@@ -24,5 +24,5 @@ mod daemon;
 pub mod render;
 mod stop;
 
-pub use config::WorkerConfig;
+pub use config::{Fault, WorkerConfig};
 pub use daemon::{run, RunSummary};

@@ -119,6 +119,7 @@ impl TestWorker {
             threads: 2,
             cache_dir: cache.to_path_buf(),
             name: "test-worker".into(),
+            fault: None,
         };
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(worker::run(config, async {
