@@ -10,12 +10,20 @@ use super::OutputError;
 
 /// Writes `bytes` to `path`: into a temp file in the same folder (a rename is atomic only
 /// within one file system), fsync, rename over `path`, then fsync the folder so that the
-/// rename itself is durable. The temp file is removed on failure.
+/// rename itself is durable. The temp file is removed on failure. A `path` that exists
+/// but is not a regular file (`/dev/null`, a socket, a pipe) is refused: the rename would
+/// replace it.
 pub(super) fn write(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
     let io = |source| OutputError::Io {
         path: path.to_path_buf(),
         source,
     };
+    if fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err(io(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "exists and is not a regular file; only files are replaced",
+        )));
+    }
     let file_name = path.file_name().ok_or_else(|| {
         io(std::io::Error::new(
             std::io::ErrorKind::InvalidInput,
@@ -68,6 +76,23 @@ fn sync_dir(dir: &Path) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn refuses_to_replace_what_is_not_a_regular_file() {
+        let dir = std::env::temp_dir().join(format!("tessera-atomic-sock-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        // A socket stands in for a device such as /dev/null: not a file, yet renamable over.
+        let path = dir.join("socket");
+        let _listener = std::os::unix::net::UnixListener::bind(&path).unwrap();
+        let err = write(&path, b"frame").unwrap_err().to_string();
+        assert!(err.contains("not a regular file"), "{err}");
+        assert!(
+            !fs::metadata(&path).unwrap().is_file(),
+            "the socket is still there"
+        );
+        fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn replaces_the_file_and_leaves_no_temp_file() {
