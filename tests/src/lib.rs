@@ -268,6 +268,8 @@ pub struct Farm {
     pub server: Option<Process>,
     /// Worker processes started so far.
     pub workers: Vec<Process>,
+    /// The client token the farm's client commands send, when the server wants one.
+    pub client_token: Option<String>,
     servers_started: usize,
 }
 
@@ -285,6 +287,7 @@ impl Farm {
             port: free_port(),
             server: None,
             workers: vec![],
+            client_token: None,
             servers_started: 0,
         }
     }
@@ -302,36 +305,44 @@ impl Farm {
     /// Starts `tessera server` (data in `data/`, leases of `lease_seconds`) and waits until
     /// it answers.
     pub fn start_server(&mut self, lease_seconds: u64) {
+        self.start_server_with(lease_seconds, &[]);
+    }
+
+    /// [`Farm::start_server`] with more flags (tokens, limits).
+    pub fn start_server_with(&mut self, lease_seconds: u64, extra: &[&str]) {
         self.servers_started += 1;
         let listen = format!("127.0.0.1:{}", self.port);
         let lease = lease_seconds.to_string();
         let name = format!("server-{}", self.servers_started);
-        let server = Process::start(
-            &name,
-            &[
-                "server",
-                "--listen",
-                &listen,
-                "--data",
-                "data",
-                "--lease-seconds",
-                &lease,
-            ],
-            self.path(),
-        );
-        self.server = Some(server);
-        let url = self.url();
-        let dir = self.path().to_path_buf();
+        let mut args = vec![
+            "server",
+            "--listen",
+            &listen,
+            "--data",
+            "data",
+            "--lease-seconds",
+            &lease,
+        ];
+        args.extend(extra);
+        self.server = Some(Process::start(&name, &args, self.path()));
+        let status = self.client_args(&["status"]);
+        let status: Vec<&str> = status.iter().map(String::as_str).collect();
         wait_until(
             "the server to answer",
             Duration::from_secs(30),
-            || {
-                tessera(&["status", "--server", &url], &dir)
-                    .status
-                    .success()
-            },
+            || tessera(&status, self.path()).status.success(),
             || self.logs(),
         );
+    }
+
+    /// `args` with `--server` and, when set, `--token`.
+    fn client_args(&self, args: &[&str]) -> Vec<String> {
+        let mut all: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+        all.extend(["--server".into(), self.url()]);
+        if let Some(t) = &self.client_token {
+            all.extend(["--token".into(), t.clone()]);
+        }
+        all
     }
 
     /// Starts `tessera worker` named `name` with `threads` render threads; returns its
@@ -362,11 +373,11 @@ impl Farm {
         self.workers.len() - 1
     }
 
-    /// Runs a client command against this farm's server (`--server` added).
+    /// Runs a client command against this farm's server (`--server` and the client token
+    /// added).
     pub fn client(&self, args: &[&str]) -> String {
-        let url = self.url();
-        let mut all = args.to_vec();
-        all.extend(["--server", url.as_str()]);
+        let all = self.client_args(args);
+        let all: Vec<&str> = all.iter().map(String::as_str).collect();
         let o = tessera(&all, self.path());
         assert!(
             o.status.success(),
