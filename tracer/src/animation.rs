@@ -32,6 +32,30 @@ pub struct Channel {
     pub sampler: Sampler,
 }
 
+impl Channel {
+    /// A channel driving `target` of `node`: keys at `times`, `values` with `width`
+    /// floats per element (see [`Sampler`]), interpolated by `interpolation`.
+    pub fn new(
+        node: u32,
+        target: Target,
+        interpolation: Interpolation,
+        times: Vec<f32>,
+        values: Vec<f32>,
+        width: usize,
+    ) -> Self {
+        Channel {
+            node,
+            target,
+            sampler: Sampler {
+                interpolation,
+                times,
+                values,
+                width,
+            },
+        }
+    }
+}
+
 /// The node property a channel drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Target {

@@ -4,7 +4,7 @@
 
 use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
 
-use crate::animation::{Animation, Channel, Interpolation, Sampler, Target};
+use crate::animation::{Animation, Channel, Interpolation, Target};
 use crate::camera::Projection;
 use crate::light::Environment;
 use crate::material::Material;
@@ -219,20 +219,10 @@ pub fn animated_demo_scene() -> Scene {
         })
         .collect();
     let slide = vec![0.15, 0.32, 0.45, -0.35, 0.32, 0.45, 0.15, 0.32, 0.45];
-    let channel = |node, target, interpolation, times: Vec<f32>, values, width| Channel {
-        node,
-        target,
-        sampler: Sampler {
-            interpolation,
-            times,
-            values,
-            width,
-        },
-    };
     b.animation(Animation {
         name: Some("demo".into()),
         channels: vec![
-            channel(
+            Channel::new(
                 metal,
                 Target::Translation,
                 Interpolation::CubicSpline,
@@ -240,7 +230,7 @@ pub fn animated_demo_scene() -> Scene {
                 bounce,
                 3,
             ),
-            channel(
+            Channel::new(
                 boxy,
                 Target::Rotation,
                 Interpolation::Linear,
@@ -248,7 +238,7 @@ pub fn animated_demo_scene() -> Scene {
                 turn,
                 4,
             ),
-            channel(
+            Channel::new(
                 glass,
                 Target::Translation,
                 Interpolation::Linear,

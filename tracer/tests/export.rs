@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
 
-use tracer::animation::{Animation, Channel, Interpolation, Sampler, Target};
+use tracer::animation::{Animation, Channel, Interpolation, Target};
 use tracer::camera::Projection;
 use tracer::demo;
 use tracer::export::{scene_to_glb, ExportError};
@@ -328,20 +328,10 @@ fn everything_else() -> Scene {
         },
         DMat4::from_quat(DQuat::from_rotation_x(-1.0)),
     );
-    let channel = |node, target, interpolation, times: Vec<f32>, values, width| Channel {
-        node,
-        target,
-        sampler: Sampler {
-            interpolation,
-            times,
-            values,
-            width,
-        },
-    };
     b.animation(Animation {
         name: None,
         channels: vec![
-            channel(
+            Channel::new(
                 sheet_node,
                 Target::Weights,
                 Interpolation::Linear,
@@ -349,7 +339,7 @@ fn everything_else() -> Scene {
                 vec![0.0, 1.0],
                 1,
             ),
-            channel(
+            Channel::new(
                 sheet_node,
                 Target::Scale,
                 Interpolation::Step,
