@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-use clap::Args;
+use clap::{Args, Subcommand};
 use glam::Vec2;
 use rayon::prelude::*;
 
@@ -16,7 +16,11 @@ use crate::args::parse_size;
 use crate::render::load_scene;
 
 #[derive(Args)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct BenchArgs {
+    /// Another benchmark instead of the tracer's.
+    #[command(subcommand)]
+    pub command: Option<BenchCommand>,
     /// Scene to measure; the built-in demo scene when left out.
     scene: Option<PathBuf>,
     /// Image size for the measurements.
@@ -28,6 +32,14 @@ pub struct BenchArgs {
     /// Smaller reference and sweep, for a first look in seconds.
     #[arg(long)]
     quick: bool,
+}
+
+/// The benchmarks other than the tracer's.
+#[derive(Subcommand)]
+pub enum BenchCommand {
+    /// Load-test the farm server: simulated workers long-poll for empty tasks; tasks per
+    /// second, lease latency and server memory, and nothing lost or done twice.
+    Farm(crate::bench_farm::FarmBenchArgs),
 }
 
 /// Root-mean-square error of the beauty RGB of `a` against `reference`.

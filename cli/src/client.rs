@@ -7,7 +7,7 @@
 use std::fmt;
 use std::time::Duration;
 
-use proto::{ErrorBody, FrameList, JobList, JobSpec, JobStatus, SceneInfo, WorkerList};
+use proto::{ErrorBody, FrameList, JobList, JobSpec, JobStatus, SceneInfo, WorkerInfo, WorkerList};
 use reqwest::{Method, RequestBuilder, StatusCode};
 use serde::de::DeserializeOwned;
 
@@ -346,6 +346,12 @@ impl Client {
     /// `GET /workers`.
     pub async fn workers(&self) -> Result<WorkerList, ClientError> {
         self.get("/workers").await
+    }
+
+    /// `POST /workers/{id}/clear`: lifts a worker's quarantine.
+    pub async fn clear_worker(&self, id: u64) -> Result<WorkerInfo, ClientError> {
+        let (req, what) = self.request(Method::POST, &format!("/workers/{id}/clear"));
+        self.json(req, &what).await
     }
 }
 

@@ -41,6 +41,10 @@ pub struct WorkersArgs {
     /// Print the worker list as JSON.
     #[arg(long)]
     pub json: bool,
+    /// Clear the worker with this id of its quarantine (after checks proved its tiles
+    /// wrong and its machine was repaired): it gets work again.
+    #[arg(long, value_name = "ID")]
+    pub clear: Option<u64>,
 }
 
 /// Runs `f` with a client on a small single-threaded runtime.
@@ -246,6 +250,11 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
                 w.name.clone(),
                 w.threads.to_string(),
                 if w.online { "yes" } else { "no" }.to_string(),
+                match (&w.quarantined, w.suspect) {
+                    (Some(_), _) => "quarantined".to_string(),
+                    (None, true) => "suspect".to_string(),
+                    (None, false) => "ok".to_string(),
+                },
                 current,
                 w.tasks_done.to_string(),
                 ago(w.last_seen_ms, now_ms),
@@ -258,6 +267,7 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
             "NAME",
             "THREADS",
             "ONLINE",
+            "CHECKS",
             "CURRENT",
             "TASKS DONE",
             "LAST SEEN",
@@ -329,6 +339,18 @@ pub fn control(args: ControlArgs, control: Control) -> anyhow::Result<()> {
 
 pub fn workers(args: WorkersArgs) -> anyhow::Result<()> {
     with_client(&args.server, |client| async move {
+        if let Some(id) = args.clear {
+            let worker = client
+                .clear_worker(id)
+                .await
+                .with_context(|| format!("clearing worker {id}"))?;
+            return if args.json {
+                print_json(&worker)
+            } else {
+                println!("worker {id} ({}) cleared: it gets work again", worker.name);
+                Ok(())
+            };
+        }
         let workers = client.workers().await?;
         if args.json {
             print_json(&workers)
@@ -466,18 +488,24 @@ mod tests {
             last_seen_ms: 58_000,
             online,
             tasks_done: 17,
+            suspect: false,
+            quarantined: None,
         };
+        let mut bad = worker(3, "c", true, None, None);
+        bad.quarantined = Some("its tile of task 9 differs".into());
         let list = WorkerList {
             workers: vec![
                 worker(1, "render-01", true, Some(3), Some(12)),
                 worker(2, "b", false, None, None),
+                bad,
             ],
         };
         assert_eq!(
             workers_table(&list, 60_000),
-            "ID  NAME       THREADS  ONLINE  CURRENT         TASKS DONE  LAST SEEN\n\
-             1   render-01  8        yes     job 3 frame 12  17          2s ago\n\
-             2   b          8        no      -               17          2s ago"
+            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  LAST SEEN\n\
+             1   render-01  8        yes     ok           job 3 frame 12  17          2s ago\n\
+             2   b          8        no      ok           -               17          2s ago\n\
+             3   c          8        yes     quarantined  -               17          2s ago"
         );
     }
 }

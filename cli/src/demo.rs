@@ -128,6 +128,8 @@ impl Workers {
                 .arg(&name)
                 // Plain text in the log files.
                 .env("NO_COLOR", "1")
+                // The demo's own farm: a deployment's settings file is not for it.
+                .env_remove("TESSERA_CONFIG")
                 .stdin(Stdio::null())
                 .stdout(out)
                 .stderr(err);
@@ -203,7 +205,7 @@ impl Drop for Workers {
 /// demo, which then stops them in order; on Linux they are also sent SIGTERM when the demo
 /// dies without cleaning up (SIGKILL, say).
 #[cfg(unix)]
-fn configure_child(cmd: &mut Command) {
+pub(crate) fn configure_child(cmd: &mut Command) {
     use std::os::unix::process::CommandExt;
     cmd.process_group(0);
     #[cfg(target_os = "linux")]
@@ -221,11 +223,11 @@ fn configure_child(cmd: &mut Command) {
 }
 
 #[cfg(not(unix))]
-fn configure_child(_cmd: &mut Command) {}
+pub(crate) fn configure_child(_cmd: &mut Command) {}
 
 /// Asks a worker to stop: SIGTERM, so it gives its lease back first.
 #[cfg(unix)]
-fn terminate(child: &mut Child) {
+pub(crate) fn terminate(child: &mut Child) {
     // SAFETY: kill(2) with a pid we spawned and have not reaped yet (so it cannot have been
     // reused).
     unsafe {
@@ -234,7 +236,7 @@ fn terminate(child: &mut Child) {
 }
 
 #[cfg(not(unix))]
-fn terminate(child: &mut Child) {
+pub(crate) fn terminate(child: &mut Child) {
     let _ = child.kill();
 }
 

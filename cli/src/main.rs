@@ -2,12 +2,15 @@
 
 mod args;
 mod bench;
+mod bench_farm;
 mod client;
 mod control;
 mod demo;
+mod logs;
 mod progress;
 mod render;
 mod server;
+mod settings;
 mod signal;
 mod submit;
 mod worker;
@@ -28,7 +31,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Render one frame of a glTF scene (or the built-in demo) to a multi-layer EXR.
     Render(render::RenderArgs),
-    /// Measure the tracer: rays per second, and time and error against samples per pixel.
+    /// Measure the tracer: rays per second, and time and error against samples per pixel
+    /// (`bench farm`: load-test the farm server).
     Bench(bench::BenchArgs),
     /// Run the farm server: REST API, scheduler, tile assembly, dashboard.
     Server(server::ServerArgs),
@@ -52,11 +56,16 @@ enum Command {
 }
 
 fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+    // `server` and `worker` settings also come from TESSERA_* variables and a --config file.
+    let (cli, layers) = settings::parse::<Cli>()?;
+    match cli.command {
         Command::Render(args) => render::run(args),
-        Command::Bench(args) => bench::run(args),
-        Command::Server(args) => server::run(args),
-        Command::Worker(args) => worker::run(args),
+        Command::Bench(args) => match args.command {
+            Some(bench::BenchCommand::Farm(farm)) => bench_farm::run(farm),
+            None => bench::run(args),
+        },
+        Command::Server(args) => server::run(args, layers),
+        Command::Worker(args) => worker::run(args, layers),
         Command::Submit(args) => submit::run(args),
         Command::Status(args) => control::status(args),
         Command::Cancel(args) => control::control(args, client::Control::Cancel),

@@ -1,4 +1,6 @@
-//! `tessera server`: flags into a [`server::Config`], then [`server::serve`] until SIGINT or SIGTERM.
+//! `tessera server`: settings (flags, `TESSERA_*` variables, `--config` file: see
+//! [`crate::settings`]) into a [`server::Config`], then [`server::serve`] until SIGINT or
+//! SIGTERM.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -6,43 +8,75 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::Args;
+use serde::Serialize;
+
+use crate::settings::{Common, Layers};
 
 /// Run the farm server: REST API, scheduler, tile assembly, dashboard.
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Serialize)]
 pub struct ServerArgs {
     /// Address to listen on. Loopback by default; listen wider only with tokens set.
-    #[arg(long, default_value = "127.0.0.1:8700")]
+    #[arg(long, env = "TESSERA_LISTEN", default_value = "127.0.0.1:8700")]
     pub listen: SocketAddr,
     /// Folder for the database, scenes, tiles and frames (created when missing).
-    #[arg(long, default_value = "./tessera-data")]
+    #[arg(long, env = "TESSERA_DATA", default_value = "./tessera-data")]
     pub data: PathBuf,
     /// Bearer token workers must present (default: worker routes are open).
-    #[arg(long)]
+    #[arg(long, env = "TESSERA_WORKER_TOKEN", hide_env_values = true)]
     pub worker_token: Option<String>,
     /// Bearer token clients must present (default: client routes are open).
-    #[arg(long)]
+    #[arg(long, env = "TESSERA_CLIENT_TOKEN", hide_env_values = true)]
     pub client_token: Option<String>,
     /// Seconds a lease lasts without a heartbeat.
-    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u64).range(5..=86_400))]
+    #[arg(long, env = "TESSERA_LEASE_SECONDS", default_value_t = 60,
+          value_parser = clap::value_parser!(u64).range(5..=86_400))]
     pub lease_seconds: u64,
+    /// The fraction of tiles rendered again on a second worker and compared bit for bit
+    /// (0 = none, 1 = all); a worker whose tiles are proven wrong is quarantined.
+    #[arg(long, env = "TESSERA_VERIFY_FRACTION", default_value_t = 0.0,
+          value_parser = parse_fraction)]
+    pub verify_fraction: f64,
     /// Most tasks (frames × tiles × sample passes) one job may have.
-    #[arg(long, default_value_t = server::limits::DEFAULT_MAX_TASKS_PER_JOB)]
+    #[arg(long, env = "TESSERA_MAX_TASKS_PER_JOB",
+          default_value_t = server::limits::DEFAULT_MAX_TASKS_PER_JOB)]
     pub max_tasks_per_job: u64,
+    /// Largest tile upload a worker may send, bytes (a bigger one is refused with 413).
+    // At most i64::MAX, so that --print-config can write it as a TOML integer.
+    #[arg(long, env = "TESSERA_MAX_TILE_BYTES",
+          default_value_t = server::limits::MAX_TILE_BYTES as u64,
+          value_parser = clap::value_parser!(u64).range(1..=(i64::MAX as u64).min(usize::MAX as u64)))]
+    pub max_tile_bytes: u64,
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub common: Common,
 }
 
-pub fn run(args: ServerArgs) -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| "info,tower_http=warn".into()),
-        )
-        .init();
+/// A fraction from 0 to 1.
+fn parse_fraction(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(f) if (0.0..=1.0).contains(&f) => Ok(f),
+        _ => Err(format!("`{s}` is not a fraction from 0 to 1")),
+    }
+}
+
+pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
+    // An empty token is no token (an empty bearer token could never be presented).
+    for token in [&mut args.worker_token, &mut args.client_token] {
+        token.take_if(|t| t.is_empty());
+    }
+    if args.common.print_config {
+        print!("{}", layers.to_toml(&args)?);
+        return Ok(());
+    }
+    crate::logs::init(args.common.log_format, "info,tower_http=warn");
     let mut config = server::Config::new(&args.data);
     config.listen = args.listen;
     config.worker_token = args.worker_token;
     config.client_token = args.client_token;
     config.lease = Duration::from_secs(args.lease_seconds);
     config.max_tasks_per_job = args.max_tasks_per_job;
+    config.verify_fraction = args.verify_fraction;
+    config.max_tile_bytes = args.max_tile_bytes as usize;
     if !args.listen.ip().is_loopback()
         && (config.worker_token.is_none() || config.client_token.is_none())
     {

@@ -1,56 +1,62 @@
-//! `tessera worker`: flags into a [`worker::WorkerConfig`], then [`worker::run`] until
-//! SIGINT or SIGTERM (the lease in hand is given back to the server before exiting).
+//! `tessera worker`: settings (flags, `TESSERA_*` variables, `--config` file: see
+//! [`crate::settings`]) into a [`worker::WorkerConfig`], then [`worker::run`] until SIGINT
+//! or SIGTERM (the lease in hand is given back to the server before exiting).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use serde::Serialize;
+
+use crate::settings::{Common, Layers};
 
 /// Run a worker: lease tiles from a farm server, render them, upload them.
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Serialize)]
 pub struct WorkerArgs {
     /// The farm server's URL.
-    #[arg(long, default_value = "http://127.0.0.1:8700")]
+    #[arg(long, env = "TESSERA_SERVER", default_value = "http://127.0.0.1:8700")]
     pub server: String,
-    /// The server's worker token (default: $TESSERA_WORKER_TOKEN, else none).
-    #[arg(long)]
+    /// The server's worker token (its --worker-token; default: none).
+    #[arg(long, env = "TESSERA_WORKER_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
     /// Render threads (default: every core).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    #[arg(long, env = "TESSERA_THREADS", value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub threads: Option<u32>,
     /// Folder for downloaded scenes (default: $XDG_CACHE_HOME/tessera/scenes, else
     /// ~/.cache/tessera/scenes, else ./tessera-cache).
-    #[arg(long)]
+    #[arg(long, env = "TESSERA_CACHE")]
     pub cache: Option<PathBuf>,
     /// A name shown on the dashboard (default: the host name).
-    #[arg(long)]
+    #[arg(long, env = "TESSERA_NAME")]
     pub name: Option<String>,
-    /// Misbehave on purpose, for the farm's fault tests: `fail-job=JOB`.
+    /// Misbehave on purpose, for the farm's fault tests: `fail-job=JOB` or `perturb`.
     #[arg(long, hide = true)]
+    #[serde(skip)]
     pub inject_fault: Option<worker::Fault>,
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub common: Common,
 }
 
-pub fn run(args: WorkerArgs) -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
-        .init();
-    let token = args.token.or_else(|| {
-        std::env::var("TESSERA_WORKER_TOKEN")
-            .ok()
-            .filter(|t| !t.is_empty())
+pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
+    // The defaults worked out here, so that --print-config shows what the worker will use.
+    args.token.take_if(|t| t.is_empty());
+    let threads = *args.threads.get_or_insert_with(|| {
+        std::thread::available_parallelism().map_or(1, |n| n.get().min(4096) as u32)
     });
-    let threads = match args.threads {
-        Some(n) => n as usize,
-        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
-    };
+    let cache = args.cache.get_or_insert_with(default_cache_dir).clone();
+    let name = args.name.get_or_insert_with(host_name).clone();
+    if args.common.print_config {
+        print!("{}", layers.to_toml(&args)?);
+        return Ok(());
+    }
+    crate::logs::init(args.common.log_format, "info");
     let config = worker::WorkerConfig {
         server: args.server,
-        token,
-        threads,
-        cache_dir: args.cache.unwrap_or_else(default_cache_dir),
-        name: args.name.unwrap_or_else(host_name),
+        token: args.token,
+        threads: threads as usize,
+        cache_dir: cache,
+        name,
         fault: args.inject_fault,
     };
     tracing::info!(

@@ -64,6 +64,13 @@ pub struct WorkerInfo {
     pub online: bool,
     /// Tasks it has finished.
     pub tasks_done: u64,
+    /// A check found one of its tiles differing from another worker's, undecided yet.
+    #[serde(default)]
+    pub suspect: bool,
+    /// Why it is quarantined (a check proved a tile of it wrong): it gets no work until an
+    /// operator clears it (`POST /workers/{id}/clear`, `tessera workers --clear ID`).
+    #[serde(default)]
+    pub quarantined: Option<String>,
 }
 
 /// `GET /workers`.

@@ -12,7 +12,7 @@ use proto::{JobSpec, OutputLayer, ResultMetadata};
 use tracer::film::{Layers, TileRect, NO_HIT_DEPTH};
 use tracer::output::{self, ExrMetadata, ImageLayer};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, StorageProblem};
 use crate::scheduler::TaskRow;
 use crate::store::{self, sha256_hex, Store};
 
@@ -86,6 +86,13 @@ pub fn merge_passes(parts: &[(Layers, u32)]) -> Layers {
     out
 }
 
+/// The accepted tile of a task, as stored.
+pub fn read_tile(store: &Store, job: u64, task: u64) -> Result<Layers> {
+    let image = output::read_exr(&store.tile(job, task))
+        .map_err(|e| Error::Internal(format!("reading the accepted tile of task {task}: {e}")))?;
+    Ok(image.layers)
+}
+
 /// Builds a frame (or, for a preview, as much of it as is in) from the accepted tiles of
 /// `tasks` (one frame's done tasks, by tile then pass).
 pub fn build_frame(store: &Store, spec: &JobSpec, tasks: &[TaskRow]) -> Result<Layers> {
@@ -96,10 +103,7 @@ pub fn build_frame(store: &Store, spec: &JobSpec, tasks: &[TaskRow]) -> Result<L
         let mut parts = Vec::new();
         while i < tasks.len() && tasks[i].tile == tile {
             let t = &tasks[i];
-            let path = store.tile(t.job_id, t.id);
-            let image = output::read_exr(&path)
-                .map_err(|e| Error::Internal(format!("reading accepted tile: {e}")))?;
-            parts.push((image.layers, t.samples.len()));
+            parts.push((read_tile(store, t.job_id, t.id)?, t.samples.len()));
             i += 1;
         }
         frame.paste(&merge_passes(&parts));
@@ -138,8 +142,18 @@ pub fn write_preview(
 ) -> Result<()> {
     let path = store.frame(job, frame_no, "png");
     std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
-    output::write_preview_png(&path, (spec.width, spec.height), frame, 0.0)
-        .map_err(|e| Error::Internal(format!("writing preview: {e}")))
+    output::write_preview_png(&path, (spec.width, spec.height), frame, 0.0).map_err(|e| {
+        // A full or read-only disk is the operator's to fix, not a bug: say so (507/503).
+        let problem = match &e {
+            output::OutputError::Io { source, .. } => StorageProblem::of_io(source),
+            _ => None,
+        };
+        let detail = format!("writing preview: {e}");
+        match problem {
+            Some(problem) => Error::Storage { problem, detail },
+            None => Error::Internal(detail),
+        }
+    })
 }
 
 /// The EXR bytes of `layers` with only the `wanted` layers (beauty always).

@@ -25,6 +25,9 @@ pub struct Config {
     pub max_lease_wait: Duration,
     /// A worker that fails this many tasks of one job gets no more of that job.
     pub block_after_failures: u32,
+    /// The fraction of tiles rendered a second time, on another worker, and compared bit
+    /// for bit (0 = none, 1 = every tile); see [`crate::verify`].
+    pub verify_fraction: f64,
     /// Most tasks (frames × tiles × passes) one job may have.
     pub max_tasks_per_job: u64,
     /// Largest scene upload, bytes.
@@ -45,6 +48,7 @@ impl Config {
             sweep_interval: Duration::from_secs(2),
             max_lease_wait: Duration::from_secs(30),
             block_after_failures: 3,
+            verify_fraction: 0.0,
             max_tasks_per_job: limits::DEFAULT_MAX_TASKS_PER_JOB,
             max_scene_bytes: limits::DEFAULT_MAX_SCENE_BYTES,
             max_tile_bytes: limits::MAX_TILE_BYTES,

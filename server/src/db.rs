@@ -82,7 +82,9 @@ impl Db {
         f: impl FnOnce(&mut Connection) -> R + Send + 'static,
     ) -> R {
         let db = self.clone();
-        match tokio::task::spawn_blocking(move || db.with(f)).await {
+        // What `f` logs belongs to the caller's request or task.
+        let span = tracing::Span::current();
+        match tokio::task::spawn_blocking(move || span.in_scope(|| db.with(f))).await {
             Ok(r) => r,
             Err(e) => std::panic::resume_unwind(e.into_panic()),
         }

@@ -34,20 +34,79 @@ pub enum Error {
     /// The fencing token is stale: the lease was revoked, expired or finished (409).
     #[error("{0}")]
     LeaseGone(String),
+    /// The data folder takes no more writes (507 when full, 503 when read-only): nothing
+    /// was stored, and the same request may succeed once the operator fixes the disk.
+    #[error("{problem}: {detail}")]
+    Storage {
+        /// Full or read-only.
+        problem: StorageProblem,
+        /// What the OS or SQLite said (logged; the client gets only `problem`).
+        detail: String,
+    },
     /// The storage failed (500); the message is logged, the client gets a summary.
     #[error("{0}")]
     Internal(String),
 }
 
+/// Why the data folder takes no more writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StorageProblem {
+    /// No space left, or the quota is used up (ENOSPC, EDQUOT, SQLITE_FULL).
+    Full,
+    /// The file system is read-only (EROFS, SQLITE_READONLY).
+    ReadOnly,
+}
+
+impl std::fmt::Display for StorageProblem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            StorageProblem::Full => "the server's disk is full",
+            StorageProblem::ReadOnly => "the data folder is read-only",
+        })
+    }
+}
+
+impl StorageProblem {
+    /// The problem behind an OS error, if it is one an operator fixes on the disk.
+    pub fn of_io(e: &std::io::Error) -> Option<StorageProblem> {
+        use std::io::ErrorKind;
+        match e.kind() {
+            ErrorKind::StorageFull | ErrorKind::QuotaExceeded => Some(StorageProblem::Full),
+            ErrorKind::ReadOnlyFilesystem => Some(StorageProblem::ReadOnly),
+            _ => None,
+        }
+    }
+}
+
 impl From<rusqlite::Error> for Error {
     fn from(e: rusqlite::Error) -> Self {
-        Error::Internal(format!("database: {e}"))
+        use rusqlite::ffi::ErrorCode;
+        // SQLite rolls the statement (or the whole transaction) back on these; the
+        // `Transaction` guard rolls back the rest, so the database stays as it was.
+        let problem = match e.sqlite_error_code() {
+            Some(ErrorCode::DiskFull) => Some(StorageProblem::Full),
+            Some(ErrorCode::ReadOnly) => Some(StorageProblem::ReadOnly),
+            _ => None,
+        };
+        match problem {
+            Some(problem) => Error::Storage {
+                problem,
+                detail: format!("database: {e}"),
+            },
+            None => Error::Internal(format!("database: {e}")),
+        }
     }
 }
 
 impl From<std::io::Error> for Error {
     fn from(e: std::io::Error) -> Self {
-        Error::Internal(format!("storage: {e}"))
+        match StorageProblem::of_io(&e) {
+            Some(problem) => Error::Storage {
+                problem,
+                detail: format!("storage: {e}"),
+            },
+            None => Error::Internal(format!("storage: {e}")),
+        }
     }
 }
 
@@ -65,3 +124,74 @@ impl From<crate::state::InvalidTransition> for Error {
 
 /// The server's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use std::io;
+
+    use axum::http::StatusCode;
+
+    use super::*;
+
+    fn sqlite(code: i32) -> rusqlite::Error {
+        rusqlite::Error::SqliteFailure(rusqlite::ffi::Error::new(code), None)
+    }
+
+    #[test]
+    fn a_full_disk_answers_507_and_says_so() {
+        let full = [
+            Error::from(io::Error::from(io::ErrorKind::StorageFull)),
+            Error::from(io::Error::from(io::ErrorKind::QuotaExceeded)),
+            Error::from(sqlite(rusqlite::ffi::SQLITE_FULL)),
+        ];
+        for e in full {
+            assert_eq!(
+                e.status(),
+                (StatusCode::INSUFFICIENT_STORAGE, "storage_full")
+            );
+            let body = e.body();
+            assert!(
+                body.message.starts_with("the server's disk is full"),
+                "{body:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_read_only_data_folder_answers_503_and_says_so() {
+        let read_only = [
+            Error::from(io::Error::from(io::ErrorKind::ReadOnlyFilesystem)),
+            Error::from(sqlite(rusqlite::ffi::SQLITE_READONLY)),
+        ];
+        for e in read_only {
+            assert_eq!(
+                e.status(),
+                (StatusCode::SERVICE_UNAVAILABLE, "storage_read_only")
+            );
+            let body = e.body();
+            assert!(
+                body.message.starts_with("the data folder is read-only"),
+                "{body:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_os_error_behind_a_full_disk_stays_in_the_log() {
+        // ENOSPC, as write(2) reports it on Linux.
+        let e = Error::from(io::Error::from_raw_os_error(28));
+        assert!(e.to_string().contains("storage: "), "{e}");
+        assert!(!e.body().message.contains("os error"), "{:?}", e.body());
+    }
+
+    #[test]
+    fn other_storage_errors_stay_500() {
+        let others = [
+            Error::from(io::Error::from(io::ErrorKind::PermissionDenied)),
+            Error::from(sqlite(rusqlite::ffi::SQLITE_CORRUPT)),
+        ];
+        for e in others {
+            assert_eq!(e.status(), (StatusCode::INTERNAL_SERVER_ERROR, "internal"));
+        }
+    }
+}

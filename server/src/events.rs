@@ -49,6 +49,11 @@ impl Hub {
         let _ = self.tx.send(event);
     }
 
+    /// Whether anyone listens: an event nobody receives need not be built.
+    pub fn has_listeners(&self) -> bool {
+        self.tx.receiver_count() > 0
+    }
+
     /// A new listener.
     pub fn subscribe(&self) -> broadcast::Receiver<proto::Event> {
         self.tx.subscribe()
@@ -86,4 +91,19 @@ pub async fn events(
         })
     });
     Sse::new(stream).keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_hub_knows_whether_anyone_listens() {
+        let hub = Hub::default();
+        assert!(!hub.has_listeners());
+        let rx = hub.subscribe();
+        assert!(hub.has_listeners());
+        drop(rx);
+        assert!(!hub.has_listeners());
+    }
 }

@@ -1,13 +1,17 @@
 //! The tile upload pipeline, start to end on one blocking thread (a client that hangs up
 //! cannot stop it half-way): is the lease current, is the tile good, store it, mark the
 //! task done (one transaction), then assemble the frame or write a progressive preview.
+//! A check task's tile is first compared with the tiles it repeats (see [`verify`]).
 
 use proto::{ResultMetadata, TaskToken};
+use tracer::film::Layers;
 
 use crate::app::{now_ms, App};
 use crate::assembly;
 use crate::error::Result;
-use crate::scheduler::{self, Accepted};
+use crate::scheduler::{self, Accepted, TaskRow};
+use crate::store::write_atomic;
+use crate::verify::{self, Verdict};
 
 /// What became of an upload.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,15 +46,31 @@ pub fn receive(
         });
     }
     let spec = app.db.with(|c| scheduler::job_spec(c, task.job_id))?;
-    if let Err(e) = assembly::check_tile(bytes, meta, &task, (spec.width, spec.height)) {
-        app.metrics.tile_refused();
-        return Err(e);
-    }
-    crate::store::write_atomic(&app.store.tile(task.job_id, task.id), bytes)?;
-    let now = now_ms();
-    let accepted = app
-        .db
-        .with(|c| scheduler::accept(c, worker, token, meta.rays, meta.render_ms, now))?;
+    let layers = match assembly::check_tile(bytes, meta, &task, (spec.width, spec.height)) {
+        Ok(layers) => layers,
+        Err(e) => {
+            app.metrics.tile_refused();
+            return Err(e);
+        }
+    };
+    let verdict = match task.check_of {
+        Some(original) => Some(judge(app, &task, original, &layers, bytes)?),
+        None => None,
+    };
+    write_atomic(&app.store.tile(task.job_id, task.id), bytes)?;
+    let (now, timing) = (now_ms(), app.timing());
+    let accepted = app.db.with(|c| {
+        scheduler::accept(
+            c,
+            worker,
+            token,
+            meta.rays,
+            meta.render_ms,
+            verdict.as_ref(),
+            now,
+            timing,
+        )
+    })?;
     match accepted {
         Accepted::Duplicate => Ok(Received {
             accepted: false,
@@ -81,6 +101,39 @@ pub fn receive(
     }
 }
 
+/// The verdict on a check's tile, compared bit for bit with every finished render of its
+/// group. When the task's own tile is found wrong, the check's tile takes its place now,
+/// before the check is accepted, so the frame can never be assembled from the wrong one.
+fn judge(
+    app: &App,
+    check: &TaskRow,
+    original: u64,
+    layers: &Layers,
+    bytes: &[u8],
+) -> Result<Verdict> {
+    let group = app.db.with(|c| verify::group(c, original))?;
+    let mut matching = Vec::new();
+    for render in &group {
+        let stored = assembly::read_tile(&app.store, check.job_id, render.task)?;
+        if verify::identical(&stored, layers) {
+            matching.push(render.task);
+        }
+    }
+    let verdict = Verdict::new(&group, &matching);
+    if verdict.replaces(original) {
+        write_atomic(&app.store.tile(check.job_id, original), bytes)?;
+    }
+    if verdict != Verdict::Agrees(vec![original]) {
+        tracing::warn!(
+            "check {} of task {original} (job {}, frame {}): {verdict:?}",
+            check.id,
+            check.job_id,
+            check.frame
+        );
+    }
+    Ok(verdict)
+}
+
 /// Assembles a frame whose tasks are all done: EXR and PNG written atomically, the frame
 /// marked assembled, then its tile files removed.
 pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
@@ -101,9 +154,12 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     let now = now_ms();
     app.db
         .with(|c| scheduler::mark_assembled(c, job, frame, now))?;
-    for t in &tasks {
+    let checks = app
+        .db
+        .with(|c| scheduler::done_checks_of_frame(c, job, frame))?;
+    for id in tasks.iter().map(|t| t.id).chain(checks) {
         // The frame holds them now; a leftover tile only costs disk.
-        let _ = std::fs::remove_file(app.store.tile(job, t.id));
+        let _ = std::fs::remove_file(app.store.tile(job, id));
     }
     Ok(())
 }

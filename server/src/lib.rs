@@ -14,6 +14,7 @@
 //! | [`intake`], [`assembly`] | tile uploads checked and accepted; frames assembled |
 //! | [`status`] | read models: job progress, frames, workers |
 //! | [`events`], [`metrics`] | server-sent events; Prometheus metrics |
+//! | [`verify`] | bit-for-bit checks of tiles on a second worker; quarantine |
 //! | [`auth`] | worker and client bearer tokens |
 //! | [`api`] | the HTTP routes, one file per resource, and the OpenAPI document |
 //! | [`dashboard`] | the web page at `/` |
@@ -39,6 +40,7 @@ pub mod spec;
 pub mod state;
 pub mod status;
 pub mod store;
+pub mod verify;
 
 use std::future::Future;
 use std::sync::Arc;
@@ -46,6 +48,9 @@ use std::sync::Arc;
 use axum::routing::get;
 use axum::Router;
 use tokio::net::TcpListener;
+use tower_http::request_id::{
+    MakeRequestUuid, PropagateRequestIdLayer, RequestId, SetRequestIdLayer,
+};
 use tower_http::trace::TraceLayer;
 
 pub use config::Config;
@@ -99,7 +104,11 @@ pub fn open(config: Config) -> Result<AppState, StartError> {
         tracing::info!("re-queued {revoked} leases from before the restart");
     }
     for (job, frame) in app.db.with(|c| scheduler::unassembled_frames(c))? {
-        intake::finish_frame(&app, job, frame)?;
+        // A frame that cannot be written now (a full disk, say) is no reason to stay
+        // down: the sweeper tries again every tick.
+        if let Err(e) = intake::finish_frame(&app, job, frame) {
+            tracing::error!("assembling job {job} frame {frame}: {e}; trying again later");
+        }
     }
     Ok(app)
 }
@@ -120,8 +129,28 @@ pub fn router(app: AppState) -> Router {
         .route("/healthz", get(api::system::healthz))
         .route("/metrics", get(api::system::prometheus))
         .merge(dashboard::routes())
-        .layer(TraceLayer::new_for_http())
+        // Outermost first: give the request an id (a caller's own `x-request-id` is kept),
+        // log everything its handling logs inside a span that carries it, and return it.
+        .layer(PropagateRequestIdLayer::x_request_id())
+        .layer(TraceLayer::new_for_http().make_span_with(request_span))
+        .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
         .with_state(app)
+}
+
+/// The span of one request: its id, method and path. Not the query: a browser's
+/// `access_token` travels there.
+fn request_span(req: &axum::http::Request<axum::body::Body>) -> tracing::Span {
+    let id = req
+        .extensions()
+        .get::<RequestId>()
+        .and_then(|id| id.header_value().to_str().ok())
+        .unwrap_or_default();
+    tracing::info_span!(
+        "request",
+        request_id = id,
+        method = %req.method(),
+        path = req.uri().path()
+    )
 }
 
 /// The OpenAPI document the server serves at `/api/v1/openapi.json`.
@@ -162,10 +191,16 @@ async fn sweep(app: AppState) {
         let a = app.clone();
         let finished = tokio::task::spawn_blocking(move || -> error::Result<Vec<(u64, i32)>> {
             let pending = a.db.with(|c| scheduler::unassembled_frames(c))?;
-            for &(job, frame) in &pending {
-                intake::finish_frame(&a, job, frame)?;
+            // One frame that fails (the disk is still full) does not hold up the others,
+            // and those assembled are announced.
+            let mut done = Vec::new();
+            for (job, frame) in pending {
+                match intake::finish_frame(&a, job, frame) {
+                    Ok(()) => done.push((job, frame)),
+                    Err(e) => tracing::error!("assembling job {job} frame {frame}: {e}"),
+                }
             }
-            Ok(pending)
+            Ok(done)
         })
         .await;
         match finished {

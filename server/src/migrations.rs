@@ -93,6 +93,15 @@ const MIGRATIONS: &[&str] = &[
     "#,
     // 2: a worker that shuts down says so; its leases go back to the queue at once.
     "ALTER TABLE workers ADD COLUMN left_ms INTEGER;",
+    // 3: verification. A check task re-renders a done task on another worker; a worker
+    // whose tile the checks prove wrong is quarantined until an operator clears it.
+    r#"
+    ALTER TABLE tasks ADD COLUMN check_of INTEGER;     -- the render task a check repeats
+    CREATE INDEX tasks_by_check ON tasks (check_of);
+    ALTER TABLE workers ADD COLUMN suspect_ms INTEGER;       -- a check disagreed with it
+    ALTER TABLE workers ADD COLUMN quarantined_ms INTEGER;   -- proven wrong: no more work
+    ALTER TABLE workers ADD COLUMN quarantine_reason TEXT;
+    "#,
 ];
 
 /// The schema version this build writes.

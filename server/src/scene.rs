@@ -54,3 +54,40 @@ pub fn inspect(glb: &[u8]) -> Result<(SceneInfo, Scene), SceneError> {
     };
     Ok((info, scene))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The summary is stored as JSON and read back for every later upload of the same
+    /// bytes and for every job on the scene: it must come back bit for bit. Found by
+    /// `fuzz/scene_loader`: an animation starting at an f32 subnormal read back one ulp off.
+    #[test]
+    fn summary_reads_back_from_its_json_bit_for_bit() {
+        let start = f32::from_bits(29) as f64; // 4.0637655465419695e-44
+        let info = SceneInfo {
+            digest: "ab".repeat(32),
+            size: 100,
+            cameras: vec![],
+            animations: vec![AnimationInfo {
+                index: 0,
+                name: Some("Step Scale".into()),
+                start_seconds: start,
+                end_seconds: 1.0 / 0.6,
+            }],
+            duration_seconds: 1.0 / 0.6,
+            triangles: 1,
+            lights: 0,
+            meshes: 1,
+            instances: 1,
+            materials: 1,
+            textures: 0,
+            features: vec![],
+            warnings: vec![],
+        };
+        let json = serde_json::to_string(&info).unwrap();
+        let back: SceneInfo = serde_json::from_str(&json).unwrap();
+        assert_eq!(back.animations[0].start_seconds.to_bits(), start.to_bits());
+        assert_eq!(back, info);
+    }
+}

@@ -11,6 +11,7 @@ use tracer::film::{SampleRange, TileRect};
 use crate::error::{Error, Result};
 use crate::spec::Plan;
 use crate::state::{transition, TaskEvent, TaskState};
+use crate::verify::{self, Verdict};
 
 /// The scheduler's settings.
 #[derive(Clone, Copy, Debug)]
@@ -19,6 +20,8 @@ pub struct Timing {
     pub lease_ms: i64,
     /// A worker that failed this many tasks of a job is blocked from it.
     pub block_after_failures: u32,
+    /// The fraction of tasks rendered a second time to check the first (see [`verify`]).
+    pub verify_fraction: f64,
 }
 
 /// One row of `tasks`.
@@ -44,15 +47,17 @@ pub struct TaskRow {
     pub attempt: u32,
     /// Failed or expired attempts.
     pub failures: u32,
-    /// The worker holding the lease.
+    /// The worker holding the lease (or that rendered the tile, once done).
     pub worker_id: Option<u64>,
+    /// For a check task, the render task it repeats.
+    pub check_of: Option<u64>,
 }
 
-const TASK_COLUMNS: &str =
+pub(crate) const TASK_COLUMNS: &str =
     "id, job_id, frame, tile, pass, x, y, w, h, sample_start, sample_end, state, attempt, \
-     failures, worker_id";
+     failures, worker_id, check_of";
 
-fn task_from_row(r: &rusqlite::Row) -> rusqlite::Result<TaskRow> {
+pub(crate) fn task_from_row(r: &rusqlite::Row) -> rusqlite::Result<TaskRow> {
     let state: String = r.get(11)?;
     Ok(TaskRow {
         id: r.get(0)?,
@@ -72,6 +77,7 @@ fn task_from_row(r: &rusqlite::Row) -> rusqlite::Result<TaskRow> {
         attempt: r.get(12)?,
         failures: r.get(13)?,
         worker_id: r.get(14)?,
+        check_of: r.get(15)?,
     })
 }
 
@@ -104,7 +110,13 @@ fn set_state(tx: &Transaction, task: &TaskRow, event: TaskEvent) -> Result<TaskS
 }
 
 /// Appends to the event log.
-fn log(tx: &Transaction, now: i64, job: Option<u64>, kind: &str, detail: &str) -> Result<()> {
+pub(crate) fn log(
+    tx: &Transaction,
+    now: i64,
+    job: Option<u64>,
+    kind: &str,
+    detail: &str,
+) -> Result<()> {
     tx.execute(
         "INSERT INTO events (at_ms, job_id, kind, detail) VALUES (?1, ?2, ?3, ?4)",
         params![now, job, kind, detail],
@@ -115,14 +127,16 @@ fn log(tx: &Transaction, now: i64, job: Option<u64>, kind: &str, detail: &str) -
 /// Sets or clears `jobs.finished_ms`: set when nothing is left to run (every task done,
 /// failed or cancelled and every complete frame assembled), cleared when work reappears.
 pub fn update_finished(tx: &Transaction, job: u64, now: i64) -> Result<()> {
-    let open: i64 = tx.query_row(
-        "SELECT (SELECT count(*) FROM tasks WHERE job_id = ?1 AND state IN ('queued', 'leased'))
-              + (SELECT count(*) FROM frames WHERE job_id = ?1
-                   AND tasks_done = tasks_total AND assembled_ms IS NULL)",
+    // EXISTS, not count(*): this runs on every accepted tile, and a count of a big job's
+    // queue grows with the job (measured with `tessera bench farm`).
+    let open: bool = tx.query_row(
+        "SELECT EXISTS (SELECT 1 FROM tasks WHERE job_id = ?1 AND state IN ('queued', 'leased'))
+             OR EXISTS (SELECT 1 FROM frames WHERE job_id = ?1
+                          AND tasks_done = tasks_total AND assembled_ms IS NULL)",
         [job],
         |r| r.get(0),
     )?;
-    if open == 0 {
+    if !open {
         tx.execute(
             "UPDATE jobs SET finished_ms = coalesce(finished_ms, ?2) WHERE id = ?1",
             params![job, now],
@@ -146,6 +160,11 @@ fn touch_worker(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
         )));
     }
     Ok(())
+}
+
+/// A worker counts as live if it called within two lease periods.
+fn live_since(now: i64, timing: Timing) -> i64 {
+    now - 2 * timing.lease_ms
 }
 
 /// Stores a new job and its tasks; returns its id.
@@ -225,6 +244,11 @@ pub fn register_worker(
     Ok(id)
 }
 
+/// A check task (`t`) goes to a worker (`?2`) that has not rendered its tile yet.
+const NOT_IN_CHECK_GROUP: &str = "(t.check_of IS NULL OR NOT EXISTS (
+        SELECT 1 FROM tasks g WHERE (g.id = t.check_of OR g.check_of = t.check_of)
+          AND g.state = 'done' AND g.worker_id = ?2))";
+
 /// The next queued task for `worker` in job `job`: tasks it has not failed first; a task
 /// it failed only when no other live worker could take it.
 fn next_task_in_job(
@@ -235,11 +259,13 @@ fn next_task_in_job(
 ) -> Result<Option<u64>> {
     let fresh: Option<u64> = tx
         .query_row(
-            "SELECT t.id FROM tasks t
-             WHERE t.state = 'queued' AND t.job_id = ?1
+            &format!(
+                "SELECT t.id FROM tasks t
+             WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
                AND NOT EXISTS (SELECT 1 FROM task_failures f
                                WHERE f.task_id = t.id AND f.worker_id = ?2)
-             ORDER BY t.frame, t.pass, t.tile LIMIT 1",
+             ORDER BY t.frame, t.pass, t.tile LIMIT 1"
+            ),
             params![job, worker],
             |r| r.get(0),
         )
@@ -249,16 +275,19 @@ fn next_task_in_job(
     }
     Ok(tx
         .query_row(
-            "SELECT t.id FROM tasks t
-             WHERE t.state = 'queued' AND t.job_id = ?1
+            &format!(
+                "SELECT t.id FROM tasks t
+             WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
                AND NOT EXISTS (
                    SELECT 1 FROM workers w
                    WHERE w.id != ?2 AND w.last_seen_ms >= ?3 AND w.left_ms IS NULL
+                     AND w.quarantined_ms IS NULL
                      AND NOT EXISTS (SELECT 1 FROM task_failures f
                                      WHERE f.task_id = t.id AND f.worker_id = w.id)
                      AND NOT EXISTS (SELECT 1 FROM job_blocks b
                                      WHERE b.job_id = t.job_id AND b.worker_id = w.id))
-             ORDER BY t.frame, t.pass, t.tile LIMIT 1",
+             ORDER BY t.frame, t.pass, t.tile LIMIT 1"
+            ),
             params![job, worker, live_since],
             |r| r.get(0),
         )
@@ -275,8 +304,11 @@ pub fn lease(
 ) -> Result<Option<Lease>> {
     let tx = conn.transaction()?;
     touch_worker(&tx, worker, now)?;
-    // A worker counts as live if it called within two lease periods.
-    let live_since = now - 2 * timing.lease_ms;
+    if verify::is_quarantined(&tx, worker)? {
+        tx.commit()?;
+        return Ok(None);
+    }
+    let live_since = live_since(now, timing);
     let jobs: Vec<u64> = {
         let mut stmt = tx.prepare(
             "SELECT j.id FROM jobs j
@@ -360,7 +392,7 @@ pub fn job_spec(conn: &Connection, job: u64) -> Result<JobSpec> {
 pub fn check_token(conn: &Connection, worker: u64, token: TaskToken) -> Result<TaskRow> {
     let task = load_task(conn, token.task_id)?.ok_or_else(|| {
         Error::LeaseGone(format!(
-            "task {} no longer exists (its job was deleted)",
+            "task {} is unknown: it never existed, or its job was deleted",
             token.task_id
         ))
     })?;
@@ -453,14 +485,18 @@ pub fn precheck_upload(
 }
 
 /// Marks `token`'s task done with its (validated, stored) tile. A second upload for a
-/// finished task is a [`Accepted::Duplicate`].
+/// finished task is a [`Accepted::Duplicate`]. A render task may be sampled for a check;
+/// a check task comes with the verdict of comparing its tile (see [`verify`]).
+#[allow(clippy::too_many_arguments)]
 pub fn accept(
     conn: &mut Connection,
     worker: u64,
     token: TaskToken,
     rays: u64,
     render_ms: u64,
+    verdict: Option<&Verdict>,
     now: i64,
+    timing: Timing,
 ) -> Result<Accepted> {
     let tx = conn.transaction()?;
     touch_worker(&tx, worker, now)?;
@@ -483,6 +519,23 @@ pub fn accept(
         "UPDATE frames SET tasks_done = tasks_done + 1 WHERE job_id = ?1 AND frame = ?2",
         params![task.job_id, task.frame],
     )?;
+    match (task.check_of, verdict) {
+        (Some(_), Some(verdict)) => verify::record(&tx, &task, worker, verdict, now)?,
+        (Some(_), None) => {
+            return Err(Error::Internal(format!(
+                "check task {} accepted without a verdict",
+                task.id
+            )))
+        }
+        (None, _) => verify::sample(
+            &tx,
+            &task,
+            worker,
+            timing.verify_fraction,
+            live_since(now, timing),
+            now,
+        )?,
+    }
     let frame_complete: bool = tx.query_row(
         "SELECT tasks_done = tasks_total FROM frames WHERE job_id = ?1 AND frame = ?2",
         params![task.job_id, task.frame],
@@ -490,7 +543,7 @@ pub fn accept(
     )?;
     let pass_left: i64 = tx.query_row(
         "SELECT count(*) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND pass = ?3
-           AND state != 'done'",
+           AND state != 'done' AND check_of IS NULL",
         params![task.job_id, task.frame, task.pass],
         |r| r.get(0),
     )?;
@@ -698,7 +751,7 @@ pub fn leave(conn: &mut Connection, worker: u64, now: i64) -> Result<Vec<u64>> {
     Ok(jobs)
 }
 
-fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {
+pub(crate) fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {
     set_state(tx, task, TaskEvent::Revoke)?;
     tx.execute(
         "UPDATE tasks SET worker_id = NULL, deadline_ms = NULL WHERE id = ?1",
@@ -861,13 +914,24 @@ pub fn unassembled_frames(conn: &Connection) -> Result<Vec<(u64, i32)>> {
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 
-/// The done tasks of one frame (for assembly), by tile then pass.
+/// The done render tasks of one frame (for assembly), by tile then pass.
 pub fn done_tasks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<TaskRow>> {
     let mut stmt = conn.prepare(&format!(
         "SELECT {TASK_COLUMNS} FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
+           AND check_of IS NULL
          ORDER BY tile, pass"
     ))?;
     let rows = stmt.query_map(params![job, frame], task_from_row)?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// The ids of one frame's done check tasks (whose tiles go once the frame is assembled).
+pub fn done_checks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<u64>> {
+    let mut stmt = conn.prepare(
+        "SELECT id FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
+           AND check_of IS NOT NULL",
+    )?;
+    let rows = stmt.query_map(params![job, frame], |r| r.get(0))?;
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 

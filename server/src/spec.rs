@@ -298,8 +298,23 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
         .filter(|l| spec.layers.contains(l))
         .collect();
 
-    let tiles = TileRect::new(0, 0, spec.width, spec.height).tiles(tile_size);
+    // Counted before anything is built: a 16384² frame in 8-pixel tiles is 4M tiles.
+    let tile_count = spec.width.div_ceil(tile_size) as u64 * spec.height.div_ceil(tile_size) as u64;
     let n = spec.sample_passes as u64;
+    let task_count = frames.count() * tile_count * n;
+    if task_count > max_tasks {
+        return bad(
+            "tile_size",
+            format!(
+                "{} frames × {tile_count} tiles × {n} sample passes = {task_count} tasks, over \
+                 this server's limit of {max_tasks}; use a larger tile_size, fewer \
+                 sample_passes or fewer frames",
+                frames.count(),
+            ),
+        );
+    }
+
+    let tiles = TileRect::new(0, 0, spec.width, spec.height).tiles(tile_size);
     let passes = (0..n)
         .map(|p| {
             let at = |k: u64| (spec.spp as u64 * k / n) as u32;
@@ -312,19 +327,7 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
         passes,
         spec,
     };
-    if plan.task_count() > max_tasks {
-        return bad(
-            "tile_size",
-            format!(
-                "{} frames × {} tiles × {} sample passes = {} tasks, over this server's limit of \
-                 {max_tasks}; use a larger tile_size, fewer sample_passes or fewer frames",
-                plan.frames.len(),
-                plan.tiles.len(),
-                plan.passes.len(),
-                plan.task_count()
-            ),
-        );
-    }
+    debug_assert_eq!(plan.task_count(), task_count);
     Ok(plan)
 }
 
@@ -575,6 +578,71 @@ mod tests {
         let p = plan(s, &scene(), 1_000_000).unwrap();
         assert_eq!(p.tiles.len(), 16);
         assert_eq!(p.spec.layers, vec![OutputLayer::Beauty, OutputLayer::Depth]);
+    }
+
+    /// Bytes allocated by the current thread, for the test below: a wrapper around the
+    /// system allocator that counts in a thread-local, so tests running beside it on other
+    /// threads do not disturb the count.
+    mod counting {
+        use std::alloc::{GlobalAlloc, Layout, System};
+        use std::cell::Cell;
+
+        thread_local! {
+            static BYTES: Cell<u64> = const { Cell::new(0) };
+        }
+
+        fn add(n: usize) {
+            let _ = BYTES.try_with(|b| b.set(b.get() + n as u64));
+        }
+
+        /// Bytes this thread has allocated so far.
+        pub fn allocated() -> u64 {
+            BYTES.with(|b| b.get())
+        }
+
+        struct Counting;
+
+        unsafe impl GlobalAlloc for Counting {
+            unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+                add(layout.size());
+                System.alloc(layout)
+            }
+            unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+                System.dealloc(ptr, layout)
+            }
+            unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+                add(new_size);
+                System.realloc(ptr, layout, new_size)
+            }
+        }
+
+        #[global_allocator]
+        static COUNTING: Counting = Counting;
+    }
+
+    /// Found by `fuzz/job_spec`: a 16384² frame in 8-pixel tiles (4M tasks) built its 64 MB
+    /// of tiles before the task limit refused it.
+    #[test]
+    fn task_limit_refuses_before_building_tiles() {
+        let mut s = spec();
+        s.width = MAX_RESOLUTION;
+        s.height = MAX_RESOLUTION;
+        s.tile_size = Some(MIN_TILE_SIZE);
+        s.frames = Some(FrameRange {
+            start: 0,
+            end: 0,
+            step: 1,
+        });
+        let scene = scene();
+        let before = counting::allocated();
+        let err = plan(s, &scene, DEFAULT_MAX_TASKS_PER_JOB).unwrap_err();
+        let allocated = counting::allocated() - before;
+        assert_eq!(err.field, "tile_size");
+        assert!(err.message.contains("4194304 tasks"), "{}", err.message);
+        assert!(
+            allocated < 64 << 10,
+            "{allocated} bytes allocated to refuse"
+        );
     }
 
     #[test]

@@ -38,7 +38,11 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
     let mut last_done_ms = None::<i64>;
     {
         let mut stmt = conn.prepare(
-            "SELECT state, count(*), sum(w * h * (sample_end - sample_start)), max(done_ms)
+            // Check tasks count as tasks but not as samples: they repeat samples.
+            "SELECT state, count(*),
+                    coalesce(sum(CASE WHEN check_of IS NULL
+                                      THEN w * h * (sample_end - sample_start) END), 0),
+                    max(done_ms)
              FROM tasks WHERE job_id = ?1 GROUP BY state",
         )?;
         let rows = stmt.query_map([job], |r| {
@@ -208,7 +212,7 @@ pub fn frame_status(conn: &Connection, job: u64, frame: i32) -> Result<FrameStat
 
 const WORKER_QUERY: &str =
     "SELECT w.id, w.name, w.threads, w.version, w.last_seen_ms, w.tasks_done,
-        t.id, t.attempt, t.job_id, t.frame, w.left_ms
+        t.id, t.attempt, t.job_id, t.frame, w.left_ms, w.suspect_ms, w.quarantine_reason
      FROM workers w
      LEFT JOIN tasks t ON t.id = (SELECT id FROM tasks WHERE worker_id = w.id AND state = 'leased'
                                   ORDER BY leased_ms DESC LIMIT 1)";
@@ -233,6 +237,8 @@ fn worker_from_row(r: &rusqlite::Row, now: i64, lease_ms: i64) -> rusqlite::Resu
         },
         current_job: r.get(8)?,
         current_frame: r.get(9)?,
+        suspect: r.get::<_, Option<i64>>(11)?.is_some(),
+        quarantined: r.get(12)?,
     })
 }
 

@@ -110,10 +110,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
         fs::rename(&tmp, path)?;
         File::open(dir)?.sync_all()
     })();
-    if result.is_err() {
+    result.map_err(|e| {
         let _ = fs::remove_file(&tmp);
-    }
-    result
+        // Name the file, keeping the kind (a full disk must still read as one).
+        io::Error::new(e.kind(), format!("writing {}: {e}", path.display()))
+    })
 }
 
 #[cfg(test)]

@@ -5,7 +5,9 @@
 //! The tests run the `tessera` binary that `cargo test --workspace` builds for the `cli`
 //! package's own tests (`target/<profile>/tessera`, beside this test binary's `deps`
 //! folder). Every process logs to a file in the farm's folder; a failed assertion prints
-//! those logs.
+//! those logs. `http` speaks raw HTTP/1.1 for tests that act as a misbehaving worker.
+
+pub mod http;
 
 use std::fs;
 use std::net::TcpListener;
@@ -156,11 +158,18 @@ pub struct Process {
 impl Process {
     /// Starts `tessera args` in `dir`, logging to `dir/<name>.log`.
     pub fn start(name: &str, args: &[&str], dir: &Path) -> Process {
+        let mut command = Command::new(tessera_bin());
+        command.args(args);
+        Process::spawn(name, command, dir)
+    }
+
+    /// Starts `command` (which must end up exec'ing `tessera`, so that the pid is the
+    /// farm process's) in `dir`, logging to `dir/<name>.log`.
+    pub fn spawn(name: &str, mut command: Command, dir: &Path) -> Process {
         let log = dir.join(format!("{name}.log"));
         let out = fs::File::create(&log).expect("creating a log file");
         let err = out.try_clone().unwrap();
-        let child = Command::new(tessera_bin())
-            .args(args)
+        let child = command
             .current_dir(dir)
             .env("RUST_LOG", "info")
             .stdin(Stdio::null())
@@ -271,6 +280,9 @@ pub struct Farm {
     /// The client token the farm's client commands send, when the server wants one.
     pub client_token: Option<String>,
     servers_started: usize,
+    /// The server's data folder lies on a small disk of its own (a tmpfs in its mount
+    /// namespace): see [`Farm::start_server_on_small_disk`].
+    small_disk: bool,
 }
 
 impl Default for Farm {
@@ -289,6 +301,7 @@ impl Farm {
             workers: vec![],
             client_token: None,
             servers_started: 0,
+            small_disk: false,
         }
     }
 
@@ -325,14 +338,114 @@ impl Farm {
         ];
         args.extend(extra);
         self.server = Some(Process::start(&name, &args, self.path()));
+        self.small_disk = false;
+        self.wait_for_server();
+    }
+
+    fn wait_for_server(&mut self) {
         let status = self.client_args(&["status"]);
         let status: Vec<&str> = status.iter().map(String::as_str).collect();
+        let dir = self.dir.path().to_owned();
+        let logs = self.logs_fn();
+        let server = self.server.as_mut().expect("a server was started");
         wait_until(
             "the server to answer",
             Duration::from_secs(30),
-            || tessera(&status, self.path()).status.success(),
-            || self.logs(),
+            || {
+                assert!(server.running(), "the server exited:\n{}", logs());
+                tessera(&status, &dir).status.success()
+            },
+            &logs,
         );
+    }
+
+    /// [`Farm::start_server`] with the data folder on a tmpfs of `size_bytes` that only
+    /// the server sees (a mount namespace of its own, through `unshare`), so a test can
+    /// fill its disk; the test reaches the folder at [`Farm::data_dir`]. The tmpfs goes
+    /// away with the server. `Err` says why this machine cannot arrange it (no `unshare`,
+    /// namespaces or mounts not permitted): the caller skips, saying so.
+    pub fn start_server_on_small_disk(
+        &mut self,
+        lease_seconds: u64,
+        size_bytes: u64,
+    ) -> Result<(), String> {
+        let data = self.path().join("data");
+        fs::create_dir_all(&data).expect("creating the data mount point");
+        let data = data.to_str().expect("a UTF-8 temp path").to_owned();
+        // A user namespace lets a non-root user mount a tmpfs; as root it may be refused
+        // (seccomp in some containers) where a plain mount namespace works.
+        let mut refusals = Vec::new();
+        let mut unshare = None;
+        for flags in [&["--user", "--map-root-user", "--mount"][..], &["--mount"]] {
+            let probe = Command::new("unshare")
+                .args(flags)
+                .args(["sh", "-c", MOUNT_TMPFS, "sh", "1m", &data, "true"])
+                .output();
+            match probe {
+                Ok(o) if o.status.success() => {
+                    unshare = Some(flags);
+                    break;
+                }
+                Ok(o) => refusals.push(format!(
+                    "`unshare {} sh -c 'mount -t tmpfs ...'` failed ({}): {}",
+                    flags.join(" "),
+                    o.status,
+                    String::from_utf8_lossy(&o.stderr).trim()
+                )),
+                Err(e) => {
+                    refusals.push(format!("running `unshare`: {e}"));
+                    break;
+                }
+            }
+        }
+        let Some(flags) = unshare else {
+            return Err(refusals.join("; "));
+        };
+        self.servers_started += 1;
+        let (listen, lease) = (
+            format!("127.0.0.1:{}", self.port),
+            lease_seconds.to_string(),
+        );
+        let mut command = Command::new("unshare");
+        command
+            .args(flags)
+            .args([
+                "sh",
+                "-c",
+                MOUNT_TMPFS,
+                "sh",
+                &size_bytes.to_string(),
+                &data,
+            ])
+            .arg(tessera_bin())
+            .args([
+                "server",
+                "--listen",
+                &listen,
+                "--data",
+                &data,
+                "--lease-seconds",
+                &lease,
+            ]);
+        let name = format!("server-{}", self.servers_started);
+        self.server = Some(Process::spawn(&name, command, self.path()));
+        self.small_disk = true;
+        self.wait_for_server();
+        Ok(())
+    }
+
+    /// The server's data folder as this process sees it: `data/` in the farm's folder,
+    /// or, on a small disk, the same path inside the server's mount namespace (through
+    /// `/proc/<pid>/root`, while the server runs).
+    pub fn data_dir(&self) -> PathBuf {
+        let data = self.path().join("data");
+        match (&self.server, self.small_disk) {
+            (Some(server), true) => {
+                let inside = data.strip_prefix("/").expect("an absolute temp path");
+                Path::new(&format!("/proc/{}/root", server.pid())).join(inside)
+            }
+            _ => data,
+        }
     }
 
     /// `args` with `--server` and, when set, `--token`.
@@ -437,30 +550,19 @@ impl Farm {
 
     /// Every log of the farm's processes, for failure messages.
     pub fn logs(&self) -> String {
-        let mut out = String::new();
-        let mut entries: Vec<_> = fs::read_dir(self.path())
-            .map(|d| d.flatten().map(|e| e.path()).collect())
-            .unwrap_or_default();
-        entries.sort();
-        for path in entries {
-            if path.extension().is_some_and(|e| e == "log") {
-                let text = fs::read_to_string(&path).unwrap_or_default();
-                let tail: Vec<&str> = text.lines().rev().take(40).collect();
-                out += &format!("--- {} (last 40 lines)\n", path.display());
-                for line in tail.into_iter().rev() {
-                    out += line;
-                    out.push('\n');
-                }
-            }
-        }
-        out
+        farm_logs(self.path())
+    }
+
+    /// [`Farm::logs`] as a closure that does not borrow the farm.
+    fn logs_fn(&self) -> impl Fn() -> String {
+        let dir = self.path().to_owned();
+        move || farm_logs(&dir)
     }
 
     /// The frame the server assembled for `job`, read from its data folder.
     pub fn server_frame(&self, job: u64, frame: i32) -> Layers {
         let path = self
-            .path()
-            .join("data")
+            .data_dir()
             .join("jobs")
             .join(job.to_string())
             .join(proto::job::frame_file_name(frame, "exr"));
@@ -478,6 +580,32 @@ impl Farm {
         path
     }
 }
+
+/// The last 40 lines of every `*.log` in `dir` (a farm's folder).
+fn farm_logs(dir: &Path) -> String {
+    let mut out = String::new();
+    let mut entries: Vec<_> = fs::read_dir(dir)
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    entries.sort();
+    for path in entries {
+        if path.extension().is_some_and(|e| e == "log") {
+            let text = fs::read_to_string(&path).unwrap_or_default();
+            let tail: Vec<&str> = text.lines().rev().take(40).collect();
+            out += &format!("--- {} (last 40 lines)\n", path.display());
+            for line in tail.into_iter().rev() {
+                out += line;
+                out.push('\n');
+            }
+        }
+    }
+    out
+}
+
+/// The shell step that mounts a tmpfs of size `$1` on `$2`, then execs the rest
+/// (`unshare` itself execs without forking, so the pid stays the farm process's).
+const MOUNT_TMPFS: &str =
+    r#"mount -t tmpfs -o size="$1" tessera-data "$2" && shift 2 && exec "$@""#;
 
 /// The first number after the word "job" in `text` (how `tessera submit` names the job).
 pub fn job_id_in(text: &str) -> Option<u64> {

@@ -225,3 +225,116 @@ fn tessera_demo_runs_a_farm_and_leaves_frames_and_nothing_running() {
         assert!(log.contains("left"), "worker {k} left the farm:\n{log}");
     }
 }
+
+#[test]
+fn bench_farm_loses_nothing_and_does_nothing_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("bench.json");
+    let out = tessera_ok(
+        &[
+            "bench",
+            "farm",
+            "--workers",
+            "20",
+            "--tasks",
+            "400",
+            "--timeout-seconds",
+            "120",
+            "--json",
+            json.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert!(out.contains("tasks per second"), "the summary table: {out}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let n = |key: &str| {
+        report[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{key}: {report}"))
+    };
+    assert_eq!((n("tasks"), n("workers")), (400.0, 20.0), "{report}");
+    assert_eq!(n("accepted"), n("tasks"), "{report}");
+    assert_eq!((n("duplicates"), n("lost")), (0.0, 0.0), "{report}");
+    assert_eq!(n("frames_done"), n("frames"), "{report}");
+    assert!(n("tasks_per_second") > 0.0, "{report}");
+    let lease = &report["lease_latency_ms"];
+    let (p50, p99) = (
+        lease["p50"].as_f64().unwrap(),
+        lease["p99"].as_f64().unwrap(),
+    );
+    assert!(p99 >= p50 && p50 > 0.0, "{report}");
+    assert_eq!(lease["count"].as_u64(), Some(400), "{report}");
+    let peak = report["server_memory"]["peak_rss_mib"].as_f64().unwrap();
+    assert!(peak > 0.0, "{report}");
+    assert_eq!(report["passed"].as_bool(), Some(true), "{report}");
+}
+
+#[test]
+fn json_logs_name_the_request_and_the_task_on_every_line_about_them() {
+    let mut farm = Farm::new();
+    farm.start_server_with(60, &["--log-format", "json"]);
+    let scene = farm.demo_scene();
+    // One task (one frame, one tile), which the worker fails at once: no render, and a
+    // line about the task on both sides.
+    let mut args = vec![scene.to_str().unwrap(), "--frames", "1", "--tile", "32"];
+    args.extend(settings("1"));
+    let job = farm.submit(&args);
+    let fault = format!("fail-job={job}");
+    let w = farm.start_worker_with(
+        "json",
+        1,
+        &["--log-format", "json", "--inject-fault", &fault],
+    );
+    let server_log = || farm.server.as_ref().unwrap().log();
+    tests::wait_until(
+        "the server to log the failed task",
+        Duration::from_secs(60),
+        || server_log().contains("failed task"),
+        || farm.logs(),
+    );
+    let status = farm.workers[w].terminate(Duration::from_secs(20));
+    assert!(status.success(), "{status}");
+
+    // Every line is a JSON object; `span(line, name)` is one of its enclosing spans.
+    let lines = |log: String| -> Vec<serde_json::Value> {
+        log.lines()
+            .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+            .collect()
+    };
+    let span = |line: &serde_json::Value, name: &str| -> serde_json::Value {
+        let spans = line["spans"].as_array().cloned().unwrap_or_default();
+        let found = spans.into_iter().find(|s| s["name"] == name);
+        found.unwrap_or_else(|| panic!("no `{name}` span in {line}"))
+    };
+    let find = |lines: &[serde_json::Value], text: &str| -> serde_json::Value {
+        let found = lines
+            .iter()
+            .find(|l| l["message"].as_str().is_some_and(|m| m.contains(text)));
+        found
+            .cloned()
+            .unwrap_or_else(|| panic!("no line with `{text}` in {lines:#?}"))
+    };
+
+    let worker = lines(farm.workers[w].log());
+    let lease = span(&find(&worker, "lease taken"), "task");
+    assert_eq!(lease["job"].as_u64(), Some(job), "{lease}");
+    assert_eq!(lease["attempt"].as_u64(), Some(1), "{lease}");
+    let task = lease["id"].as_u64().expect("a task id");
+    let failed = span(&find(&worker, "injected fault"), "task");
+    assert_eq!(failed["id"].as_u64(), Some(task), "{failed}");
+
+    let server = lines(server_log());
+    let registered = span(&find(&server, "registered"), "request");
+    let failure = find(&server, "failed task");
+    let request = span(&failure, "request");
+    assert_eq!(
+        span(&failure, "task")["id"].as_u64(),
+        Some(task),
+        "{failure}"
+    );
+    let ids = [&registered, &request].map(|s| s["request_id"].as_str().unwrap_or_default());
+    // UUIDs, one per request.
+    assert!(ids.iter().all(|id| id.len() == 36), "{ids:?}");
+    assert_ne!(ids[0], ids[1]);
+}

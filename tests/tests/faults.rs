@@ -6,6 +6,11 @@ use std::time::Duration;
 use proto::JobState;
 use tests::{render_directly, settings, Farm};
 
+#[path = "faults/disk.rs"]
+mod disk;
+#[path = "faults/verify.rs"]
+mod verify;
+
 /// The shortest lease `tessera server` allows, so an expiry comes within seconds.
 const LEASE_SECONDS: u64 = 5;
 

@@ -107,10 +107,11 @@ pub fn load_slice(bytes: &[u8], base_dir: Option<&Path>) -> Result<Scene, SceneE
     let skipped = animation::strip_unsupported_channels(&mut raw);
     let mut root: ::gltf::json::Root = if skipped.is_empty() {
         ::gltf::json::deserialize::from_slice(container.json)
+            .map_err(|e| typed_json_error(e, || root_at_path_slice(container.json)))?
     } else {
         ::gltf::json::deserialize::from_value(raw.clone())
-    }
-    .map_err(json_error)?;
+            .map_err(|e| typed_json_error(e, || root_at_path_value(raw.clone())))?
+    };
 
     // Required extensions are checked against what we implement, not what the `gltf`
     // crate parses: it knows some we do not render and lacks some we do.
@@ -146,6 +147,34 @@ pub fn load_slice(bytes: &[u8], base_dir: Option<&Path>) -> Result<Scene, SceneE
     })?;
     scene.warnings.extend(skipped);
     Ok(scene)
+}
+
+/// A value of the wrong type (`"count": "three"`, `nodes` as an object) as serde reports
+/// it has only a line and column, useless in a GLB's one-line JSON: parse again, tracking
+/// the path (only on failure, so loading a good file costs nothing more), and name it.
+fn typed_json_error(
+    e: ::gltf::json::Error,
+    retry: impl FnOnce() -> Option<serde_path_to_error::Path>,
+) -> SceneError {
+    match retry() {
+        Some(path) if path.iter().next().is_some() => SceneError::Json(format!("{path}: {e}")),
+        _ => SceneError::Json(e.to_string()),
+    }
+}
+
+/// Where the typed parse of `json` fails, if it does.
+fn root_at_path_slice(json: &[u8]) -> Option<serde_path_to_error::Path> {
+    let mut de = serde_json::Deserializer::from_slice(json);
+    serde_path_to_error::deserialize::<_, ::gltf::json::Root>(&mut de)
+        .err()
+        .map(|e| e.path().clone())
+}
+
+/// Where the typed parse of `raw` fails, if it does.
+fn root_at_path_value(raw: ::gltf::json::Value) -> Option<serde_path_to_error::Path> {
+    serde_path_to_error::deserialize::<_, ::gltf::json::Root>(raw)
+        .err()
+        .map(|e| e.path().clone())
 }
 
 /// `gltf-json` 1.4's validation indexes `accessors` with a primitive's POSITION before

@@ -488,6 +488,22 @@ fn a_channel_on_a_matrix_node_is_an_error() {
     );
 }
 
+/// Found by `fuzz/scene_loader`: the `gltf` crate does not check a channel's target node
+/// and panicked reading one out of range.
+#[test]
+fn a_channel_on_a_missing_node_is_an_error() {
+    let mut doc = Doc::default();
+    let anim = translation_animation(&mut doc, &[0.0, 1.0]).replace(r#""node":0"#, r#""node":5"#);
+    let json = one_node(&mut doc, r#"{"mesh":0}"#, &anim);
+    let err = load(&json).unwrap_err();
+    assert_eq!(err.element(), Some(Element::Animation(0)), "{err}");
+    assert!(
+        err.to_string()
+            .contains("channel 0 targets node 5, out of range for 1 nodes"),
+        "{err}"
+    );
+}
+
 #[test]
 fn decreasing_key_times_are_an_error() {
     let mut doc = Doc::default();

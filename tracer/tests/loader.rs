@@ -852,6 +852,31 @@ fn not_gltf_at_all() {
     );
 }
 
+#[test]
+fn json_of_the_wrong_type_names_its_path() {
+    // A one-line document (as in a GLB): line and column alone do not say where.
+    let count = r#"{"asset":{"version":"2.0"},"buffers":[{"byteLength":12}],"accessors":[{"componentType":5126,"type":"VEC3","count":"three"}]}"#;
+    assert_eq!(
+        message(load(count)),
+        "malformed glTF JSON: accessors[0].count: invalid type: string \"three\", \
+         expected u64 at line 1 column 121"
+    );
+    let nodes = r#"{"asset":{"version":"2.0"},"nodes":{"0":{"mesh":0}}}"#;
+    let m = message(load(nodes));
+    assert!(
+        m.starts_with("malformed glTF JSON: nodes: invalid type: map, expected a sequence"),
+        "{m}"
+    );
+    // The same through the path taken when unsupported animation channels are stripped.
+    let stripped = r#"{"asset":{"version":"2.0"},"nodes":{"0":{}},"animations":[{"samplers":[],
+        "channels":[{"sampler":0,"target":{"path":"pointer"}}]}]}"#;
+    let m = message(load(stripped));
+    assert!(
+        m.starts_with("malformed glTF JSON: nodes: invalid type: map"),
+        "{m}"
+    );
+}
+
 /// A small valid GLB: a quad with its data in the BIN chunk.
 fn quad_glb() -> Vec<u8> {
     let mut doc = Doc::default();

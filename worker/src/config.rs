@@ -28,6 +28,9 @@ pub struct WorkerConfig {
 pub enum Fault {
     /// Report every task of this job as failed, without rendering it.
     FailJob(u64),
+    /// Render every tile, then change one pixel a little before sending it: a machine
+    /// with bad memory or a broken build, which only a second render can catch.
+    Perturb,
 }
 
 impl std::str::FromStr for Fault {
@@ -39,7 +42,10 @@ impl std::str::FromStr for Fault {
                 .parse()
                 .map(Fault::FailJob)
                 .map_err(|_| format!("fail-job takes a job id, not `{job}`")),
-            _ => Err(format!("unknown fault `{s}` (known: fail-job=JOB)")),
+            None if s == "perturb" => Ok(Fault::Perturb),
+            _ => Err(format!(
+                "unknown fault `{s}` (known: fail-job=JOB, perturb)"
+            )),
         }
     }
 }
@@ -74,6 +80,7 @@ mod tests {
     #[test]
     fn faults_parse_or_say_what_is_known() {
         assert_eq!("fail-job=7".parse(), Ok(Fault::FailJob(7)));
+        assert_eq!("perturb".parse(), Ok(Fault::Perturb));
         assert!("fail-job=x"
             .parse::<Fault>()
             .unwrap_err()

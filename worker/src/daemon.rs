@@ -32,6 +32,7 @@ use anyhow::Context;
 use proto::{Lease, TaskToken, WorkerRegistered, WorkerRegistration};
 use tracer::render::{prepare_frame, PreparedFrame};
 use tracer::scene::Scene;
+use tracing::Instrument;
 
 use crate::api::{
     Api, ApiError, FailureAnswer, HeartbeatAnswer, InFlight, LeaseAnswer, UploadAnswer,
@@ -172,7 +173,16 @@ impl Daemon {
                     }
                     Ok(())
                 }
-                Ok(Some(LeaseAnswer::Assigned(lease))) => self.work(&reg, *lease).await,
+                Ok(Some(LeaseAnswer::Assigned(lease))) => {
+                    // Every line logged about this lease names it.
+                    let span = tracing::info_span!(
+                        "task",
+                        id = lease.token.task_id,
+                        job = lease.job_id,
+                        attempt = lease.token.attempt
+                    );
+                    self.work(&reg, *lease).instrument(span).await
+                }
                 Err(e) => Err(e),
             };
             match result {
@@ -283,12 +293,15 @@ impl Daemon {
             lease.token.attempt
         );
         let cancel = Arc::new(AtomicBool::new(false));
-        let mut heartbeat = tokio::spawn(heartbeat_until_gone(
-            self.api.clone(),
-            reg.worker_id,
-            lease.token,
-            Duration::from_secs(reg.heartbeat_seconds.max(1)),
-        ));
+        let mut heartbeat = tokio::spawn(
+            heartbeat_until_gone(
+                self.api.clone(),
+                reg.worker_id,
+                lease.token,
+                Duration::from_secs(reg.heartbeat_seconds.max(1)),
+            )
+            .in_current_span(),
+        );
         let stop = self.stop.clone();
         // The render runs on the rayon pool; when this select drops it, the pool's threads
         // stop at their next pixel because `cancel` is set below.
@@ -351,8 +364,13 @@ impl Daemon {
         }
         let frame = self.frame(lease).await?;
         let (pool, job, cancel) = (self.pool.clone(), lease.clone(), cancel.clone());
+        let perturb = self.fault == Some(Fault::Perturb);
         let rendered = tokio::task::spawn_blocking(move || {
-            let (tile, ms) = pool.install(|| render_lease(&frame, &job, &cancel))?;
+            let (mut tile, ms) = pool.install(|| render_lease(&frame, &job, &cancel))?;
+            if perturb {
+                // One pixel's red a thousandth too bright, after averaging.
+                tile.beauty[0].x += 1e-3 * tile.samples[0].max(1) as f32;
+            }
             Some(encode_tile(&job, &tile, ms))
         })
         .await;

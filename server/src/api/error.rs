@@ -9,7 +9,7 @@ use axum::Json;
 use proto::ErrorBody;
 use serde::de::DeserializeOwned;
 
-use crate::error::Error;
+use crate::error::{Error, StorageProblem};
 
 impl Error {
     /// The HTTP status and the stable kind name.
@@ -23,6 +23,14 @@ impl Error {
             Error::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too_large"),
             Error::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
             Error::LeaseGone(_) => (StatusCode::CONFLICT, "lease_gone"),
+            Error::Storage {
+                problem: StorageProblem::Full,
+                ..
+            } => (StatusCode::INSUFFICIENT_STORAGE, "storage_full"),
+            Error::Storage {
+                problem: StorageProblem::ReadOnly,
+                ..
+            } => (StatusCode::SERVICE_UNAVAILABLE, "storage_read_only"),
             Error::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal"),
         }
     }
@@ -38,6 +46,17 @@ impl Error {
                 "the server could not complete the request; its log says why".to_string(),
                 None,
             ),
+            // The OS error names server paths: the log has it, the client needs only this.
+            Error::Storage { problem, .. } => {
+                let fix = match problem {
+                    StorageProblem::Full => "once space is freed",
+                    StorageProblem::ReadOnly => "once it is writable again",
+                };
+                (
+                    format!("{problem}: nothing was stored; try again {fix}"),
+                    None,
+                )
+            }
             other => (other.to_string(), None),
         };
         ErrorBody {
@@ -51,8 +70,10 @@ impl Error {
 impl IntoResponse for Error {
     fn into_response(self) -> Response {
         let (status, _) = self.status();
-        if let Error::Internal(detail) = &self {
-            tracing::error!("internal error: {detail}");
+        match &self {
+            Error::Internal(detail) => tracing::error!("internal error: {detail}"),
+            Error::Storage { .. } => tracing::error!("{self}"),
+            _ => {}
         }
         (status, Json(self.body())).into_response()
     }
@@ -130,23 +151,91 @@ impl<S: Send + Sync, T: DeserializeOwned + Send> FromRequestParts<S> for PathPar
     }
 }
 
-/// Reads a whole raw body of at most `limit` bytes; `what` names it in the error.
+/// Reads a whole raw body of at most `limit` bytes; `what` names it in the error: over
+/// the limit (413), cut short by a client that hung up mid-body, or otherwise unreadable.
 pub async fn read_body(
     body: axum::body::Body,
     limit: usize,
     what: &str,
 ) -> Result<axum::body::Bytes, Error> {
     axum::body::to_bytes(body, limit).await.map_err(|e| {
-        let too_large = std::error::Error::source(&e)
-            .map(|s| s.to_string().contains("length limit"))
-            .unwrap_or(false)
-            || e.to_string().contains("length limit");
-        if too_large {
+        let text = error_chain(&e);
+        if text.contains("length limit") {
             Error::TooLarge(format!(
                 "the {what} is over this server's limit of {limit} bytes"
             ))
+        } else if ends_early(&e) {
+            Error::BadRequest(format!(
+                "the {what} was cut short: the connection ended before the body's \
+                 Content-Length was reached ({text}); send it again"
+            ))
         } else {
-            Error::BadRequest(format!("reading the {what}: {e}"))
+            Error::BadRequest(format!("reading the {what}: {text}"))
         }
     })
+}
+
+/// `e` and its sources, each once (axum's error repeats hyper's): "error reading a body
+/// from connection: end of file before message length reached".
+fn error_chain(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let mut next = Some(e);
+    while let Some(err) = next {
+        let text = err.to_string();
+        if parts.last() != Some(&text) {
+            parts.push(text);
+        }
+        next = err.source();
+    }
+    parts.join(": ")
+}
+
+/// Whether the body ended before its announced length: hyper reports that as an
+/// `UnexpectedEof` I/O error somewhere down the chain.
+fn ends_early(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut next = Some(e);
+    while let Some(err) = next {
+        if err
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::UnexpectedEof)
+        {
+            return true;
+        }
+        next = err.source();
+    }
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use axum::body::{Body, Bytes};
+
+    fn message(e: Error) -> (StatusCode, String) {
+        (e.status().0, e.body().message)
+    }
+
+    #[tokio::test]
+    async fn a_body_cut_short_or_over_the_limit_says_so() {
+        // What hyper yields when the client hangs up before its Content-Length.
+        let cut = Body::from_stream(tokio_stream::iter([
+            Ok(Bytes::from_static(b"half a tile")),
+            Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                "end of file before message length reached",
+            )),
+        ]));
+        let (status, text) = message(read_body(cut, 1000, "tile").await.unwrap_err());
+        assert_eq!(status, StatusCode::BAD_REQUEST);
+        assert!(
+            text.starts_with("the tile was cut short") && text.contains("end of file"),
+            "{text}"
+        );
+        let big = Body::from(vec![0u8; 11]);
+        let (status, text) = message(read_body(big, 10, "scene").await.unwrap_err());
+        assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE);
+        assert_eq!(text, "the scene is over this server's limit of 10 bytes");
+        let fine = Body::from(vec![1u8; 10]);
+        assert_eq!(read_body(fine, 10, "tile").await.unwrap().len(), 10);
+    }
 }

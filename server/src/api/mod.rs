@@ -7,7 +7,7 @@
 //! | `scenes.rs` | `POST /scenes`, `GET /scenes/{digest}`, `GET /scenes/{digest}/info` |
 //! | `jobs.rs` | `POST/GET /jobs`, `GET/DELETE /jobs/{id}`, `POST /jobs/{id}/{cancel,pause,resume,retry}` |
 //! | `frames.rs` | `GET /jobs/{id}/frames`, `GET /jobs/{id}/frames/{frame}/{exr,png}` |
-//! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat,leave}`, `POST /workers/{id}/tasks/{task}/{result,failure}` |
+//! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat,leave,clear}`, `POST /workers/{id}/tasks/{task}/{result,failure}` |
 //! | `system.rs` | `/healthz`, `/metrics`, `/api/v1/openapi.json` |
 //! | `error.rs` | errors as JSON; extractors that reject with them |
 
@@ -75,6 +75,7 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .routes(routes!(frames::exr))
         .routes(routes!(frames::png))
         .routes(routes!(workers::list))
+        .routes(routes!(workers::clear))
         .routes(routes!(events::events))
         .layer(json_limit)
         .route_layer(guard(Role::Client));

@@ -16,7 +16,7 @@ use super::error::{read_body, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
 use crate::limits::{MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
-use crate::{intake, scheduler, status};
+use crate::{intake, scheduler, status, verify};
 
 /// Registers a worker; the answer carries its id and the timing it must keep.
 #[utoipa::path(
@@ -49,10 +49,15 @@ pub async fn register(
         });
     }
     let now = now_ms();
+    let who = format!(
+        "`{}` ({} threads, version {})",
+        reg.name, reg.threads, reg.version
+    );
     let id = app
         .db
         .run(move |c| scheduler::register_worker(c, &reg.name, reg.threads, &reg.version, now))
         .await?;
+    tracing::info!(worker = id, "worker {id} registered: {who}");
     app.publish_worker(id).await;
     Ok((
         StatusCode::CREATED,
@@ -128,6 +133,11 @@ pub async fn lease(
     responses((status = 200, body = HeartbeatAck), (status = 409, description = "lease gone: stop", body = proto::ErrorBody)),
     security(("worker_token" = []))
 )]
+#[tracing::instrument(
+    name = "task",
+    skip_all,
+    fields(id = hb.token.map(|t| t.task_id), worker = worker)
+)]
 pub async fn heartbeat(
     State(app): State<AppState>,
     PathParams(worker): PathParams<u64>,
@@ -192,9 +202,12 @@ pub async fn leave(
         (status = 409, description = "lease gone: drop the tile", body = proto::ErrorBody),
         (status = 413, body = proto::ErrorBody),
         (status = 422, description = "the tile is refused; the message says why", body = proto::ErrorBody),
+        (status = 503, description = "the data folder is read-only: nothing stored, send it again later", body = proto::ErrorBody),
+        (status = 507, description = "the server's disk is full: nothing stored, send it again later", body = proto::ErrorBody),
     ),
     security(("worker_token" = []))
 )]
+#[tracing::instrument(name = "task", skip_all, fields(id = task, worker = worker))]
 pub async fn result(
     State(app): State<AppState>,
     PathParams((worker, task)): PathParams<(u64, u64)>,
@@ -211,11 +224,12 @@ pub async fn result(
         task_id: task,
         attempt: meta.attempt,
     };
-    let a = app.clone();
-    let received =
-        tokio::task::spawn_blocking(move || intake::receive(&a, worker, token, &meta, &bytes))
-            .await
-            .map_err(|e| Error::Internal(format!("tile intake panicked: {e}")))??;
+    let (a, span) = (app.clone(), tracing::Span::current());
+    let received = tokio::task::spawn_blocking(move || {
+        span.in_scope(|| intake::receive(&a, worker, token, &meta, &bytes))
+    })
+    .await
+    .map_err(|e| Error::Internal(format!("tile intake panicked: {e}")))??;
     if received.accepted {
         app.publish_frame(received.job, received.frame).await;
         app.publish_job(received.job).await;
@@ -238,6 +252,11 @@ pub async fn result(
     responses((status = 200, body = FailureAck), (status = 409, description = "lease gone", body = proto::ErrorBody)),
     security(("worker_token" = []))
 )]
+#[tracing::instrument(
+    name = "task",
+    skip_all,
+    fields(id = task, worker = worker, attempt = report.attempt)
+)]
 pub async fn failure(
     State(app): State<AppState>,
     PathParams((worker, task)): PathParams<(u64, u64)>,
@@ -251,6 +270,7 @@ pub async fn failure(
         }
         message.truncate(cut);
     }
+    tracing::warn!("worker {worker} failed task {task}: {message}");
     let token = TaskToken {
         task_id: task,
         attempt: report.attempt,
@@ -264,4 +284,31 @@ pub async fn failure(
     app.publish_job(job).await;
     app.publish_worker(worker).await;
     Ok(Json(ack))
+}
+
+/// An operator clears a worker that checks found computing wrong pixels (once its machine
+/// is repaired): it is no longer quarantined and gets work again.
+#[utoipa::path(
+    post,
+    path = "/workers/{id}/clear",
+    tag = "workers",
+    params(("id" = u64, Path, description = "worker id")),
+    responses((status = 200, body = proto::WorkerInfo), (status = 404, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn clear(
+    State(app): State<AppState>,
+    PathParams(worker): PathParams<u64>,
+) -> Result<Json<proto::WorkerInfo>> {
+    let (now, lease) = (now_ms(), app.config.lease_ms());
+    let info = app
+        .db
+        .run(move |c| {
+            verify::clear(c, worker, now)?;
+            status::worker(c, worker, now, lease)
+        })
+        .await?;
+    app.work.notify_waiters();
+    app.publish_worker(worker).await;
+    Ok(Json(info))
 }

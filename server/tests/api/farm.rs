@@ -166,6 +166,16 @@ async fn single_pass_frames_equal_the_direct_render_bit_for_bit() {
     );
     let health = c.get(format!("{}/healthz", s.base)).send().await.unwrap();
     assert_eq!(health.status(), StatusCode::OK);
+    // Every answer carries its request's id: a fresh UUID, or the caller's own.
+    let id = |r: &reqwest::Response| r.headers()["x-request-id"].to_str().unwrap().to_string();
+    assert_eq!(id(&health).len(), 36, "{:?}", health.headers());
+    let mine = c
+        .get(format!("{}/healthz", s.base))
+        .header("x-request-id", "trace-me-7")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(id(&mine), "trace-me-7");
 }
 
 #[tokio::test(flavor = "multi_thread")]

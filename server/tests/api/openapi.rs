@@ -50,6 +50,7 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         ("POST", "/api/v1/workers/{id}/lease"),
         ("POST", "/api/v1/workers/{id}/heartbeat"),
         ("POST", "/api/v1/workers/{id}/leave"),
+        ("POST", "/api/v1/workers/{id}/clear"),
         ("POST", "/api/v1/workers/{id}/tasks/{task}/result"),
         ("POST", "/api/v1/workers/{id}/tasks/{task}/failure"),
         ("GET", "/api/v1/events"),

@@ -146,7 +146,9 @@ pub(crate) fn convert_animations(
         };
         let mut channels = Vec::new();
         for (c, ch) in anim.channels().enumerate() {
-            let target_node = ch.target().node().index();
+            // `gltf` 1.4 never validates a channel's target node, and `Target::node` panics
+            // when it is out of range: take the index from the JSON.
+            let target_node = doc.as_json().animations[a].channels[c].target.node.value();
             let Some(node) = nodes.get(target_node) else {
                 return Err(SceneError::at(
                     element,
