@@ -7,17 +7,15 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use proto::{
-    CameraSpec, Heartbeat, JobState, JobStatus, Lease, LeaseRequest, ResultAck, ResultMetadata,
+    Heartbeat, JobState, JobStatus, Lease, LeaseRequest, ResultAck, ResultMetadata,
     WorkerRegistered, WorkerRegistration,
 };
 use sha2::{Digest, Sha256};
 use tests::http::{Answer, Request};
 use tests::{render_directly, settings, tessera, wait_until, Farm};
-use tracer::animation::AnimationChoice;
-use tracer::film::{Layers, SampleRange, TileRect};
-use tracer::motion::Shutter;
+use tracer::film::{Layers, TileRect};
 use tracer::output::{encode_exr_layers, ExrMetadata, ImageLayer};
-use tracer::render::{prepare_frame, render_tile, CameraChoice, FrameOptions, RenderSettings};
+use tracer::render::{prepare_frame, render_tile};
 
 const WORKER_TOKEN: &str = "worker-secret";
 const CLIENT_TOKEN: &str = "client-secret";
@@ -105,11 +103,41 @@ fn bad_tokens_scenes_and_specs_are_refused_and_the_farm_goes_on() {
         ),
         (&["--frames", "5-1"], "frames"),
         (&["--size", "0x10"], "size"),
+        (&["--size", "20000x10"], "1..=16384"),
     ] {
         let mut args = vec!["submit", demo];
         args.extend(flags);
         refused(&farm, &args, Some(CLIENT_TOKEN), field);
     }
+    // What the CLI cannot send, straight to the API: an unknown field (refused, not
+    // ignored), the server's own bound on the size, a scene the server does not have.
+    let refused_raw = |body: String, field: &str, says: &str| {
+        let answer = Request {
+            method: "POST",
+            path: "/api/v1/jobs",
+            headers: vec![
+                ("Authorization".into(), format!("Bearer {CLIENT_TOKEN}")),
+                ("Content-Type".into(), "application/json".into()),
+            ],
+            body: body.as_bytes(),
+        }
+        .send(farm.port);
+        assert_eq!(answer.status, 422, "{}", answer.text());
+        let error = answer.error();
+        assert_eq!(error.field.as_deref(), Some(field), "{error:?}");
+        assert!(error.message.contains(says), "{error:?}");
+    };
+    // The submits above uploaded the scene before their job was refused.
+    let digest: String = Sha256::digest(std::fs::read(demo).unwrap())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    let body = format!(r#"{{"scene":"{digest}","colour":"red"}}"#);
+    refused_raw(body, "colour", "unknown field");
+    let body = format!(r#"{{"scene":"{digest}","width":20000}}"#);
+    refused_raw(body, "width", "16384");
+    let body = format!(r#"{{"scene":"{}"}}"#, "0".repeat(64));
+    refused_raw(body, "scene", "no scene with digest");
 
     // Nothing was created, and the farm renders a good job (a tile larger than the image
     // is one tile per frame) exactly as tessera render does.
@@ -221,41 +249,16 @@ fn metadata(lease: &Lease, exr: &[u8]) -> ResultMetadata {
 
 /// Renders `lease` with the tracer as `tessera worker` does: the resolved tile.
 fn render_lease(scene: &Path, lease: &Lease) -> Layers {
+    use worker::render::{frame_options, sample_range, settings, tile_rect};
     let scene = tracer::loader::load_glb(&std::fs::read(scene).unwrap()).unwrap();
-    let options = FrameOptions {
-        frame: lease.frame,
-        fps: lease.fps,
-        shutter: Shutter {
-            open: lease.shutter[0],
-            close: lease.shutter[1],
-        },
-        motion_steps: lease.motion_steps,
-        animation: match &lease.animation {
-            None => AnimationChoice::All,
-            Some(name) => AnimationChoice::Name(name.clone()),
-        },
-        width: lease.width,
-        height: lease.height,
-        camera: match &lease.camera {
-            CameraSpec::Default => CameraChoice::Default,
-            CameraSpec::Index(i) => CameraChoice::Index(*i as usize),
-            CameraSpec::Name(n) => CameraChoice::Name(n.clone()),
-        },
-        environment: None,
-    };
-    let frame = prepare_frame(Arc::new(scene), &options).unwrap();
-    let settings = RenderSettings {
-        max_depth: lease.max_depth,
-        seed: lease.seed,
-    };
-    let rect = TileRect::new(
-        lease.tile.x,
-        lease.tile.y,
-        lease.tile.width,
-        lease.tile.height,
-    );
-    let samples = SampleRange::new(lease.samples.start, lease.samples.end);
-    render_tile(&frame, &settings, rect, samples).resolve()
+    let frame = prepare_frame(Arc::new(scene), &frame_options(lease)).unwrap();
+    render_tile(
+        &frame,
+        &settings(lease),
+        tile_rect(lease),
+        sample_range(lease),
+    )
+    .resolve()
 }
 
 /// `layers` as the EXR a worker uploads for `lease`, with only the `wanted` layers and
