@@ -65,6 +65,11 @@ fn worker(c: &mut Connection, name: &str, now: i64) -> u64 {
     register_worker(c, name, 4, "test", now).unwrap()
 }
 
+/// The task a leased check repeats (`None` for a render task).
+fn check_of(c: &Connection, lease: &Lease) -> Option<u64> {
+    load_task(c, lease.token.task_id).unwrap().unwrap().check_of
+}
+
 fn state_of(c: &Connection, task: u64) -> TaskState {
     load_task(c, task).unwrap().unwrap().state
 }
@@ -577,10 +582,7 @@ fn quarantine_sends_the_workers_other_tiles_to_checks() {
     crate::verify::sample(&tx, &first, a, 1.0, 0, 2).unwrap();
     tx.commit().unwrap();
     let l = lease(&mut c, b, 3, TIMING).unwrap().unwrap();
-    assert_eq!(
-        load_task(&c, l.token.task_id).unwrap().unwrap().check_of,
-        Some(done[0])
-    );
+    assert_eq!(check_of(&c, &l), Some(done[0]));
     accept(
         &mut c,
         b,
@@ -594,10 +596,7 @@ fn quarantine_sends_the_workers_other_tiles_to_checks() {
     .unwrap();
     let b_check = l.token.task_id;
     let l = lease(&mut c, e, 5, TIMING).unwrap().unwrap();
-    assert_eq!(
-        load_task(&c, l.token.task_id).unwrap().unwrap().check_of,
-        Some(done[0])
-    );
+    assert_eq!(check_of(&c, &l), Some(done[0]));
     accept(
         &mut c,
         e,
