@@ -11,9 +11,8 @@
 //! table and, with `--json`, written as a [`Report`].
 
 use std::collections::HashMap;
-use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Child;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -28,7 +27,7 @@ use tracer::film::TileBuffer;
 use worker::api::{Api, ApiError, LeaseAnswer, UploadAnswer};
 
 use crate::client::Client;
-use crate::demo::{configure_child, terminate};
+use crate::demo::{terminate, tessera_command};
 
 /// The smallest tile the server accepts: the least pixel work per task.
 const TILE: u32 = server::limits::MIN_TILE_SIZE;
@@ -353,10 +352,7 @@ impl ServerProcess {
     /// Starts `tessera server` on a free loopback port (the server picks it: no race with
     /// other programs) and waits for it to log its address.
     fn start(data: &Path, log: &Path, max_tasks: u64) -> anyhow::Result<ServerProcess> {
-        let exe = std::env::current_exe().context("finding the tessera executable")?;
-        let out = File::create(log).with_context(|| format!("creating {}", log.display()))?;
-        let err = out.try_clone()?;
-        let mut cmd = Command::new(&exe);
+        let mut cmd = tessera_command(log)?;
         cmd.arg("server")
             .arg("--listen")
             .arg("127.0.0.1:0")
@@ -365,15 +361,13 @@ impl ServerProcess {
             .arg("--max-tasks-per-job")
             .arg(max_tasks.to_string())
             // The address line must be logged, and nothing per request.
-            .env("RUST_LOG", "info,tower_http=warn")
-            .env("NO_COLOR", "1")
-            .stdin(Stdio::null())
-            .stdout(out)
-            .stderr(err);
-        configure_child(&mut cmd);
-        let child = cmd
-            .spawn()
-            .with_context(|| format!("starting the server ({})", exe.display()))?;
+            .env("RUST_LOG", "info,tower_http=warn");
+        let child = cmd.spawn().with_context(|| {
+            format!(
+                "starting the server ({})",
+                cmd.get_program().to_string_lossy()
+            )
+        })?;
         let mut server = ServerProcess {
             child,
             url: String::new(),

@@ -109,14 +109,11 @@ impl Workers {
         cache: &Path,
         logs: &Path,
     ) -> anyhow::Result<Workers> {
-        let exe = std::env::current_exe().context("finding the tessera executable")?;
         let mut workers = Workers { procs: Vec::new() };
         for k in 1..=n {
             let name = format!("demo-{k}");
             let log = logs.join(format!("worker-{k}.log"));
-            let out = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
-            let err = out.try_clone()?;
-            let mut cmd = Command::new(&exe);
+            let mut cmd = tessera_command(&log)?;
             cmd.arg("worker")
                 .arg("--server")
                 .arg(server)
@@ -125,18 +122,13 @@ impl Workers {
                 .arg("--cache")
                 .arg(cache)
                 .arg("--name")
-                .arg(&name)
-                // Plain text in the log files.
-                .env("NO_COLOR", "1")
-                // The demo's own farm: a deployment's settings file is not for it.
-                .env_remove("TESSERA_CONFIG")
-                .stdin(Stdio::null())
-                .stdout(out)
-                .stderr(err);
-            configure_child(&mut cmd);
-            let child = cmd
-                .spawn()
-                .with_context(|| format!("starting worker {name} ({})", exe.display()))?;
+                .arg(&name);
+            let child = cmd.spawn().with_context(|| {
+                format!(
+                    "starting worker {name} ({})",
+                    cmd.get_program().to_string_lossy()
+                )
+            })?;
             workers.procs.push(WorkerProcess {
                 name,
                 child,
@@ -201,11 +193,33 @@ impl Drop for Workers {
     }
 }
 
+/// A command running this `tessera` executable as a child of the demo or a benchmark: its
+/// output goes to `log` as plain text, it sees none of a deployment's `TESSERA_*` settings
+/// (the caller's own farm is not the deployment's), and it is set up by
+/// [`configure_child`].
+pub(crate) fn tessera_command(log: &Path) -> anyhow::Result<Command> {
+    let exe = std::env::current_exe().context("finding the tessera executable")?;
+    let out = File::create(log).with_context(|| format!("creating {}", log.display()))?;
+    let err = out.try_clone()?;
+    let mut cmd = Command::new(exe);
+    for (name, _) in std::env::vars_os() {
+        if name.to_string_lossy().starts_with("TESSERA_") {
+            cmd.env_remove(name);
+        }
+    }
+    cmd.env("NO_COLOR", "1")
+        .stdin(Stdio::null())
+        .stdout(out)
+        .stderr(err);
+    configure_child(&mut cmd);
+    Ok(cmd)
+}
+
 /// Workers run in their own process group, so a Ctrl-C at the terminal reaches only the
 /// demo, which then stops them in order; on Linux they are also sent SIGTERM when the demo
 /// dies without cleaning up (SIGKILL, say).
 #[cfg(unix)]
-pub(crate) fn configure_child(cmd: &mut Command) {
+fn configure_child(cmd: &mut Command) {
     use std::os::unix::process::CommandExt;
     cmd.process_group(0);
     #[cfg(target_os = "linux")]
@@ -223,7 +237,7 @@ pub(crate) fn configure_child(cmd: &mut Command) {
 }
 
 #[cfg(not(unix))]
-pub(crate) fn configure_child(_cmd: &mut Command) {}
+fn configure_child(_cmd: &mut Command) {}
 
 /// Asks a worker to stop: SIGTERM, so it gives its lease back first.
 #[cfg(unix)]

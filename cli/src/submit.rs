@@ -321,7 +321,6 @@ mod tests {
         SceneInfo {
             digest: "ab".repeat(32),
             size: 1,
-            cameras: vec![],
             animations: vec![
                 AnimationInfo {
                     index: 0,
@@ -338,13 +337,10 @@ mod tests {
             ],
             duration_seconds: 1.0,
             triangles: 12,
-            lights: 0,
             meshes: 1,
             instances: 1,
             materials: 1,
-            textures: 0,
-            features: vec![],
-            warnings: vec![],
+            ..Default::default()
         }
     }
 

@@ -2,8 +2,9 @@
 
 use serde::{Deserialize, Serialize};
 
-/// The answer to a scene upload (and to `GET /scenes/{digest}/info`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// The answer to a scene upload (and to `GET /scenes/{digest}/info`). The default is an
+/// empty scene, for tests to fill in what they need.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct SceneInfo {
     /// Lower-case hex SHA-256 of the GLB bytes: the scene's name on the farm.

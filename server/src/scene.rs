@@ -68,7 +68,6 @@ mod tests {
         let info = SceneInfo {
             digest: "ab".repeat(32),
             size: 100,
-            cameras: vec![],
             animations: vec![AnimationInfo {
                 index: 0,
                 name: Some("Step Scale".into()),
@@ -77,13 +76,10 @@ mod tests {
             }],
             duration_seconds: 1.0 / 0.6,
             triangles: 1,
-            lights: 0,
             meshes: 1,
             instances: 1,
             materials: 1,
-            textures: 0,
-            features: vec![],
-            warnings: vec![],
+            ..Default::default()
         };
         let json = serde_json::to_string(&info).unwrap();
         let back: SceneInfo = serde_json::from_str(&json).unwrap();

@@ -17,17 +17,11 @@ fn scene() -> SceneInfo {
     SceneInfo {
         digest: "a".repeat(64),
         size: 1,
-        cameras: vec![],
-        animations: vec![],
-        duration_seconds: 0.0,
         triangles: 1,
-        lights: 0,
         meshes: 1,
         instances: 1,
         materials: 1,
-        textures: 0,
-        features: vec![],
-        warnings: vec![],
+        ..Default::default()
     }
 }
 

@@ -372,13 +372,10 @@ mod tests {
             }],
             duration_seconds: 2.0,
             triangles: 12,
-            lights: 0,
             meshes: 1,
             instances: 1,
             materials: 1,
-            textures: 0,
-            features: vec![],
-            warnings: vec![],
+            ..Default::default()
         }
     }
 

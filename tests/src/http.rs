@@ -50,6 +50,17 @@ impl Answer {
     }
 }
 
+/// `GET path` without credentials, as a probe or a Prometheus scrape sends it.
+pub fn get(port: u16, path: &str) -> Answer {
+    Request {
+        method: "GET",
+        path,
+        headers: vec![],
+        body: b"",
+    }
+    .send(port)
+}
+
 impl Request<'_> {
     /// Sends the request and reads the answer.
     pub fn send(&self, port: u16) -> Answer {

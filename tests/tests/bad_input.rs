@@ -11,7 +11,7 @@ use proto::{
     WorkerRegistered, WorkerRegistration,
 };
 use sha2::{Digest, Sha256};
-use tests::http::{Answer, Request};
+use tests::http::{self, Answer, Request};
 use tests::{render_directly, settings, tessera, wait_until, Farm};
 use tracer::film::{Layers, TileRect};
 use tracer::output::{encode_exr_layers, ExrMetadata, ImageLayer};
@@ -459,14 +459,7 @@ fn bad_uploads_from_a_rogue_worker_are_refused_and_the_job_renders_exactly() {
     // Nothing was accepted: the two leases are still out, no task is done.
     let st = farm.job(job);
     assert_eq!((st.tasks.leased, st.tasks.done), (2, 0), "{st:?}");
-    let metrics = Request {
-        method: "GET",
-        path: "/metrics",
-        headers: vec![],
-        body: b"",
-    }
-    .send(farm.port)
-    .text();
+    let metrics = http::get(farm.port, "/metrics").text();
     assert!(
         metrics.contains(&format!("tessera_tiles_refused_total {refusals}")),
         "{metrics}"
@@ -583,16 +576,6 @@ fn stored_scenes(farm: &Farm) -> Vec<String> {
         .collect();
     names.sort();
     names
-}
-
-fn get(farm: &Farm, path: &str) -> Answer {
-    Request {
-        method: "GET",
-        path,
-        headers: vec![],
-        body: b"",
-    }
-    .send(farm.port)
 }
 
 #[test]
@@ -764,7 +747,7 @@ fn broken_scenes_are_refused_by_name_and_nothing_is_stored() {
 
     // The server is up, nothing was stored and no job was created.
     assert!(farm.server.as_mut().unwrap().running(), "{}", farm.logs());
-    assert_eq!(get(&farm, "/healthz").status, 200);
+    assert_eq!(http::get(farm.port, "/healthz").status, 200);
     assert_eq!(stored_scenes(&farm), Vec::<String>::new());
     let jobs: proto::JobList = serde_json::from_str(&farm.client(&["status", "--json"])).unwrap();
     assert!(jobs.jobs.is_empty(), "{jobs:?}");

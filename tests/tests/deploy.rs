@@ -8,7 +8,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::Command;
 
-use tests::http::Request;
+use tests::http;
 use tests::{tessera_bin, Farm};
 
 #[path = "deploy/files.rs"]
@@ -453,23 +453,10 @@ fn probes_scrapes_and_the_autoscaler_query_answer_on_a_running_server() {
     farm.client_token = Some(CLIENT_TOKEN.into());
     farm.start_server_with(60, &["--worker-token", "w", "--client-token", CLIENT_TOKEN]);
     for &path in &paths {
-        let answer = Request {
-            method: "GET",
-            path,
-            headers: vec![],
-            body: b"",
-        }
-        .send(farm.port);
+        let answer = http::get(farm.port, path);
         assert_eq!(answer.status, 200, "GET {path}: {}", answer.text());
     }
-    let metrics = Request {
-        method: "GET",
-        path: "/metrics",
-        headers: vec![],
-        body: b"",
-    }
-    .send(farm.port)
-    .text();
+    let metrics = http::get(farm.port, "/metrics").text();
     for (name, label, values) in wanted {
         for value in &values {
             let series = format!("{name}{{{label}=\"{value}\"}}");

@@ -9,7 +9,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use proto::{JobList, JobSpec, JobState, JobStatus};
-use tests::http::{Answer, Request};
+use tests::http::{self, Answer, Request};
 use tests::{render_directly, settings, Farm, FRAMES};
 
 /// The data folder's disk: room for the scene, the database (its WAL grows to about
@@ -57,16 +57,6 @@ fn frames_are_whole(data: &Path) -> usize {
         }
     }
     frames
-}
-
-fn get(farm: &Farm, path: &str) -> Answer {
-    Request {
-        method: "GET",
-        path,
-        headers: vec![],
-        body: b"",
-    }
-    .send(farm.port)
 }
 
 fn post_job(farm: &Farm, spec: &JobSpec) -> Answer {
@@ -120,7 +110,7 @@ fn a_full_disk_answers_507_and_the_job_finishes_once_space_returns() {
         "{refused}"
     );
     assert!(farm.server.as_mut().unwrap().running(), "{}", farm.logs());
-    let health = get(&farm, "/healthz");
+    let health = http::get(farm.port, "/healthz");
     assert_eq!(health.status, 200, "{}", health.text());
     assert_eq!(
         frames_are_whole(&data),
@@ -146,7 +136,7 @@ fn a_full_disk_answers_507_and_the_job_finishes_once_space_returns() {
     assert_eq!((st.tasks.done, st.tasks.failed), (4, 0), "{st:?}");
     let log = farm.workers[w].log();
     assert!(log.contains("answers again"), "{log}");
-    let jobs: JobList = get(&farm, "/api/v1/jobs").json();
+    let jobs: JobList = http::get(farm.port, "/api/v1/jobs").json();
     assert_eq!(jobs.jobs.len(), 2, "the refused job left a trace: {jobs:?}");
     // The same request succeeds now that there is room.
     let again = post_job(&farm, &spec);
