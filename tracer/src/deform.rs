@@ -47,7 +47,8 @@ pub struct Deformed {
     pub positions: Vec<Vec3>,
     /// Unit normals; empty when the primitive has none.
     pub normals: Vec<Vec3>,
-    /// Tangents with unit xyz and the input's w; empty when the primitive has none.
+    /// Tangents with unit xyz and the input's w (negated where a joint mirrors); empty when
+    /// the primitive has none.
     pub tangents: Vec<Vec4>,
 }
 
@@ -72,8 +73,9 @@ pub fn joint_matrices(skin: &Skin, joint_world: impl Fn(u32) -> Option<DMat4>) -
 /// `weights`; a weight without a target is ignored, a target without a weight counts 0),
 /// then, with `joints` (from [`joint_matrices`]), linear blend skinning over all joint sets
 /// in f64: positions by the blended matrix, normals by its inverse transpose, tangents'
-/// xyz by the blended matrix with w kept, normals and tangents renormalised. See the module
-/// docs for zero weight sums and degenerate results. Large primitives run in parallel.
+/// xyz by the blended matrix with w kept (negated where the matrix mirrors), normals and
+/// tangents renormalised. See the module docs for zero weight sums and degenerate results.
+/// Large primitives run in parallel.
 pub fn deform(prim: &Primitive, weights: &[f32], joints: Option<&[DMat4]>) -> Deformed {
     let n = prim.positions.len();
     let has_normals = prim.normals.len() == n && n > 0;
@@ -172,20 +174,22 @@ impl Job<'_> {
 
             // Skin: one blended matrix for the vertex.
             let blend = self.joints.and_then(|j| blend(prim, j, v));
-            let (p, n, t) = match blend {
+            let (p, n, t, w_sign) = match blend {
                 Some(m) => {
                     let m3 = DMat3::from_mat4(m);
                     let det = m3.determinant();
                     // The cofactor matrix is det · M⁻ᵀ: it gives normal directions even for a
-                    // singular M, and the sign of det makes it point like M⁻ᵀ would.
-                    let cof = cofactor(&m3) * if det < 0.0 { -1.0 } else { 1.0 };
+                    // singular M, and the sign of det makes it point like M⁻ᵀ would. A mirror
+                    // also reverses the bitangent, cross(normal, tangent) · w: w turns too.
+                    let sign = if det < 0.0 { -1.0 } else { 1.0 };
                     (
                         m.transform_point3(p_morphed),
-                        n.map(|n| cof * n),
+                        n.map(|n| cofactor(&m3) * sign * n),
                         t.map(|t| m3 * t),
+                        sign as f32,
                     )
                 }
-                None => (p_morphed, n, t),
+                None => (p_morphed, n, t, 1.0),
             };
 
             *out_p = finite_or(p, p_morphed).as_vec3();
@@ -194,7 +198,7 @@ impl Job<'_> {
             }
             if let (Some(o), Some(t)) = (tan.get_mut(k), t) {
                 let t_in = prim.tangents[v];
-                *o = unit_or(t, t_in.truncate(), Vec3::X).extend(t_in.w);
+                *o = unit_or(t, t_in.truncate(), Vec3::X).extend(t_in.w * w_sign);
             }
         }
     }

@@ -1,6 +1,6 @@
 //! Rays, hits, bounding boxes, shading frames and the self-intersection offset.
 
-use glam::Vec3;
+use glam::{Affine3A, Vec3};
 
 /// A ray in the prepared frame's camera-relative world space (or in an object's space).
 #[derive(Clone, Copy, Debug)]
@@ -206,6 +206,68 @@ pub fn offset_ray_origin(p: Vec3, ng: Vec3) -> Vec3 {
         pick(p.y, p_i.y, ng.y),
         pick(p.z, p_i.z, ng.z),
     )
+}
+
+/// Where `ray` meets the plane of the triangle `v`, computed in double precision from the
+/// single-precision inputs and rounded once, with a bound on its error per coordinate;
+/// `None` when the ray is parallel to the plane or the numbers overflow. The point is on
+/// the plane and where the ray is along it to within that rounding, whatever the
+/// triangle's size: barycentric interpolation, in contrast, is off by the rounding of the
+/// vertices' magnitudes, which on a triangle 1e5 across is centimetres.
+pub fn plane_hit_point(ray: &Ray, v: [Vec3; 3]) -> Option<(Vec3, Vec3)> {
+    let [a, b, c] = v.map(|p| p.as_dvec3());
+    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+    let n = (b - a).cross(c - a);
+    let t = n.dot(a - o) / n.dot(d);
+    let p = (o + d * t).as_vec3();
+    if !(t.is_finite() && p.is_finite()) {
+        return None;
+    }
+    // Rounding to single precision, and double precision's own error relative to the
+    // magnitudes it worked with (far above 2^-53 of them, to cover every operation).
+    let magnitudes = a.abs().max(b.abs()).max(c.abs()).max(o.abs()).max_element();
+    let error = p.abs() * crate::triangle::gamma(1) + Vec3::splat((magnitudes * 1e-14) as f32);
+    Some((p, error))
+}
+
+/// A bound on the absolute error, per coordinate, of `to_world · object` for an
+/// object-space point known to within `object_error`, widened to cover moving the result
+/// back into an instance's object space for the next ray. It grows with the translation's
+/// magnitude, not only the point's: a mesh placed far from its node's origin is known no
+/// better than that placement's rounding (pbrt-v4's error bounds for transforms).
+pub fn hit_point_error(to_world: &Affine3A, object: Vec3, object_error: Vec3) -> Vec3 {
+    use crate::triangle::gamma;
+    let m = to_world.matrix3.abs();
+    let t = Vec3::from(to_world.translation).abs();
+    // The object-space error carried through the matrix; the product and sums of the
+    // transform (gamma(3)); the same again for the inverse transform of the next ray.
+    m * object_error * (1.0 + gamma(3)) + (m * object.abs() + t) * (2.0 * gamma(3))
+}
+
+/// [`offset_ray_origin`] for a point known to within `error` (per coordinate, see
+/// [`hit_point_error`]): moved along `ng` past the error first (pbrt-v4's
+/// `OffsetRayOrigin`), then by the same ulp steps, but without the absolute floor near the
+/// origin, which would be a tenth of a whole scene 1e-4 across; the error bound covers
+/// what the floor was for (a point near zero computed from larger numbers).
+pub fn offset_ray_origin_bounded(p: Vec3, ng: Vec3, error: Vec3) -> Vec3 {
+    let d = ng.abs().dot(error);
+    step_ulps(p + ng * d, ng)
+}
+
+/// Moves each coordinate of `p` by a number of ulps proportional to `ng`'s component, away
+/// from the surface (the integer part of [`offset_ray_origin`]).
+fn step_ulps(p: Vec3, ng: Vec3) -> Vec3 {
+    const INT_SCALE: f32 = 256.0;
+    let of_i = (ng * INT_SCALE).as_ivec3();
+    let step = |p: f32, o: i32| {
+        if p.abs() < f32::MIN_POSITIVE {
+            // Zero or subnormal: every ulp is 2^-149, and integer steps could cross zero.
+            return p + o as f32 * f32::from_bits(1);
+        }
+        let bits = p.to_bits() as i32;
+        f32::from_bits((bits + if p < 0.0 { -o } else { o }) as u32)
+    };
+    Vec3::new(step(p.x, of_i.x), step(p.y, of_i.y), step(p.z, of_i.z))
 }
 
 /// Interpolates three per-vertex values with barycentric weights (b1, b2).

@@ -5,7 +5,9 @@ use glam::{Vec2, Vec3, Vec4};
 
 use crate::bsdf::Bsdf;
 use crate::film::SampleValue;
-use crate::geometry::{barycentric, offset_ray_origin, Frame, Hit, Ray};
+use crate::geometry::{
+    barycentric, hit_point_error, offset_ray_origin_bounded, plane_hit_point, Frame, Hit, Ray,
+};
 use crate::light::Emitter;
 use crate::render::{PreparedFrame, RenderSettings};
 use crate::sampler::PixelSampler;
@@ -23,6 +25,8 @@ const BOUNCE_DIMENSIONS: u32 = 5;
 pub(crate) struct SurfacePoint {
     /// Position (camera-relative world space).
     pub p: Vec3,
+    /// Bound on the error of `p`, per coordinate (see [`hit_point_error`]).
+    pub p_error: Vec3,
     /// Geometric normal, unit, on the side of the surface's front face.
     pub ng: Vec3,
     /// Shading frame (normal map and interpolated normal applied).
@@ -43,11 +47,26 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     let (prim, t) = (tri.prim, tri.t);
     let (b1, b2) = (hit.b1, hit.b2);
 
-    // Position from barycentrics in object space, then to world: more precise than o + t d.
-    let [a, b, c] = tri.positions;
-    let p = tri
-        .to_world()
-        .transform_point3(barycentric(a, b, c, b1, b2));
+    // Position where the object-space ray meets the triangle's plane, in double precision:
+    // exactly on the plane, and not off along it by the rounding of barycentrics times
+    // vertices, which on a triangle 1e5 across is centimetres. Then to world.
+    let object_ray = Ray {
+        origin: tri.to_object().transform_point3(ray.origin),
+        dir: tri.to_object().transform_vector3(ray.dir),
+        time: ray.time,
+    };
+    let (p_object, object_error) =
+        plane_hit_point(&object_ray, tri.positions).unwrap_or_else(|| {
+            // Interpolated instead: off by the vertices' rounding (pbrt-v4's bound).
+            let [a, b, c] = tri.positions;
+            let weights = a.abs() * (1.0 - b1 - b2).abs() + b.abs() * b1.abs() + c.abs() * b2.abs();
+            (
+                barycentric(a, b, c, b1, b2),
+                weights * crate::triangle::gamma(7),
+            )
+        });
+    let p = tri.to_world().transform_point3(p_object);
+    let p_error = hit_point_error(tri.to_world(), p_object, object_error);
     let ng_raw = tri.front_normal();
     let ng = if ng_raw == Vec3::ZERO {
         -ray.dir.normalize()
@@ -60,13 +79,17 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     let material = &scene.materials[prim.material as usize];
     let sample = material.sample(&scene.textures, uvs, color);
 
-    // Interpolated shading normal; missing or degenerate normals fall back to the face.
+    // Interpolated shading normal; missing or degenerate normals fall back to the face. One
+    // facing away from the front face is that normal written reversed (normals flipped
+    // against the winding): it is turned to the front, which the winding defines in glTF.
     let mut ns = match tri.normals() {
         None => ng,
         Some([n0, n1, n2]) => {
             let n = (*tri.normal_to_world() * barycentric(n0, n1, n2, b1, b2)).normalize_or_zero();
             if n == Vec3::ZERO || !n.is_finite() {
                 ng
+            } else if n.dot(ng) < 0.0 {
+                -n
             } else {
                 n
             }
@@ -77,9 +100,13 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
         let t4 = barycentric(t0, t1, t2, b1, b2);
         let tangent = tri.to_world().transform_vector3(t4.truncate());
         let tf = Frame::from_normal_tangent(ns, tangent);
-        let sign = if t4.w < 0.0 { -1.0 } else { 1.0 };
+        // glTF's bitangent is cross(normal, tangent) · w in the mesh's space; a mirroring
+        // placement (negative determinant) reverses cross products, so w turns with it.
+        let mirrored = tri.to_world().matrix3.determinant() < 0.0;
+        let sign = if (t4.w < 0.0) != mirrored { -1.0 } else { 1.0 };
         let mapped = tf.x * nm.x + tf.y * (nm.y * sign) + tf.z * nm.z;
-        if let Some(m) = mapped.try_normalize() {
+        // A map that bends the normal below the surface is broken there: it is ignored.
+        if let Some(m) = mapped.try_normalize().filter(|m| m.dot(ng) > 0.0) {
             ns = m;
             shading = Frame::from_normal_tangent(ns, tf.x);
         }
@@ -98,8 +125,18 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     } else {
         (ng, shading)
     };
+    // Seen from under its shading normal while above the surface (or the reverse), a point
+    // would reflect light into the surface or lose it: it is shaded with the geometric
+    // normal, whose frame conserves energy, instead.
+    let wo = -ray.dir;
+    let shading = if (wo.dot(shading.z) > 0.0) != (wo.dot(ng) > 0.0) {
+        Frame::from_normal_tangent(ng, shading.x)
+    } else {
+        shading
+    };
     SurfacePoint {
         p,
+        p_error,
         ng,
         frame: shading,
         front,
@@ -121,11 +158,12 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
     }
 }
 
-/// A ray leaving `p` towards `dir`, offset to the side of `ng` the direction is on.
-fn spawn(p: Vec3, ng: Vec3, dir: Vec3, time: f32) -> Ray {
-    let n = if dir.dot(ng) >= 0.0 { ng } else { -ng };
+/// A ray leaving `sp` towards `dir`, offset past the error of its position to the side of
+/// the surface the direction is on.
+fn spawn(sp: &SurfacePoint, dir: Vec3, time: f32) -> Ray {
+    let n = if dir.dot(sp.ng) >= 0.0 { sp.ng } else { -sp.ng };
     Ray {
-        origin: offset_ray_origin(p, n),
+        origin: offset_ray_origin_bounded(sp.p, n, sp.p_error),
         dir,
         time,
     }
@@ -169,6 +207,11 @@ pub fn trace_sample(
     let mut prev_delta = true;
     let mut prev_p = ray.origin;
     let mut albedo_done = false;
+    // Product of η² over the refractions so far: the BTDF scales radiance by 1/η² on the
+    // way into a denser medium, which is not energy lost; Russian roulette looks at
+    // `throughput · eta_scale` so a path inside glass is not killed for that factor (and
+    // its survivors weighted up by η², a firefly per escaping path), as in pbrt-v4.
+    let mut eta_scale = 1.0f32;
 
     for depth in 0..=settings.max_depth {
         sampler.start_dimension(CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
@@ -243,12 +286,17 @@ pub fn trace_sample(
                         } => emitted_toward(frame, instance, triangle, b1, b2, ls.wi, ray.time),
                     };
                     if le != Vec3::ZERO {
-                        let shadow = spawn(sp.p, sp.ng, ls.wi, ray.time);
-                        // Stop just short of the light so it does not occlude itself.
-                        let t_max = if ls.distance.is_finite() {
-                            ls.distance * (1.0 - 1e-4)
-                        } else {
-                            f32::INFINITY
+                        let mut shadow = spawn(&sp, ls.wi, ray.time);
+                        // Aim at the sampled point from the offset origin (else the offset
+                        // carries the ray past the light) and stop just short of it, so
+                        // that the light does not occlude itself.
+                        let to_light = sp.p + ls.wi * ls.distance - shadow.origin;
+                        let t_max = match to_light.try_normalize() {
+                            Some(dir) if ls.distance.is_finite() => {
+                                shadow.dir = dir;
+                                to_light.length() * (1.0 - 1e-4)
+                            }
+                            _ => f32::INFINITY,
                         };
                         out.rays += 1;
                         if !frame.occluded(&shadow, t_max) {
@@ -281,14 +329,22 @@ pub fn trace_sample(
         if !throughput.is_finite() || throughput == Vec3::ZERO {
             break;
         }
+        if bs.wi.z * wo_local.z < 0.0 {
+            let eta_rel = if wo_local.z > 0.0 {
+                bsdf.eta()
+            } else {
+                1.0 / bsdf.eta()
+            };
+            eta_scale *= eta_rel * eta_rel;
+        }
         prev_pdf = bs.pdf;
         prev_delta = bs.delta;
         prev_p = sp.p;
-        ray = spawn(sp.p, sp.ng, wi, ray.time);
+        ray = spawn(&sp, wi, ray.time);
 
         // Russian roulette once the path has a few bounces.
         if depth + 1 >= RR_START_DEPTH {
-            let survive = throughput.max_element().min(1.0);
+            let survive = (throughput.max_element() * eta_scale).min(1.0);
             if sampler.next_1d() >= survive {
                 break;
             }

@@ -19,7 +19,14 @@
 //!   skipped with a warning in [`Scene::warnings`].
 //! - A non-finite vertex position is an error naming its accessor, rather than a silently
 //!   dropped triangle: such files are broken, and a farm should say so at upload.
-//! - Zero or non-finite normals are replaced by face normals (one warning per primitive).
+//! - Zero or non-finite normals are replaced by face normals (one warning per primitive),
+//!   splitting a vertex whose faces disagree. Triangles that use a vertex twice (which the
+//!   spec says meshes should not contain) are kept, with a warning: they draw nothing.
+//! - A node rotation that is not a unit quaternion is normalised, and so are animation
+//!   rotation keys (their CUBICSPLINE tangents by the same factor), with a warning; a zero
+//!   node rotation is an error. A node matrix that is not translation · rotation · scale (a
+//!   shear, a last row other than (0, 0, 0, 1)) loads with a warning. Zero, singular and
+//!   negative (mirroring) scales are legal and load silently.
 //! - A primitive without a material gets the glTF default material, appended once at the
 //!   end of [`Scene::materials`].
 //! - Mesh indices are the document's, so a mesh may have no primitives (all skipped).

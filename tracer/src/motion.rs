@@ -138,6 +138,9 @@ pub struct DeformedMesh {
     pub steps: Vec<Vec<Deformed>>,
     /// Hierarchy over the deformed triangles (with per-step bounds when it moves).
     pub bvh: MeshBvh,
+    /// Whether the node placing these vertices mirrors them (negative determinant): glTF
+    /// then turns the front face, which the vertices' winding alone no longer tells.
+    pub mirrored: bool,
 }
 
 impl DeformedMesh {
@@ -167,7 +170,12 @@ impl DeformedMesh {
         } else {
             MeshBvh::build_motion(&triangles)
         };
-        Self { source, steps, bvh }
+        Self {
+            source,
+            steps,
+            bvh,
+            mirrored: false,
+        }
     }
 
     /// Whether the vertices move inside the shutter.
@@ -232,9 +240,15 @@ pub(crate) fn place(d: &mut Deformed, to_world: &DMat4) {
     for n in &mut d.normals {
         *n = (normal_matrix * n.as_dvec3()).as_vec3();
     }
+    // A mirror reverses the bitangent, cross(normal, tangent) · w: w turns with it.
+    let w_sign = if linear.determinant() < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
     for t in &mut d.tangents {
         let v = (linear * t.truncate().as_dvec3()).as_vec3();
-        *t = v.extend(t.w);
+        *t = v.extend(t.w * w_sign);
     }
 }
 

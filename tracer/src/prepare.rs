@@ -63,6 +63,40 @@ fn to_f32_affine(m: &DMat4) -> Affine3A {
     Affine3A::from_mat4(m.as_mat4())
 }
 
+/// Whether `m` is finite but cannot be inverted in f32, by the test [`Instance::new`]
+/// makes (a zero scale on some axis): rays could not enter such an instance.
+fn has_no_inverse(m: &DMat4) -> bool {
+    let a = to_f32_affine(m);
+    let det = a.matrix3.determinant();
+    a.is_finite() && !(det != 0.0 && det.is_finite() && a.inverse().is_finite())
+}
+
+/// Whether placing `mesh` by the camera-relative `to_frame` in single precision resolves
+/// it far more coarsely than its distance from the camera calls for. Rays meet an instance
+/// in its object space, where the camera sits about as far from the origin as the
+/// translation says, so positions there round relative to the translation, not to the
+/// surface's distance: a unit cube scaled to 2e5 and moved 1e5 away, as a wall a metre
+/// from the camera, would have centimetre steps. Such a mesh is baked into the frame in
+/// double precision instead, where its vertices near the camera keep their detail. (Only
+/// a camera outside the mesh's box can be near all of it and far from its origin.)
+fn coarse_placement(mesh: &crate::scene::Mesh, to_frame: &DMat4) -> bool {
+    // The rounding is 1024 times coarser than at the mesh's distance: ten bits lost.
+    const LOST: f64 = 1024.0;
+    let b = mesh.bvh.bounds();
+    if b.is_empty() {
+        return false;
+    }
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for c in b.corners() {
+        let p = to_frame.transform_point3(c.as_dvec3());
+        (lo, hi) = (lo.min(p), hi.max(p));
+    }
+    // Distance from the camera (the origin) to the mesh's box in the frame.
+    let distance = DVec3::ZERO.clamp(lo, hi).length();
+    let translation = to_frame.w_axis.truncate().length();
+    distance > 0.0 && translation.is_finite() && translation > LOST * distance
+}
+
 /// Whether `node` deforms its mesh: a skin whose mesh carries joint influences, or morph
 /// targets whose weights are not all zero at some pose.
 fn deforms(scene: &Scene, node: u32, poses: &[&Posed]) -> bool {
@@ -322,12 +356,32 @@ pub fn prepare_frame(
         let Some(mesh) = scene.nodes[node as usize].mesh else {
             continue;
         };
-        if deforming[j] {
+        // Rays cannot enter a placement that has no inverse (a zero scale on one axis): bake
+        // its vertices into the frame, as for a deformed mesh, so that a mesh flattened onto
+        // a plane draws as that plane (the limit of ever thinner scales). A zero scale on
+        // every axis leaves only zero-area triangles, which draw nothing.
+        let flattened = poses.len() == 1 && has_no_inverse(&(relative * poses[0].instances[j].1));
+        // So is a mesh that its placement would resolve far too coarsely near the camera.
+        let coarse = poses.len() == 1
+            && coarse_placement(
+                &scene.meshes[mesh as usize],
+                &(relative * poses[0].instances[j].1),
+            );
+        if deforming[j] || flattened || coarse {
             let per_step = poses
                 .iter()
                 .map(|posed| deform_instance(&scene, posed, node, &posed.instances[j].1, &relative))
                 .collect();
-            let d = DeformedMesh::new(mesh, &scene.meshes[mesh as usize], per_step);
+            let mut d = DeformedMesh::new(mesh, &scene.meshes[mesh as usize], per_step);
+            // Skinned vertices are placed by their joints; the others by the node, whose
+            // mirror glTF's winding rule follows.
+            let n = &scene.nodes[node as usize];
+            let skinned = n.skin.is_some()
+                && scene.meshes[mesh as usize]
+                    .primitives
+                    .iter()
+                    .any(|p| !p.joint_sets.is_empty());
+            d.mirrored = !skinned && DMat3::from_mat4(poses[0].instances[j].1).determinant() < 0.0;
             let index = (scene.meshes.len() + deformed.len()) as u32;
             instances.push(Instance::new(index, Affine3A::IDENTITY, &d.bvh.bounds()));
             deformed.push(d);

@@ -203,10 +203,16 @@ impl TriangleAt<'_> {
             .map_or(&self.inst.normal_to_world, |p| &p.normal_to_world)
     }
 
-    /// Object-space geometric normal by the winding (not normalised).
+    /// Object-space geometric normal by the winding (not normalised), turned for the baked
+    /// vertices of a mirrored node (a still instance's mirror is in its normal matrix).
     pub fn face_normal(&self) -> Vec3 {
         let [a, b, c] = self.positions;
-        (b - a).cross(c - a)
+        let n = (b - a).cross(c - a);
+        if self.deformed.is_some_and(|d| d.mirrored) {
+            -n
+        } else {
+            n
+        }
     }
 
     /// World-space unit normal of the front face. The inverse transpose keeps the front

@@ -27,6 +27,8 @@ pub(crate) const fn gamma(n: i32) -> f32 {
 #[derive(Clone, Copy, Debug)]
 pub struct RayPrecomputed {
     origin: Vec3,
+    /// The direction, for the double-precision recomputation of [`precise_hit`].
+    dir: Vec3,
     kx: usize,
     ky: usize,
     kz: usize,
@@ -58,6 +60,7 @@ impl RayPrecomputed {
         let shear = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
         Self {
             origin: ray.origin,
+            dir: d,
             kx,
             ky,
             kz,
@@ -71,8 +74,10 @@ impl RayPrecomputed {
 /// Returns `(t, b1, b2)` for a hit with `0 < t < t_max`, `b1` and `b2` being the barycentric
 /// weights of `v1` and `v2`. A hit is reported only when `t` is provably positive given the
 /// rounding errors of the test (pbrt's conservative bound), so that a ray leaving a surface
-/// whose origin was offset does not find that surface again at `t ≈ 0`. Degenerate
-/// (zero-area) triangles and rays in the triangle's plane never hit.
+/// whose origin was offset does not find that surface again at `t ≈ 0`. Where single
+/// precision cannot prove it, or places the hit only roughly (a triangle far larger than
+/// its distance from the origin), `t` and the barycentrics are recomputed in double
+/// precision. Degenerate (zero-area) triangles and rays in the triangle's plane never hit.
 #[inline]
 pub fn intersect_triangle(
     ray: &RayPrecomputed,
@@ -126,30 +131,16 @@ pub fn intersect_triangle(
         return None;
     }
 
-    // Scaled hit distance, compared against the range before the division (the paper's
-    // test, with the determinant's sign folded in). Written so that NaN fails.
+    // Scaled hit distance (the paper's), and bounds on the error of t and of the hit's
+    // position from every rounding above (pbrt-v4, "Ensure that computed triangle t is
+    // conservatively greater than zero"). The constants are named so that they are folded
+    // at compile time.
     let az = sz * a[kz];
     let bz = sz * b[kz];
     let cz = sz * c[kz];
     let t_scaled = u * az + v * bz + w * cz;
-    let (t_scaled_abs, det_abs) = if det < 0.0 {
-        (-t_scaled, -det)
-    } else {
-        (t_scaled, det)
-    };
-    if !(t_scaled_abs > 0.0 && t_scaled_abs <= t_max * det_abs) {
-        return None;
-    }
-
     let inv_det = 1.0 / det;
     let t = t_scaled * inv_det;
-    if !(t < t_max) {
-        return None;
-    }
-
-    // Conservative t > 0 (pbrt-v4, "Ensure that computed triangle t is conservatively
-    // greater than zero"): the error bound on t from every rounding above. The constants
-    // are named so that they are folded at compile time.
     const G2: f32 = gamma(2);
     const G3: f32 = gamma(3);
     const G5: f32 = gamma(5);
@@ -157,16 +148,99 @@ pub fn intersect_triangle(
     let max_xt = ax.abs().max(bx.abs()).max(cx.abs());
     let max_yt = ay.abs().max(by.abs()).max(cy.abs());
     let delta_z = G3 * max_zt;
-    let delta_x = G5 * (max_xt + max_zt);
-    let delta_y = G5 * (max_yt + max_zt);
+    // x' = x - Sx·z rounds relative to |x| + |z| (|Sx| <= 1), with z in the vertices'
+    // units. pbrt takes the scaled z (in t's units), which is the same only for a unit
+    // direction: an instance scaled by 1e6 has object-space directions of length 1e-6,
+    // and its bound would come out a million times too large (every hit refused).
+    let max_z = a[kz].abs().max(b[kz].abs()).max(c[kz].abs());
+    let delta_x = G5 * (max_xt + max_z);
+    let delta_y = G5 * (max_yt + max_z);
     let delta_e = 2.0 * (G2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
     let max_e = u.abs().max(v.abs()).max(w.abs());
     let delta_t = 3.0 * (G3 * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
-    if !(t > delta_t) {
+    // Each barycentric is off by at most about 4·delta_e/|det|, so the point by that times
+    // the vertices' distances from the origin, here in t's units.
+    let delta_p = 12.0 * delta_e * inv_det.abs() * ((max_xt + max_yt) * sz.abs() + max_zt);
+    if t > delta_t.max(delta_p) * IMPRECISE {
+        return (t < t_max).then_some((t, v * inv_det, w * inv_det));
+    }
+    // Provably behind the origin or beyond t_max (and NaN): no hit.
+    if !(t + delta_t > 0.0 && t - delta_t < t_max) {
         return None;
     }
+    // The bounds grow with the vertices' distance from the origin, not with t: on a huge
+    // triangle seen from close by (a 1e5 floor under a camera 1e-3 above it) single
+    // precision can neither place the hit nor prove it in front. Double precision can.
+    precise_hit(ray, v0, v1, v2, t_max)
+}
 
-    Some((t, v * inv_det, w * inv_det))
+/// When the single-precision bounds on `t` and on the hit's position exceed this fraction
+/// of `t`, the hit is recomputed in double precision.
+const IMPRECISE: f32 = 1024.0;
+
+/// [`intersect_triangle`] for a ray the single-precision test found inside the triangle
+/// but could not place: `t`, `b1` and `b2` recomputed in double precision from the same
+/// single-precision inputs (exact in double), `t` kept only if provably positive by the
+/// same error bound with double's unit roundoff. Which triangle the ray is in stays the
+/// single-precision test's decision, so that shared edges stay watertight.
+#[cold]
+#[inline(never)]
+fn precise_hit(
+    ray: &RayPrecomputed,
+    v0: Vec3,
+    v1: Vec3,
+    v2: Vec3,
+    t_max: f32,
+) -> Option<(f32, f32, f32)> {
+    const fn gamma64(n: i32) -> f64 {
+        const U: f64 = f64::EPSILON * 0.5;
+        let nu = n as f64 * U;
+        nu / (1.0 - nu)
+    }
+    let (kx, ky, kz) = (ray.kx, ray.ky, ray.kz);
+    let d = ray.dir.as_dvec3();
+    let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+    let o = ray.origin.as_dvec3();
+    let [a, b, c] = [v0, v1, v2].map(|v| v.as_dvec3() - o);
+    let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
+    let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
+    let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    let det = u + v + w;
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let (az, bz, cz) = (sz * a[kz], sz * b[kz], sz * c[kz]);
+    let t = (u * az + v * bz + w * cz) / det;
+
+    // The bound of intersect_triangle, in double precision (one more rounding each for the
+    // subtractions from the origin and the shear constants, which are not exact here).
+    let max_zt = az.abs().max(bz.abs()).max(cz.abs());
+    let max_xt = ax.abs().max(bx.abs()).max(cx.abs());
+    let max_yt = ay.abs().max(by.abs()).max(cy.abs());
+    let max_z = a[kz].abs().max(b[kz].abs()).max(c[kz].abs());
+    let delta_z = gamma64(4) * max_zt;
+    let delta_x = gamma64(6) * (max_xt + max_z);
+    let delta_y = gamma64(6) * (max_yt + max_z);
+    let delta_e = 2.0 * (gamma64(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+    let max_e = u.abs().max(v.abs()).max(w.abs());
+    let delta_t =
+        3.0 * (gamma64(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) / det.abs();
+    let t32 = t as f32;
+    if !(t > delta_t && t32 > 0.0 && t32 < t_max) {
+        return None;
+    }
+    // Inside by the single-precision test: keep the barycentrics inside too.
+    let (b1, b2) = ((v / det).clamp(0.0, 1.0), (w / det).clamp(0.0, 1.0));
+    let sum = b1 + b2;
+    let (b1, b2) = if sum > 1.0 {
+        (b1 / sum, b2 / sum)
+    } else {
+        (b1, b2)
+    };
+    Some((t32, b1 as f32, b2 as f32))
 }
 
 #[cfg(test)]

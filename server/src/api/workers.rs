@@ -173,7 +173,10 @@ pub async fn leave(
         .run(move |c| scheduler::leave(c, worker, now))
         .await?;
     // Operators see scale-downs and restarts in the log, not only in the event table.
-    tracing::info!(worker, "worker {worker} left; leases given back for jobs {jobs:?}");
+    tracing::info!(
+        worker,
+        "worker {worker} left; leases given back for jobs {jobs:?}"
+    );
     app.work.notify_waiters();
     for &job in &jobs {
         app.publish_job(job).await;

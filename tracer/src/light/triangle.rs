@@ -6,8 +6,13 @@
 //! `SampleSphericalTriangle`), with density exactly 1/Ω. Where Ω is tiny (single precision
 //! cannot resolve the spherical construction) or nearly a hemisphere (the construction
 //! degenerates), the point is drawn uniformly by area instead, with density
-//! d² / (|cos θ_light| · area). Both [`TriangleLight::sample`] and [`TriangleLight::pdf`]
-//! decide between the two from the same Ω computed the same way, so they always agree.
+//! d² / (|cos θ_light| · area). So is a triangle two of whose vertices lie in nearly
+//! opposite directions (the point sits close to that edge, as under a huge emitter): the
+//! great circle through two nearly antipodal directions is ill-defined in single precision,
+//! and the spherical construction then crowds its samples towards the horizon (a floor
+//! 0.5 m under an emitter plane 2e5 m wide came out 8% too dark). Both
+//! [`TriangleLight::sample`] and [`TriangleLight::pdf`] decide between the two from the
+//! same quantities computed the same way, so they always agree.
 
 use glam::{Vec2, Vec3};
 
@@ -18,6 +23,10 @@ const MIN_SPHERICAL_SOLID_ANGLE: f32 = 3e-4;
 /// Above this solid angle (sr), sample by area (pbrt-v4's `MaxSphericalSampleArea`; a
 /// hemisphere is 2π ≈ 6.283).
 const MAX_SPHERICAL_SOLID_ANGLE: f32 = 6.22;
+/// Below this cosine between two vertex directions (more than about 176° apart), sample
+/// by area: the spherical construction's error grows like 1e-7 / sin of that angle, from
+/// about 1e-4 of the irradiance here to tens of percent within 0.01° of 180°.
+const MIN_SPHERICAL_VERTEX_COSINE: f32 = -0.998;
 
 /// An emissive triangle ready for sampling: its vertices, unit geometric normal
 /// (cross(p1 − p0, p2 − p0), not flipped) and area.
@@ -76,10 +85,20 @@ impl TriangleLight {
         }
     }
 
-    /// Whether, seen from `p` with solid angle `omega`, directions are sampled on the
-    /// sphere (else by area).
+    /// Whether a solid angle `omega` is one the spherical construction resolves.
     fn spherical(omega: f32) -> bool {
         (MIN_SPHERICAL_SOLID_ANGLE..=MAX_SPHERICAL_SOLID_ANGLE).contains(&omega)
+    }
+
+    /// Whether, seen from `p` with solid angle `omega`, directions are sampled on the
+    /// sphere (else by area): `omega` is resolvable and no two vertices are seen in nearly
+    /// opposite directions.
+    fn spherical_from(&self, p: Vec3, omega: f32) -> bool {
+        if !Self::spherical(omega) {
+            return false;
+        }
+        let [a, b, c] = self.p.map(|v| (v - p).normalize_or_zero());
+        a.dot(b).min(b.dot(c)).min(c.dot(a)) > MIN_SPHERICAL_VERTEX_COSINE
     }
 
     /// Area-sampling density converted to solid angle for the point `q` seen from `p`;
@@ -103,7 +122,7 @@ impl TriangleLight {
     /// sampled (`p` in the triangle's plane, or a numerically degenerate configuration).
     pub(crate) fn sample(&self, p: Vec3, u: Vec2) -> Option<TriangleSample> {
         let omega = self.solid_angle(p);
-        let (b1, b2, pdf) = if Self::spherical(omega) {
+        let (b1, b2, pdf) = if self.spherical_from(p, omega) {
             let (b1, b2) = self.sample_spherical(p, u)?;
             (b1, b2, 1.0 / omega)
         } else {
@@ -130,7 +149,7 @@ impl TriangleLight {
     /// this triangle.
     pub(crate) fn pdf(&self, p: Vec3, q: Vec3) -> f32 {
         let omega = self.solid_angle(p);
-        if Self::spherical(omega) {
+        if self.spherical_from(p, omega) {
             1.0 / omega
         } else {
             self.area_pdf_to_solid_angle(p, q)

@@ -5,6 +5,9 @@
 //! - Key times must be finite and never decrease (an error naming the input accessor). Two
 //!   keys at the same time, which the spec forbids too, are merged into the later one with
 //!   a warning, so that [`Sampler::times`] is strictly increasing.
+//! - Rotation keys must be unit quaternions, as node rotations are: one further from unit
+//!   length than rounding explains is normalised (with its CUBICSPLINE tangents) with a
+//!   warning, so that every interpolation renders the rotation the file meant.
 //! - A channel that targets a node with a `matrix` is an error: the spec allows only
 //!   translation, rotation and scale on animated nodes.
 //! - A channel whose target this loader does not know (KHR_animation_pointer's `pointer`,
@@ -20,6 +23,7 @@ use gltf::json::Value;
 
 use super::accessor::read_floats;
 use super::error::{Element, SceneError};
+use super::gltf::UNIT_TOLERANCE;
 use crate::animation::{Animation, Channel, Interpolation, Sampler, Target};
 use crate::scene::{Mesh, Node, Skin};
 
@@ -290,7 +294,7 @@ fn convert_sampler(
             format!("{out_what}: {ty:?} is not a component type glTF allows for {name}"),
         ));
     }
-    let values = read_floats(&output, buffers, &[dims], &out_what)?.values;
+    let mut values = read_floats(&output, buffers, &[dims], &out_what)?.values;
     let per_key = match interpolation {
         Interpolation::CubicSpline => 3,
         _ => 1,
@@ -324,6 +328,24 @@ fn convert_sampler(
         ));
     }
 
+    if target == Target::Rotation {
+        // A normalised integer can only come within one quantisation step of unit length.
+        let tolerance = match ty {
+            DataType::I8 | DataType::U8 => 1.0 / 127.0,
+            DataType::I16 | DataType::U16 => 1.0 / 32767.0,
+            _ => 0.0,
+        };
+        let tolerance = f64::max(tolerance, UNIT_TOLERANCE);
+        if let Some((bad, lo, hi)) = normalise_rotation_keys(&mut values, per_key, tolerance) {
+            warnings.push(format!(
+                "accessor {}: {bad} of {} rotation keys of {what} are not unit quaternions \
+                 (lengths {lo:.6} to {hi:.6}); normalised (a zero one holds the previous key)",
+                output.index(),
+                times.len()
+            ));
+        }
+    }
+
     // Keys at equal times: keep the later one, so that times strictly increase.
     let stride = per_key * width;
     let keep: Vec<usize> = (0..keys)
@@ -351,4 +373,35 @@ fn convert_sampler(
         values,
         width,
     })
+}
+
+/// Scales every rotation key whose length is off 1 by more than `tolerance` to unit length
+/// (for CUBICSPLINE, its in- and out-tangents by the same factor, so the spline keeps its
+/// shape), as glTF requires node rotations to be unit quaternions. Zero keys stay: the
+/// sampler holds the previous key there. Returns how many keys were off, and the smallest
+/// and largest length among them; `None` when all are unit.
+fn normalise_rotation_keys(
+    values: &mut [f32],
+    per_key: usize,
+    tolerance: f64,
+) -> Option<(usize, f64, f64)> {
+    let (mut bad, mut lo, mut hi) = (0, f64::INFINITY, 0.0f64);
+    for key in values.chunks_exact_mut(4 * per_key) {
+        // The value is the middle element of a CUBICSPLINE key.
+        let v = if per_key == 3 { 4 } else { 0 };
+        let len = key[v..v + 4]
+            .iter()
+            .map(|&c| c as f64 * c as f64)
+            .sum::<f64>()
+            .sqrt();
+        if (len - 1.0).abs() <= tolerance {
+            continue;
+        }
+        bad += 1;
+        (lo, hi) = (lo.min(len), hi.max(len));
+        if len > 0.0 {
+            key.iter_mut().for_each(|c| *c = (*c as f64 / len) as f32);
+        }
+    }
+    (bad > 0).then_some((bad, lo, hi))
 }

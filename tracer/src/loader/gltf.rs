@@ -4,7 +4,7 @@
 
 use std::borrow::Cow;
 
-use glam::{DMat4, DQuat, DVec3, Vec3};
+use glam::{DMat4, DQuat, DVec3, DVec4, Vec3};
 use gltf::json::Value;
 use rayon::prelude::*;
 
@@ -137,7 +137,23 @@ fn convert_nodes(
         let mut trs = None;
         let local = match n.transform() {
             gltf::scene::Transform::Matrix { matrix } => {
-                DMat4::from_cols_array_2d(&matrix.map(|c| c.map(f64::from)))
+                let mut m = DMat4::from_cols_array_2d(&matrix.map(|c| c.map(f64::from)));
+                if let Some(why) = not_trs(&m) {
+                    let repair = if m.row(3) == DVec4::W {
+                        "the shear is kept"
+                    } else {
+                        // Affine placements only: the row would leak into the composition.
+                        m = m.transpose();
+                        m.w_axis = DVec4::W;
+                        m = m.transpose();
+                        "its last row is taken as (0, 0, 0, 1)"
+                    };
+                    warnings.push(format!(
+                        "{element}: matrix {why}; glTF requires a matrix decomposable into \
+                         translation, rotation and scale ({repair})"
+                    ));
+                }
+                m
             }
             gltf::scene::Transform::Decomposed {
                 translation: t,
@@ -152,6 +168,12 @@ fn convert_nodes(
                     return Err(SceneError::at(
                         element,
                         format!("rotation {r:?} is not a usable quaternion"),
+                    ));
+                }
+                if (len - 1.0).abs() > UNIT_TOLERANCE {
+                    warnings.push(format!(
+                        "{element}: rotation {r:?} is not a unit quaternion (length {len:.6}); \
+                         normalised"
                     ));
                 }
                 let decomposed = Trs {
@@ -186,6 +208,30 @@ fn convert_nodes(
     }
     check_node_graph(&nodes, warnings)?;
     Ok(nodes)
+}
+
+/// How far from 1 the length of a float quaternion written by an exporter may be before
+/// the loader warns: f32 rounding stays far below it, and so do components printed with
+/// three decimals (at most 1e-3 off; Khronos's SimpleSkin sample is 2.3e-4 off).
+pub(crate) const UNIT_TOLERANCE: f64 = 2e-3;
+
+/// Why `m` is no translation · rotation · scale, as the spec requires of a node matrix: its
+/// last row is not (0, 0, 0, 1), or its columns are not orthogonal (a shear). `None` for a
+/// TRS matrix, zero or negative scales included.
+fn not_trs(m: &DMat4) -> Option<&'static str> {
+    if m.row(3) != DVec4::W {
+        return Some("has a last row other than (0, 0, 0, 1)");
+    }
+    let cols = [
+        m.x_axis.truncate(),
+        m.y_axis.truncate(),
+        m.z_axis.truncate(),
+    ];
+    let sheared = (0..3).any(|i| {
+        let (a, b) = (cols[i], cols[(i + 1) % 3]);
+        a.dot(b).abs() > UNIT_TOLERANCE * a.length() * b.length()
+    });
+    sheared.then_some("shears (its columns are not orthogonal)")
 }
 
 /// Refuses cycles; warns about nodes with two parents (the spec wants strict trees; we

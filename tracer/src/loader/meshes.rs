@@ -13,6 +13,7 @@
 //! of a primitive whose tangents are generated (MikkTSpace) or absent.
 
 use std::borrow::Cow;
+use std::collections::HashMap;
 
 use glam::{Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions as D};
@@ -257,6 +258,16 @@ fn convert_primitive(
         }
     };
     let indices = assemble(mode, &flat, where_, warnings);
+    let repeated = indices
+        .iter()
+        .filter(|[a, b, c]| a == b || b == c || c == a)
+        .count();
+    if repeated > 0 {
+        warnings.push(format!(
+            "{where_}: {repeated} degenerate triangles (a vertex used twice), which glTF meshes \
+             should not contain; they draw nothing"
+        ));
+    }
 
     let mut out = Primitive {
         positions,
@@ -267,11 +278,12 @@ fn convert_primitive(
     // Joints and targets before anything re-indexes the vertices, so that it carries them.
     out.joint_sets = joint_sets(prim, buffers, n, skin, where_, warnings)?;
     out.targets = morph_targets(prim, buffers, n, where_)?;
+    let mut bad_normals = Vec::new();
     if let Some(f) = attribute(prim, &Semantic::Normals, &[D::Vec3], buffers, n, where_)? {
         out.normals = vec3s(&f);
-        let repaired = repair_normals(&mut out, where_, warnings);
+        bad_normals = normalize_normals(&mut out.normals);
         for t in out.targets.iter_mut().filter(|t| !t.normals.is_empty()) {
-            for &v in &repaired {
+            for &v in &bad_normals {
                 t.normals[v] = Vec3::ZERO;
             }
         }
@@ -330,6 +342,18 @@ fn convert_primitive(
                 ));
             }
         }
+    }
+    // Every attribute is read: vertices may now be split.
+    if !bad_normals.is_empty() {
+        let split = face_normals_at(&mut out, &bad_normals);
+        warnings.push(format!(
+            "{where_}: {} zero or non-finite normals replaced by face normals{}",
+            bad_normals.len(),
+            match split {
+                0 => String::new(),
+                k => format!(" ({k} vertices split between faces that disagree)"),
+            }
+        ));
     }
     if let Some(set) = normal_texcoord {
         if !tangents_ok {
@@ -546,36 +570,92 @@ fn assemble(mode: Mode, v: &[u32], where_: &str, warnings: &mut Vec<String>) -> 
     }
 }
 
-/// Renormalises normals; zero or non-finite ones become the area-weighted normal of the
-/// faces around the vertex (+Z for a vertex no face gives one). Returns the vertices
-/// repaired.
-fn repair_normals(prim: &mut Primitive, where_: &str, warnings: &mut Vec<String>) -> Vec<usize> {
+/// Renormalises normals; returns the vertices whose normal is zero or not finite, left
+/// for [`face_normals_at`].
+fn normalize_normals(normals: &mut [Vec3]) -> Vec<usize> {
     let mut bad = Vec::new();
-    for (i, nrm) in prim.normals.iter_mut().enumerate() {
+    for (i, nrm) in normals.iter_mut().enumerate() {
         match nrm.try_normalize() {
             Some(u) => *nrm = u,
             None => bad.push(i),
         }
     }
-    if bad.is_empty() {
-        return bad;
+    bad
+}
+
+/// Gives each corner at a vertex of `bad` the normal of its face, as the spec's flat normals
+/// for a primitive without NORMAL: a vertex whose faces disagree is split into one copy per
+/// face normal (every per-vertex array follows), so a welded cube stays a cube rather than
+/// rounding at its corners. A vertex on no face with an area keeps +Z. Returns how many
+/// copies were added.
+fn face_normals_at(prim: &mut Primitive, bad: &[usize]) -> usize {
+    let mut given: Vec<Option<Vec3>> = vec![None; prim.positions.len()];
+    let mut is_bad = vec![false; prim.positions.len()];
+    for &v in bad {
+        is_bad[v] = true;
+        prim.normals[v] = Vec3::Z;
     }
-    let mut sum = vec![Vec3::ZERO; prim.positions.len()];
-    for &[a, b, c] in &prim.indices {
-        let p = |i: u32| prim.positions[i as usize];
-        let face = (p(b) - p(a)).cross(p(c) - p(a));
-        for i in [a, b, c] {
-            sum[i as usize] += face;
+    // Per split vertex, its copies and their normals. Coplanar faces agree to rounding.
+    let same = |a: Vec3, b: Vec3| a.dot(b) > 1.0 - 1e-6;
+    let mut copies: HashMap<u32, Vec<(Vec3, u32)>> = HashMap::new();
+    let mut added = 0;
+    for t in 0..prim.indices.len() {
+        let Some(face) = prim.face_normal(t).try_normalize() else {
+            continue;
+        };
+        for k in 0..3 {
+            let v = prim.indices[t][k];
+            if !is_bad[v as usize] {
+                continue;
+            }
+            match given[v as usize] {
+                None => {
+                    given[v as usize] = Some(face);
+                    prim.normals[v as usize] = face;
+                }
+                Some(n) if same(n, face) => {}
+                Some(_) => {
+                    let known = copies.entry(v).or_default();
+                    let copy = match known.iter().find(|(n, _)| same(*n, face)) {
+                        Some(&(_, c)) => c,
+                        None => {
+                            let c = copy_vertex(prim, v as usize);
+                            prim.normals[c as usize] = face;
+                            known.push((face, c));
+                            added += 1;
+                            c
+                        }
+                    };
+                    prim.indices[t][k] = copy;
+                }
+            }
         }
     }
-    for &i in &bad {
-        prim.normals[i] = sum[i].try_normalize().unwrap_or(Vec3::Z);
+    added
+}
+
+/// Appends a copy of vertex `v`, every per-vertex array included; returns its index.
+fn copy_vertex(prim: &mut Primitive, v: usize) -> u32 {
+    fn push<T: Copy>(a: &mut Vec<T>, v: usize) {
+        if let Some(&x) = a.get(v) {
+            a.push(x);
+        }
     }
-    warnings.push(format!(
-        "{where_}: {} zero or non-finite normals replaced by face normals",
-        bad.len()
-    ));
-    bad
+    push(&mut prim.positions, v);
+    push(&mut prim.normals, v);
+    push(&mut prim.tangents, v);
+    push(&mut prim.colors, v);
+    prim.uvs.iter_mut().for_each(|set| push(set, v));
+    for set in &mut prim.joint_sets {
+        push(&mut set.joints, v);
+        push(&mut set.weights, v);
+    }
+    for t in &mut prim.targets {
+        push(&mut t.positions, v);
+        push(&mut t.normals, v);
+        push(&mut t.tangents, v);
+    }
+    prim.positions.len() as u32 - 1
 }
 
 /// Generates MikkTSpace tangents for a normal-mapped primitive, first giving it flat
