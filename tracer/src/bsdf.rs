@@ -45,7 +45,9 @@
 //!   sampled; this keeps every `1/cos` finite and loses a solid angle of order 1e-6.
 //! - Lobes are sampled in proportion to their estimated albedo at `wo`, and `pdf` is the
 //!   matching mixture over the non-delta lobes; a non-delta sample returns the whole
-//!   `eval` and `pdf` (one-sample MIS between lobes).
+//!   `eval` and `pdf` (one-sample MIS between lobes). A microfacet reflection that points
+//!   below the horizon, or a refraction above it, is folded through the tangent plane
+//!   rather than lost, and `pdf` counts both ways of reaching a direction.
 //!
 //! # Energy
 //!
@@ -332,8 +334,9 @@ impl Bsdf {
     }
 
     /// Samples an incident direction from `u_lobe` (lobe choice) and `u` (direction).
-    /// `None` when no direction carries energy (a black material, a grazing `wo`, or a
-    /// sampled microfacet whose reflection or refraction points the wrong way).
+    /// `None` when no direction carries energy (a black material, a grazing `wo`, total
+    /// internal reflection where part of the light is absorbed, or a sample that grazes
+    /// the tangent plane).
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
         if !wo.is_finite() || wo.z.abs() < COS_EPS {
             return None;
@@ -554,22 +557,47 @@ impl Bsdf {
         Some((wm, cos_om, cos_im, denom))
     }
 
-    /// pdf for `wo.z > 0`: the lobe mixture over the non-delta lobes.
+    /// Density of reaching `w` (either side) by reflecting `wo` about a sampled visible
+    /// normal, D_wo(wm) / (4 wo·wm), with `wo·wm`; `None` where no visible normal does.
+    fn reflection_pdf(&self, wo: Vec3, w: Vec3) -> Option<(f32, f32)> {
+        let wm = (wo + w).try_normalize()?;
+        let cos_om = wo.dot(wm);
+        if wm.z <= 0.0 || cos_om <= 0.0 {
+            return None;
+        }
+        let pdf = microfacet::g1(wo.z, self.alpha) * microfacet::d(wm, self.alpha) / (4.0 * wo.z);
+        Some((pdf, cos_om))
+    }
+
+    /// pdf for `wo.z > 0`: the lobe mixture over the non-delta lobes. A sampled reflection
+    /// that points below the horizon, or a refraction that points above it, is mirrored
+    /// through the tangent plane (folded) instead of ending the path: every microfacet
+    /// sample then carries energy, which keeps path weights near the albedo where light is
+    /// trapped (rough glass of high IOR: about 200 bounces by total internal reflection,
+    /// and the lost samples made the weights of the others heavy-tailed). A direction is
+    /// thus reached two ways, and its density is the sum over both.
     fn pdf_local(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> f32 {
         let [p_ggx, p_diff, p_glass] = at.p;
         let glass_rough = p_glass > 0.0 && !self.glass_smooth;
         if wi.z > 0.0 {
             let mut pdf = p_diff * wi.z * FRAC_1_PI;
             if !self.smooth {
-                let wm = (wo + wi).normalize_or(Vec3::Z);
-                // Reflection through the visible-normal density: D_wo(wm) / (4 wo·wm).
-                let pdf_refl =
-                    microfacet::g1(wo.z, self.alpha) * microfacet::d(wm, self.alpha) / (4.0 * wo.z);
-                pdf += p_ggx * pdf_refl;
+                // Reflections reach `wi` directly, or folded from below the horizon.
+                let mut refl = 0.0;
+                let mut glass_refl = 0.0;
+                for w in [wi, flip(wi)] {
+                    let Some((pdf_refl, cos_om)) = self.reflection_pdf(wo, w) else {
+                        continue;
+                    };
+                    refl += pdf_refl;
+                    if glass_rough {
+                        glass_refl += fresnel::dielectric(cos_om, at.eta_rel) * pdf_refl;
+                    }
+                }
+                pdf += p_ggx * refl;
                 if glass_rough {
-                    let fr = fresnel::dielectric(wo.dot(wm).clamp(0.0, 1.0), at.eta_rel);
                     pdf += p_glass
-                        * ((1.0 - at.glass_ms) * self.glass_s * fr * pdf_refl
+                        * ((1.0 - at.glass_ms) * self.glass_s * glass_refl
                             + at.glass_ms * at.glass_ms_r * wi.z * FRAC_1_PI);
                 }
             }
@@ -579,16 +607,19 @@ impl Bsdf {
                 return 0.0;
             }
             let mut pdf = at.glass_ms * (1.0 - at.glass_ms_r) * -wi.z * FRAC_1_PI;
-            if let Some((wm, cos_om, cos_im, denom)) =
-                Self::refraction_half_vector(wo, wi, at.eta_rel)
-            {
-                let fr = fresnel::dielectric(cos_om, at.eta_rel);
-                let t = 1.0 - self.glass_s * fr;
-                let dwm_dwi = cos_im.abs() / denom;
-                pdf += (1.0 - at.glass_ms)
-                    * t
-                    * microfacet::pdf_visible_normal(wo, wm, self.alpha)
-                    * dwm_dwi;
+            // Refractions reach `wi` directly, or folded from above the horizon.
+            for w in [wi, flip(wi)] {
+                if let Some((wm, cos_om, cos_im, denom)) =
+                    Self::refraction_half_vector(wo, w, at.eta_rel)
+                {
+                    let fr = fresnel::dielectric(cos_om, at.eta_rel);
+                    let t = 1.0 - self.glass_s * fr;
+                    let dwm_dwi = cos_im.abs() / denom;
+                    pdf += (1.0 - at.glass_ms)
+                        * t
+                        * microfacet::pdf_visible_normal(wo, wm, self.alpha)
+                        * dwm_dwi;
+                }
             }
             p_glass * pdf
         }
@@ -625,11 +656,9 @@ impl Bsdf {
             });
         }
         let wm = microfacet::sample_visible_normal(wo, self.alpha, u);
+        // A reflection below the horizon is folded back above it (see `pdf_local`).
         let wi = microfacet::reflect(wo, wm);
-        if wi.z < COS_EPS {
-            return None;
-        }
-        self.continuous_sample(wo, wi, at)
+        self.continuous_sample(wo, if wi.z < 0.0 { flip(wi) } else { wi }, at)
     }
 
     /// Samples the dielectric interface: a microfacet normal (or the macro normal when
@@ -675,18 +704,22 @@ impl Bsdf {
         let uc = ((uc - at.glass_ms) / (1.0 - at.glass_ms)).clamp(0.0, 1.0);
         let wm = microfacet::sample_visible_normal(wo, self.alpha, u);
         let fr = fresnel::dielectric(wo.dot(wm).clamp(0.0, 1.0), at.eta_rel);
+        // A reflection below the horizon, or a refraction above it, is folded to its own
+        // side (see `pdf_local`) rather than ending the path.
         let wi = if uc < self.glass_s * fr {
             let wi = microfacet::reflect(wo, wm);
-            if wi.z < COS_EPS {
-                return None;
+            if wi.z < 0.0 {
+                flip(wi)
+            } else {
+                wi
             }
-            wi
         } else {
             let wi = microfacet::refract(wo, wm, at.eta_rel)?;
-            if wi.z > -COS_EPS {
-                return None;
+            if wi.z > 0.0 {
+                flip(wi)
+            } else {
+                wi
             }
-            wi
         };
         self.continuous_sample(wo, wi, at)
     }
