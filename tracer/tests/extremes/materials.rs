@@ -19,30 +19,21 @@
 use glam::{DMat4, DVec3, Vec3, Vec4};
 use tracer::bsdf::{Bsdf, SurfaceParams};
 use tracer::camera::Projection;
-use tracer::film::{Layers, SampleRange, TileBuffer, TileRect};
+use tracer::film::{Layers, TileBuffer};
 use tracer::light::Environment;
 use tracer::material::Material;
-use tracer::render::{render_region, PreparedFrame, RenderSettings};
+use tracer::render::{PreparedFrame, RenderSettings};
 use tracer::scene::{CameraDef, Scene, SceneBuilder};
 use tracer::shapes::{cube, uv_sphere};
 
 use crate::common::Rng;
-use crate::support::{assert_finite, options, prepare};
+use crate::support::{assert_finite, options, prepare, render_buffer};
 
 /// Renders the whole frame and also returns the raw sums: the film silently drops NaN or
 /// infinite samples, so a finite image alone does not prove that none occurred, and the
 /// ray count is the integrator's path-length statistic.
 fn render_counted(frame: &PreparedFrame, max_depth: u32, spp: u32) -> (Layers, TileBuffer) {
-    let settings = RenderSettings { max_depth, seed: 0 };
-    let rect = TileRect::new(0, 0, frame.width, frame.height);
-    let buf = render_region(
-        frame,
-        &settings,
-        rect,
-        SampleRange::new(0, spp),
-        16,
-        &|_| {},
-    );
+    let buf = render_buffer(frame, &RenderSettings { max_depth, seed: 0 }, spp);
     (buf.resolve(), buf)
 }
 

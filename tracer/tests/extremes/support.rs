@@ -3,7 +3,7 @@
 use std::sync::Arc;
 
 use glam::{DMat4, Vec3};
-use tracer::film::{Layers, SampleRange, TileRect};
+use tracer::film::{Layers, SampleRange, TileBuffer, TileRect};
 use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
 use tracer::scene::{Node, Scene};
 
@@ -14,8 +14,14 @@ pub fn prepare(scene: Scene, options: &FrameOptions) -> PreparedFrame {
 
 /// Renders the whole frame with `spp` samples per pixel in 16-pixel tiles.
 pub fn render(frame: &PreparedFrame, settings: &RenderSettings, spp: u32) -> Layers {
+    render_buffer(frame, settings, spp).resolve()
+}
+
+/// [`render`]'s raw sums: they count the samples dropped as NaN or infinite (which a
+/// finite resolved image cannot show) and the rays traced.
+pub fn render_buffer(frame: &PreparedFrame, settings: &RenderSettings, spp: u32) -> TileBuffer {
     let rect = TileRect::new(0, 0, frame.width, frame.height);
-    render_region(frame, settings, rect, SampleRange::new(0, spp), 16, &|_| {}).resolve()
+    render_region(frame, settings, rect, SampleRange::new(0, spp), 16, &|_| {})
 }
 
 /// Options for a `width` x `height` frame, everything else default.
