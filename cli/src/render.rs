@@ -9,12 +9,15 @@ use anyhow::{bail, Context};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
+use proto::job::Quality;
 use tracer::animation::AnimationChoice;
 use tracer::film::{SampleRange, TileRect};
 use tracer::light::{Environment, EnvironmentMap};
 use tracer::motion::Shutter;
 use tracer::output::{self, ExrMetadata};
-use tracer::render::{prepare_frame, render_region, CameraChoice, FrameOptions, RenderSettings};
+use tracer::render::{
+    prepare_frame, render_region, CameraChoice, FrameOptions, NoiseTarget, RenderSettings,
+};
 use tracer::scene::Scene;
 
 use crate::args::{
@@ -53,12 +56,26 @@ pub struct RenderArgs {
     /// Play only this animation (glTF index or name); all play together by default.
     #[arg(long, value_parser = parse_animation)]
     animation: Option<AnimationChoice>,
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 64)]
-    spp: u32,
-    /// Maximum bounces (0: emitters seen directly, 1: direct light only).
-    #[arg(long, default_value_t = 8)]
-    max_depth: u32,
+    /// A quality preset: draft, preview or final (see `tessera render --help` and
+    /// README.md); --spp, --max-depth, --noise-threshold and --min-spp override its parts.
+    #[arg(long)]
+    quality: Option<Quality>,
+    /// Samples per pixel; with a noise threshold, the most a pixel takes [default: 64, or
+    /// the preset's].
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Maximum bounces (0: emitters seen directly, 1: direct light only) [default: 8, or
+    /// the preset's].
+    #[arg(long)]
+    max_depth: Option<u32>,
+    /// Adaptive sampling: a pixel stops once its estimated relative error (Cycles'
+    /// measure; 0.01 is clean) is at most this. Off by default.
+    #[arg(long)]
+    noise_threshold: Option<f32>,
+    /// With a noise threshold, the samples every pixel takes before it may stop
+    /// [default: 16, or the preset's; at most --spp].
+    #[arg(long)]
+    min_spp: Option<u32>,
     /// Image size, WIDTHxHEIGHT.
     #[arg(long, default_value = "640x360", value_parser = parse_size)]
     size: (u32, u32),
@@ -121,16 +138,54 @@ pub fn load_scene(path: Option<&PathBuf>, demo: fn() -> Scene) -> anyhow::Result
     }
 }
 
+/// Samples a pixel takes before adaptive sampling may stop it, unless set.
+const DEFAULT_MIN_SPP: u32 = 16;
+
+/// The sampling settings of `--quality`, `--spp`, `--max-depth`, `--noise-threshold` and
+/// `--min-spp`, checked: (spp, settings).
+fn sampling(args: &RenderArgs) -> anyhow::Result<(u32, RenderSettings)> {
+    let preset = args.quality.map(Quality::settings);
+    let spp = args.spp.or(preset.map(|p| p.spp)).unwrap_or(64);
+    let max_depth = args.max_depth.or(preset.map(|p| p.max_depth)).unwrap_or(8);
+    if spp == 0 || spp > MAX_SPP {
+        bail!("--spp {spp}: must be 1..={MAX_SPP}");
+    }
+    if max_depth > MAX_DEPTH {
+        bail!("--max-depth {max_depth}: must be at most {MAX_DEPTH}");
+    }
+    let threshold = args
+        .noise_threshold
+        .or(preset.map(|p| p.noise_threshold as f32));
+    let noise = match threshold {
+        Some(t) => {
+            if !(t > 0.0 && t <= 1.0) {
+                bail!("--noise-threshold {t}: must be in (0, 1] (0.01 is clean, 0.1 rough)");
+            }
+            let min_samples = match args.min_spp {
+                Some(m) if m == 0 || m > spp => {
+                    bail!("--min-spp {m}: must be 1..=--spp ({spp})")
+                }
+                Some(m) => m,
+                None => preset.map_or(DEFAULT_MIN_SPP, |p| p.min_spp).min(spp),
+            };
+            Some(NoiseTarget {
+                threshold: t,
+                min_samples,
+            })
+        }
+        None if args.min_spp.is_some() => bail!("--min-spp needs --noise-threshold"),
+        None => None,
+    };
+    let settings = RenderSettings {
+        noise,
+        max_depth,
+        seed: args.seed,
+    };
+    Ok((spp, settings))
+}
+
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    if args.spp == 0 || args.spp > MAX_SPP {
-        bail!("--spp {}: must be 1..={MAX_SPP}", args.spp);
-    }
-    if args.max_depth > MAX_DEPTH {
-        bail!(
-            "--max-depth {}: must be at most {MAX_DEPTH}",
-            args.max_depth
-        );
-    }
+    let (spp, settings) = sampling(&args)?;
     if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
         bail!("--fps {}: must be in (0, 1000]", args.fps);
     }
@@ -180,10 +235,6 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         .map(parse_environment)
         .transpose()?;
     let load_time = t_load.elapsed();
-    let settings = RenderSettings {
-        max_depth: args.max_depth,
-        seed: args.seed,
-    };
 
     let bar = ProgressBar::new(region.area() as u64 * frames.len() as u64);
     bar.set_style(
@@ -220,17 +271,20 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             &frame,
             &settings,
             region,
-            SampleRange::new(0, args.spp),
+            SampleRange::new(0, spp),
             32,
             &|t| bar.inc(t.rect.area() as u64),
         );
         let render_time = t_render.elapsed().as_secs_f64();
 
         let layers = tile.resolve();
-        let meta = ExrMetadata::new()
-            .with("tessera/version", env!("CARGO_PKG_VERSION"))
-            .with("tessera/spp", args.spp.to_string())
-            .with("tessera/max-depth", args.max_depth.to_string())
+        let reached = layers.sampling();
+        let mut meta = ExrMetadata::new()
+            .with(ExrMetadata::VERSION, env!("CARGO_PKG_VERSION"))
+            .with(ExrMetadata::SPP, spp.to_string())
+            .with_sampling(&reached)
+            .with(ExrMetadata::RENDER_SECONDS, format!("{render_time:.3}"))
+            .with("tessera/max-depth", settings.max_depth.to_string())
             .with("tessera/frame", frame_number.to_string())
             .with("tessera/fps", args.fps.to_string())
             .with(
@@ -239,7 +293,14 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             )
             .with("tessera/motion-steps", frame.motion_steps.to_string())
             .with("tessera/seed", args.seed.to_string())
-            .with("tessera/features", frame.features.names().join(","));
+            .with(ExrMetadata::FEATURES, frame.features.names().join(","));
+        if let Some(q) = args.quality {
+            meta.set("tessera/quality", q.name());
+        }
+        if let Some(t) = settings.noise {
+            meta.set("tessera/noise-threshold", t.threshold.to_string());
+            meta.set("tessera/min-spp", t.min_samples.to_string());
+        }
         let exr = match &out {
             Output::File(path) => path.clone(),
             Output::Folder(dir) => frame_file(dir, frame_number, "exr"),
@@ -250,14 +311,20 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         output::write_preview_png(&png, (width, height), &layers, 1.0)
             .with_context(|| format!("writing {}", png.display()))?;
 
-        let paths = region.area() as f64 * args.spp as f64;
+        let paths = region.area() as f64 * reached.mean_samples;
+        let noise = reached
+            .mean_noise
+            .map_or("no noise estimate".to_string(), |e| format!("noise {e:.4}"));
         let line = format!(
-            "frame {frame_number}: {}x{} ({} px) at {} spp, {} motion step(s), in {:.2} s \
-             (prepare {:.2} s): {:.2} M samples/s, {:.2} M rays/s, {} NaN/inf samples dropped",
+            "frame {frame_number}: {}x{} ({} px) at {:.1} spp (pixels {}..={}), {noise}, \
+             {} motion step(s), in {:.2} s (prepare {:.2} s): {:.2} M samples/s, \
+             {:.2} M rays/s, {} NaN/inf samples dropped",
             region.width,
             region.height,
             region.area(),
-            args.spp,
+            reached.mean_samples,
+            reached.min_samples,
+            reached.max_samples,
             frame.motion_steps,
             render_time,
             prepare_time,
@@ -287,4 +354,95 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
 enum Output {
     File(PathBuf),
     Folder(PathBuf),
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        render: RenderArgs,
+    }
+
+    fn sampling_of(args: &[&str]) -> anyhow::Result<(u32, RenderSettings)> {
+        let cli = Cli::try_parse_from(std::iter::once("render").chain(args.iter().copied()))?;
+        sampling(&cli.render)
+    }
+
+    fn error_of(args: &[&str]) -> String {
+        format!("{:#}", sampling_of(args).unwrap_err())
+    }
+
+    #[test]
+    fn defaults_render_64_spp_without_a_noise_target() {
+        let (spp, settings) = sampling_of(&[]).unwrap();
+        assert_eq!((spp, settings.max_depth, settings.noise), (64, 8, None));
+    }
+
+    #[test]
+    fn a_quality_preset_sets_everything_and_options_override_it() {
+        let (spp, settings) = sampling_of(&["--quality", "draft"]).unwrap();
+        let draft = Quality::Draft.settings();
+        assert_eq!((spp, settings.max_depth), (draft.spp, draft.max_depth));
+        let target = settings.noise.unwrap();
+        assert_eq!(target.threshold, draft.noise_threshold as f32);
+        assert_eq!(target.min_samples, draft.min_spp);
+
+        let (spp, settings) = sampling_of(&[
+            "--quality",
+            "final",
+            "--spp",
+            "8",
+            "--max-depth",
+            "3",
+            "--noise-threshold",
+            "0.2",
+        ])
+        .unwrap();
+        assert_eq!((spp, settings.max_depth), (8, 3));
+        // The preset's minimum is cut to the maximum.
+        assert_eq!(
+            settings.noise,
+            Some(NoiseTarget {
+                threshold: 0.2,
+                min_samples: 8
+            })
+        );
+    }
+
+    #[test]
+    fn absurd_sampling_settings_are_refused_by_name() {
+        for (args, expected) in [
+            (&["--spp", "0"][..], "--spp 0"),
+            (&["--max-depth", "5000"], "--max-depth 5000"),
+            (&["--noise-threshold", "0"], "--noise-threshold 0"),
+            (&["--noise-threshold=-1"], "--noise-threshold -1"),
+            (&["--noise-threshold", "NaN"], "--noise-threshold NaN"),
+            (&["--noise-threshold", "2"], "--noise-threshold 2"),
+            (
+                &[
+                    "--noise-threshold",
+                    "0.1",
+                    "--min-spp",
+                    "100",
+                    "--spp",
+                    "64",
+                ],
+                "--min-spp 100",
+            ),
+            (
+                &["--noise-threshold", "0.1", "--min-spp", "0"],
+                "--min-spp 0",
+            ),
+            (&["--min-spp", "4"], "--min-spp needs --noise-threshold"),
+        ] {
+            let e = error_of(args);
+            assert!(e.contains(expected), "{args:?}: {e}");
+        }
+        assert!(error_of(&["--quality", "best"]).contains("draft, preview or final"));
+    }
 }

@@ -118,5 +118,5 @@ fuzz_target!(|data: &[u8]| {
         "an accepted tile reads back the same"
     );
     let mut frame = Layers::new(TileRect::new(0, 0, FRAME.0, FRAME.1));
-    frame.paste(&merge_passes(&[(layers, task.samples.len())]));
+    frame.paste(&merge_passes(&[layers]));
 });

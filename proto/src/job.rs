@@ -46,6 +46,74 @@ impl FrameRange {
     }
 }
 
+/// A named quality preset: the settings `--quality` stands for, each of which an explicit
+/// option overrides. The price of each (time, and error against a converged reference) is
+/// measured by `tessera bench` (BENCHMARKS.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum Quality {
+    /// Blocking and timing: 16 spp at most, 4 bounces, stop at error 0.1.
+    Draft,
+    /// Judging light and materials: 128 spp at most, 8 bounces, stop at error 0.03.
+    Preview,
+    /// Delivery: 1024 spp at most, 12 bounces, stop at error 0.01 (Cycles' default).
+    Final,
+}
+
+/// What a [`Quality`] preset sets.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QualitySettings {
+    /// Samples per pixel at most.
+    pub spp: u32,
+    /// Maximum bounces.
+    pub max_depth: u32,
+    /// Adaptive sampling's error target.
+    pub noise_threshold: f64,
+    /// Samples every pixel takes before it may stop.
+    pub min_spp: u32,
+}
+
+impl Quality {
+    /// Every preset, from fastest to best.
+    pub const ALL: [Quality; 3] = [Quality::Draft, Quality::Preview, Quality::Final];
+
+    /// The preset's name, as the CLI and the job spec spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Draft => "draft",
+            Quality::Preview => "preview",
+            Quality::Final => "final",
+        }
+    }
+
+    /// The settings the preset stands for.
+    pub fn settings(self) -> QualitySettings {
+        let (spp, max_depth, noise_threshold, min_spp) = match self {
+            Quality::Draft => (16, 4, 0.1, 4),
+            Quality::Preview => (128, 8, 0.03, 16),
+            Quality::Final => (1024, 12, 0.01, 32),
+        };
+        QualitySettings {
+            spp,
+            max_depth,
+            noise_threshold,
+            min_spp,
+        }
+    }
+}
+
+impl std::str::FromStr for Quality {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Quality::ALL
+            .into_iter()
+            .find(|q| q.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| format!("unknown quality {s:?}: draft, preview or final"))
+    }
+}
+
 /// An image layer of the output EXR.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -59,15 +127,22 @@ pub enum OutputLayer {
     Normal,
     /// Depth along the view axis (`Z`).
     Depth,
+    /// Samples taken per pixel (`samples`).
+    Samples,
+    /// Estimated relative error per pixel (`noise`; 1e10 where a pixel had too few
+    /// samples to tell).
+    Noise,
 }
 
 impl OutputLayer {
     /// Every layer, in file order.
-    pub const ALL: [OutputLayer; 4] = [
+    pub const ALL: [OutputLayer; 6] = [
         OutputLayer::Beauty,
         OutputLayer::Albedo,
         OutputLayer::Normal,
         OutputLayer::Depth,
+        OutputLayer::Samples,
+        OutputLayer::Noise,
     ];
 }
 
@@ -322,7 +397,7 @@ mod tests {
     fn spec_defaults_fill_missing_fields() {
         let spec: JobSpec = serde_json::from_str(r#"{"scene":"abc"}"#).unwrap();
         assert_eq!(spec, JobSpec::new("abc"));
-        assert_eq!(spec.layers.len(), 4);
+        assert_eq!(spec.layers, OutputLayer::ALL);
     }
 
     #[test]

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use glam::{Vec3, Vec4};
 use proto::{JobSpec, OutputLayer, ResultMetadata};
-use tracer::film::{Layers, TileRect, NO_HIT_DEPTH};
+use tracer::film::{Layers, TileRect, NO_HIT_DEPTH, NO_NOISE_ESTIMATE};
 use tracer::output::{self, ExrMetadata, ImageLayer};
 
 use crate::error::{Error, Result, StorageProblem};
@@ -49,23 +49,27 @@ pub fn check_tile(
         .map_err(|e| Error::BadTile(format!("tile of task {}: {e}", task.id)))
 }
 
-/// Sample-weighted average of the passes of one tile: `parts` are (pass layers, samples
-/// per pixel). Beauty and albedo average by samples; normals are summed by weight and
-/// renormalised; depth averages over the passes that hit something.
-pub fn merge_passes(parts: &[(Layers, u32)]) -> Layers {
-    if let [(only, _)] = parts {
+/// Sample-weighted average of the passes of one tile, pixel by pixel (each pass's
+/// `samples` layer says how many samples each of its pixels holds). Beauty and albedo
+/// average by samples; normals are summed by weight and renormalised; depth averages over
+/// the passes that hit something; samples add up. The noise estimates combine as the
+/// standard errors of a weighted mean do: `sqrt(Σ (n_k e_k)²) / Σ n_k` over the passes
+/// that have one (a pass of a single sample has none).
+pub fn merge_passes(parts: &[Layers]) -> Layers {
+    if let [only] = parts {
         return only.clone();
     }
-    let rect = parts[0].0.rect;
-    let total: f32 = parts.iter().map(|(_, n)| *n as f32).sum();
+    let rect = parts[0].rect;
     let mut out = Layers::new(rect);
     for i in 0..rect.area() {
         let mut beauty = Vec4::ZERO;
         let mut albedo = Vec3::ZERO;
         let mut normal = Vec3::ZERO;
         let (mut depth, mut depth_weight) = (0.0f32, 0.0f32);
-        for (layers, n) in parts {
-            let w = *n as f32;
+        let (mut total, mut noise_sq, mut noise_weight) = (0.0f32, 0.0f64, 0.0f64);
+        for layers in parts {
+            let w = layers.samples[i];
+            total += w;
             beauty += layers.beauty[i] * w;
             albedo += layers.albedo[i] * w;
             normal += layers.normal[i] * w;
@@ -73,9 +77,20 @@ pub fn merge_passes(parts: &[(Layers, u32)]) -> Layers {
                 depth += layers.depth[i] * w;
                 depth_weight += w;
             }
+            if layers.noise[i] < NO_NOISE_ESTIMATE {
+                noise_sq += (f64::from(w) * f64::from(layers.noise[i])).powi(2);
+                noise_weight += f64::from(w);
+            }
         }
-        out.beauty[i] = beauty / total;
-        out.albedo[i] = albedo / total;
+        let inv = if total > 0.0 { total.recip() } else { 0.0 };
+        out.samples[i] = total;
+        out.noise[i] = if noise_weight > 0.0 {
+            (noise_sq.sqrt() / noise_weight) as f32
+        } else {
+            NO_NOISE_ESTIMATE
+        };
+        out.beauty[i] = beauty * inv;
+        out.albedo[i] = albedo * inv;
         out.normal[i] = normal.normalize_or_zero();
         out.depth[i] = if depth_weight > 0.0 {
             depth / depth_weight
@@ -103,7 +118,7 @@ pub fn build_frame(store: &Store, spec: &JobSpec, tasks: &[TaskRow]) -> Result<L
         let mut parts = Vec::new();
         while i < tasks.len() && tasks[i].tile == tile {
             let t = &tasks[i];
-            parts.push((read_tile(store, t.job_id, t.id)?, t.samples.len()));
+            parts.push(read_tile(store, t.job_id, t.id)?);
             i += 1;
         }
         frame.paste(&merge_passes(&parts));
@@ -111,19 +126,35 @@ pub fn build_frame(store: &Store, spec: &JobSpec, tasks: &[TaskRow]) -> Result<L
     Ok(frame)
 }
 
+/// What a frame's EXR header says beyond its spec and pixels.
+pub struct FrameFacts {
+    /// Seconds the workers spent on its tiles.
+    pub render_seconds: f64,
+    /// What the scene needs from the tracer.
+    pub features: Vec<String>,
+}
+
 /// Writes the final frame: `frame_NNNN.exr` with the job's layers and `frame_NNNN.png`,
-/// both atomically.
+/// both atomically. The EXR's header says how it was rendered: the settings, the samples
+/// and estimated error reached, the render time and the scene's features.
 pub fn write_frame(
     store: &Store,
     job: u64,
     frame_no: i32,
     spec: &JobSpec,
     frame: &Layers,
+    facts: &FrameFacts,
 ) -> Result<()> {
     let size = (spec.width, spec.height);
     let meta = ExrMetadata::new()
         .with(ExrMetadata::VERSION, env!("CARGO_PKG_VERSION"))
         .with(ExrMetadata::SPP, spec.spp.to_string())
+        .with_sampling(&frame.sampling())
+        .with(
+            ExrMetadata::RENDER_SECONDS,
+            format!("{:.3}", facts.render_seconds),
+        )
+        .with(ExrMetadata::FEATURES, facts.features.join(","))
         .with(ExrMetadata::SETTINGS, serde_json::to_string(spec)?)
         .with("tessera/job", job.to_string())
         .with("tessera/frame", frame_no.to_string());
@@ -170,6 +201,8 @@ fn encode_layers(
             OutputLayer::Albedo => ImageLayer::Albedo,
             OutputLayer::Normal => ImageLayer::Normal,
             OutputLayer::Depth => ImageLayer::Depth,
+            OutputLayer::Samples => ImageLayer::Samples,
+            OutputLayer::Noise => ImageLayer::Noise,
         })
         .collect();
     output::encode_exr_layers(size, layers, meta, &wanted)
@@ -180,8 +213,10 @@ fn encode_layers(
 mod tests {
     use super::*;
 
-    fn layers(rect: TileRect, v: f32, depth: f32) -> Layers {
+    fn layers(rect: TileRect, v: f32, depth: f32, samples: f32) -> Layers {
         let mut l = Layers::new(rect);
+        l.samples.iter_mut().for_each(|s| *s = samples);
+        l.noise.iter_mut().for_each(|e| *e = 0.1);
         l.beauty
             .iter_mut()
             .for_each(|b| *b = Vec4::new(v, v * 2.0, v * 3.0, 1.0));
@@ -196,32 +231,37 @@ mod tests {
         let rect = TileRect::new(0, 0, 2, 1);
         // 1 sample of 1.0 and 3 samples of 3.0 average to 2.5.
         let merged = merge_passes(&[
-            (layers(rect, 1.0, 4.0), 1),
-            (layers(rect, 3.0, NO_HIT_DEPTH), 3),
+            layers(rect, 1.0, 4.0, 1.0),
+            layers(rect, 3.0, NO_HIT_DEPTH, 3.0),
         ]);
         assert_eq!(merged.beauty[0], Vec4::new(2.5, 5.0, 7.5, 1.0));
         assert_eq!(merged.albedo[1], Vec3::splat(2.5));
         assert_eq!(merged.normal[0], Vec3::Z);
         // Only the first pass hit: its depth stands.
         assert_eq!(merged.depth[0], 4.0);
+        assert_eq!(merged.samples[0], 4.0);
+        // Standard errors of 0.1 at 1 and 3 samples: sqrt(0.1² + 0.3²) / 4.
+        assert!((merged.noise[1] - 0.1f32.hypot(0.3) / 4.0).abs() < 1e-7);
         let none = merge_passes(&[
-            (layers(rect, 1.0, NO_HIT_DEPTH), 2),
-            (layers(rect, 1.0, NO_HIT_DEPTH), 2),
+            layers(rect, 1.0, NO_HIT_DEPTH, 2.0),
+            layers(rect, 1.0, NO_HIT_DEPTH, 2.0),
         ]);
         assert_eq!(none.depth[1], NO_HIT_DEPTH);
+        // Two halves of equal error make an error 1/√2 of it.
+        assert!((none.noise[0] - 0.1 / 2f32.sqrt()).abs() < 1e-7);
     }
 
     #[test]
     fn one_pass_is_kept_bit_for_bit() {
         let rect = TileRect::new(4, 2, 3, 2);
-        let l = layers(rect, 0.1234567, 9.87654);
-        assert_eq!(merge_passes(&[(l.clone(), 7)]), l);
+        let l = layers(rect, 0.1234567, 9.87654, 7.0);
+        assert_eq!(merge_passes(std::slice::from_ref(&l)), l);
     }
 
     #[test]
     fn layer_subset_writes_only_those_channels() {
         let rect = TileRect::new(0, 0, 4, 3);
-        let l = layers(rect, 0.5, 2.0);
+        let l = layers(rect, 0.5, 2.0, 4.0);
         let bytes = encode_layers(
             (4, 3),
             &l,

@@ -925,6 +925,29 @@ pub fn done_tasks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Ve
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 
+/// Seconds the workers spent rendering one frame's tiles (its done tasks, checks left
+/// out), as they reported.
+pub fn frame_render_seconds(conn: &Connection, job: u64, frame: i32) -> Result<f64> {
+    let ms: Option<i64> = conn.query_row(
+        "SELECT SUM(render_ms) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
+           AND check_of IS NULL",
+        params![job, frame],
+        |r| r.get(0),
+    )?;
+    Ok(ms.unwrap_or(0) as f64 / 1000.0)
+}
+
+/// What the scene of `job` needs from the tracer (its summary's `features`).
+pub fn job_scene_features(conn: &Connection, job: u64) -> Result<Vec<String>> {
+    let json: String = conn.query_row(
+        "SELECT scenes.info FROM jobs JOIN scenes ON scenes.digest = jobs.scene
+         WHERE jobs.id = ?1",
+        [job],
+        |r| r.get(0),
+    )?;
+    Ok(serde_json::from_str::<proto::SceneInfo>(&json)?.features)
+}
+
 /// The ids of one frame's done check tasks (whose tiles go once the frame is assembled).
 pub fn done_checks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<u64>> {
     let mut stmt = conn.prepare(

@@ -338,6 +338,8 @@ pub fn layer_name(l: OutputLayer) -> &'static str {
         OutputLayer::Albedo => "albedo",
         OutputLayer::Normal => "normal",
         OutputLayer::Depth => "depth",
+        OutputLayer::Samples => "samples",
+        OutputLayer::Noise => "noise",
     }
 }
 

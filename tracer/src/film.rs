@@ -1,6 +1,10 @@
 //! Tile buffers. A tile accumulates per-pixel sums, not averages, so that the buffers of
 //! two sample ranges of the same tile merge by addition and equal the buffer of the whole
 //! range within float rounding.
+//!
+//! Each pixel also sums its odd-numbered samples apart (a "half buffer"): the difference
+//! between the mean of all samples and the mean of that half estimates the pixel's error,
+//! which adaptive sampling stops on and the `noise` layer reports.
 
 use glam::{Vec3, Vec4};
 
@@ -118,6 +122,10 @@ pub struct TileBuffer {
     pub hits: Vec<u32>,
     /// Number of samples kept, per pixel (samples with NaN or infinity are dropped).
     pub samples: Vec<u32>,
+    /// Sum of RGB radiance over the kept samples whose index is odd.
+    pub half: Vec<Vec3>,
+    /// Number of those samples, per pixel.
+    pub half_samples: Vec<u32>,
     /// Samples dropped because they were NaN or infinite.
     pub dropped: u64,
     /// Rays traced, for throughput figures.
@@ -136,14 +144,16 @@ impl TileBuffer {
             depth: vec![0.0; n],
             hits: vec![0; n],
             samples: vec![0; n],
+            half: vec![Vec3::ZERO; n],
+            half_samples: vec![0; n],
             dropped: 0,
             rays: 0,
         }
     }
 
-    /// Adds one sample to the pixel at `index` (row-major within the tile); a sample with
-    /// any non-finite value is dropped whole and counted.
-    pub fn add(&mut self, index: usize, s: &SampleValue) {
+    /// Adds sample number `sample` to the pixel at `index` (row-major within the tile); a
+    /// sample with any non-finite value is dropped whole and counted.
+    pub fn add(&mut self, index: usize, sample: u32, s: &SampleValue) {
         self.rays += s.rays as u64;
         let finite = s.radiance.is_finite()
             && s.alpha.is_finite()
@@ -162,6 +172,22 @@ impl TileBuffer {
             self.hits[index] += 1;
         }
         self.samples[index] += 1;
+        if sample % 2 == 1 {
+            self.half[index] += s.radiance;
+            self.half_samples[index] += 1;
+        }
+    }
+
+    /// The estimated error of pixel `index` (see [`noise_estimate`]).
+    pub fn noise(&self, index: usize) -> f32 {
+        let (n, h) = (self.samples[index], self.half_samples[index]);
+        if h == 0 || h == n {
+            return NO_NOISE_ESTIMATE;
+        }
+        noise_estimate(
+            self.beauty[index].truncate() / n as f32,
+            self.half[index] / h as f32,
+        )
     }
 
     /// Adds another buffer of the same rectangle (another sample range).
@@ -180,6 +206,8 @@ impl TileBuffer {
             self.depth[i] += other.depth[i];
             self.hits[i] += other.hits[i];
             self.samples[i] += other.samples[i];
+            self.half[i] += other.half[i];
+            self.half_samples[i] += other.half_samples[i];
         }
         self.dropped += other.dropped;
         self.rays += other.rays;
@@ -197,6 +225,8 @@ impl TileBuffer {
             self.depth[dst..dst + w].copy_from_slice(&tile.depth[src..src + w]);
             self.hits[dst..dst + w].copy_from_slice(&tile.hits[src..src + w]);
             self.samples[dst..dst + w].copy_from_slice(&tile.samples[src..src + w]);
+            self.half[dst..dst + w].copy_from_slice(&tile.half[src..src + w]);
+            self.half_samples[dst..dst + w].copy_from_slice(&tile.half_samples[src..src + w]);
         }
         self.dropped += tile.dropped;
         self.rays += tile.rays;
@@ -225,9 +255,40 @@ impl TileBuffer {
             } else {
                 NO_HIT_DEPTH
             };
+            out.samples[i] = self.samples[i] as f32;
+            out.noise[i] = self.noise(i);
         }
         out
     }
+}
+
+/// Samples and estimated error over a set of pixels (see [`Layers::sampling`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SamplingSummary {
+    /// Mean samples per pixel.
+    pub mean_samples: f64,
+    /// Fewest samples a pixel took.
+    pub min_samples: u32,
+    /// Most samples a pixel took.
+    pub max_samples: u32,
+    /// Mean estimated error over the pixels that have an estimate; `None` if none has.
+    pub mean_noise: Option<f64>,
+}
+
+/// Written as the noise of a pixel with too few samples to estimate it (fewer than two,
+/// or all of one parity): large and finite, like [`NO_HIT_DEPTH`].
+pub const NO_NOISE_ESTIMATE: f32 = 1.0e10;
+
+/// A pixel's estimated relative error from the mean of all its samples and the mean of
+/// its odd-numbered half, as Cycles' adaptive sampling measures it (after Dammertz et al.
+/// 2010, "A hierarchical automatic stopping condition for Monte Carlo global
+/// illumination"): `Σ|I − A| / (1e-4 + sqrt(Σ I))` over R, G, B. `I − A` is half the
+/// difference of the two halves' means, so it is distributed as the error of `I` itself;
+/// dividing by the square root of the intensity weighs it as the eye does, so dark
+/// pixels need not reach the absolute error of bright ones.
+pub fn noise_estimate(mean: Vec3, half_mean: Vec3) -> f32 {
+    let difference = (mean - half_mean).abs().element_sum();
+    difference / (1e-4 + mean.element_sum().max(0.0).sqrt())
 }
 
 /// Averaged image layers of a rectangle, ready to write: the content of one EXR data
@@ -244,10 +305,16 @@ pub struct Layers {
     pub normal: Vec<Vec3>,
     /// Depth along the view axis ([`NO_HIT_DEPTH`] where nothing was hit).
     pub depth: Vec<f32>,
+    /// Samples taken per pixel (adaptive sampling stops pixels at different counts).
+    pub samples: Vec<f32>,
+    /// Estimated relative error per pixel (see [`noise_estimate`];
+    /// [`NO_NOISE_ESTIMATE`] where there were too few samples).
+    pub noise: Vec<f32>,
 }
 
 impl Layers {
-    /// Black layers for `rect`, depth at [`NO_HIT_DEPTH`].
+    /// Black layers for `rect`: depth at [`NO_HIT_DEPTH`], no samples, noise at
+    /// [`NO_NOISE_ESTIMATE`].
     pub fn new(rect: TileRect) -> Self {
         let n = rect.area();
         Self {
@@ -256,6 +323,8 @@ impl Layers {
             albedo: vec![Vec3::ZERO; n],
             normal: vec![Vec3::ZERO; n],
             depth: vec![NO_HIT_DEPTH; n],
+            samples: vec![0.0; n],
+            noise: vec![NO_NOISE_ESTIMATE; n],
         }
     }
 
@@ -269,6 +338,26 @@ impl Layers {
             self.albedo[dst..dst + w].copy_from_slice(&tile.albedo[src..src + w]);
             self.normal[dst..dst + w].copy_from_slice(&tile.normal[src..src + w]);
             self.depth[dst..dst + w].copy_from_slice(&tile.depth[src..src + w]);
+            self.samples[dst..dst + w].copy_from_slice(&tile.samples[src..src + w]);
+            self.noise[dst..dst + w].copy_from_slice(&tile.noise[src..src + w]);
+        }
+    }
+
+    /// What the samples reached over these pixels: for a frame's status and metadata.
+    pub fn sampling(&self) -> SamplingSummary {
+        let n = self.samples.len().max(1) as f64;
+        let (mut noise_sum, mut estimated) = (0.0f64, 0usize);
+        for &e in &self.noise {
+            if e < NO_NOISE_ESTIMATE {
+                noise_sum += f64::from(e);
+                estimated += 1;
+            }
+        }
+        SamplingSummary {
+            mean_samples: self.samples.iter().map(|&s| f64::from(s)).sum::<f64>() / n,
+            min_samples: self.samples.iter().copied().reduce(f32::min).unwrap_or(0.0) as u32,
+            max_samples: self.samples.iter().copied().fold(0.0, f32::max) as u32,
+            mean_noise: (estimated > 0).then(|| noise_sum / estimated as f64),
         }
     }
 
@@ -283,6 +372,8 @@ impl Layers {
             out.albedo[dst..dst + w].copy_from_slice(&self.albedo[src..src + w]);
             out.normal[dst..dst + w].copy_from_slice(&self.normal[src..src + w]);
             out.depth[dst..dst + w].copy_from_slice(&self.depth[src..src + w]);
+            out.samples[dst..dst + w].copy_from_slice(&self.samples[src..src + w]);
+            out.noise[dst..dst + w].copy_from_slice(&self.noise[src..src + w]);
         }
         out
     }
@@ -326,6 +417,7 @@ mod tests {
         let mut b = TileBuffer::new(TileRect::new(0, 0, 1, 1));
         b.add(
             0,
+            0,
             &SampleValue {
                 radiance: Vec3::ONE,
                 alpha: 1.0,
@@ -334,12 +426,14 @@ mod tests {
         );
         b.add(
             0,
+            0,
             &SampleValue {
                 radiance: Vec3::NAN,
                 ..Default::default()
             },
         );
         b.add(
+            0,
             0,
             &SampleValue {
                 depth: Some(f32::INFINITY),

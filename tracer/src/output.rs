@@ -169,6 +169,8 @@ fn check_lengths(layers: &Layers) -> Result<(), OutputError> {
         ("albedo", layers.albedo.len()),
         ("normal", layers.normal.len()),
         ("depth", layers.depth.len()),
+        ("samples", layers.samples.len()),
+        ("noise", layers.noise.len()),
     ];
     for (layer, len) in lens {
         if len != expected {

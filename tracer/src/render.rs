@@ -82,12 +82,15 @@ impl Default for FrameOptions {
 }
 
 /// Settings of the light transport itself, the same for every tile of a job.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
     /// Maximum number of bounces: 0 shows only emitters seen directly, 1 adds direct light.
     pub max_depth: u32,
     /// A user seed, mixed into every random number.
     pub seed: u32,
+    /// Adaptive sampling: each pixel stops once its estimated error is at or below this
+    /// target (and at the end of the sample range if it never is).
+    pub noise: Option<NoiseTarget>,
 }
 
 impl Default for RenderSettings {
@@ -95,7 +98,46 @@ impl Default for RenderSettings {
         Self {
             max_depth: 8,
             seed: 0,
+            noise: None,
         }
+    }
+}
+
+/// When a pixel has enough samples: its estimated error
+/// ([`noise_estimate`](crate::film::noise_estimate)) is at or below `threshold` at
+/// [`NoiseTarget::CHECKS_IN_A_ROW`] checks in a row, checked after `min_samples` and then
+/// every [`NoiseTarget::CHECK_EVERY`] samples. Whether a pixel stops depends on its own
+/// samples only, so the image is the same for any tile split; it must be rendered as one
+/// sample range starting at 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseTarget {
+    /// The error to reach (Cycles' default is 0.01; smaller is cleaner and slower).
+    pub threshold: f32,
+    /// Samples every pixel takes before it may stop: the estimate of a handful of
+    /// samples can be lucky, missing a rare bright path.
+    pub min_samples: u32,
+}
+
+impl NoiseTarget {
+    /// Samples between two checks (an even number, so both halves grow alike).
+    pub const CHECK_EVERY: u32 = 4;
+    /// Checks in a row that must find the error at the threshold. The estimate of one
+    /// check is itself noisy, and stopping at the first low one stops on luck: with one
+    /// check the demo's true mean error came out at the threshold, twice the estimate.
+    pub const CHECKS_IN_A_ROW: u32 = 2;
+
+    /// Whether a pixel with `taken` samples and estimated error `noise` may stop;
+    /// `streak` carries the pixel's checks in a row at the threshold (start it at 0).
+    pub fn reached(&self, taken: u32, noise: f32, streak: &mut u32) -> bool {
+        if taken < self.min_samples.max(2) || !taken.is_multiple_of(Self::CHECK_EVERY) {
+            return false;
+        }
+        *streak = if noise <= self.threshold {
+            *streak + 1
+        } else {
+            0
+        };
+        *streak >= Self::CHECKS_IN_A_ROW
     }
 }
 
@@ -365,9 +407,10 @@ impl PreparedFrame {
     }
 }
 
-/// Renders samples `samples` of the pixels in `rect` of `frame`. Every pixel is a pure
-/// function of (pixel, sample index, frame, seed), so any split into tiles and sample
-/// ranges gives the same result. Parallel over rows with rayon.
+/// Renders samples `samples` of the pixels in `rect` of `frame` (with a noise target, a
+/// pixel stops early once it reaches it). Every pixel is a pure function of (pixel,
+/// sample index, frame, settings), so any split into tiles and sample ranges gives the
+/// same result. Parallel over rows with rayon.
 pub fn render_tile(
     frame: &PreparedFrame,
     settings: &RenderSettings,
@@ -397,6 +440,7 @@ pub fn render_tile_cancellable(
                 if cancel.load(Ordering::Relaxed) {
                     return None;
                 }
+                let mut streak = 0;
                 for index in samples.start..samples.end {
                     let s = integrator::trace_sample(
                         frame,
@@ -405,7 +449,14 @@ pub fn render_tile_cancellable(
                         rect.y + row,
                         index,
                     );
-                    buf.add(col as usize, &s);
+                    let pixel = col as usize;
+                    buf.add(pixel, index, &s);
+                    if let Some(target) = &settings.noise {
+                        let taken = index + 1 - samples.start;
+                        if target.reached(taken, buf.noise(pixel), &mut streak) {
+                            break;
+                        }
+                    }
                 }
             }
             Some(buf)

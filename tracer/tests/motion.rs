@@ -196,6 +196,7 @@ fn prepare(scene: Scene, shutter: Shutter) -> PreparedFrame {
 
 fn render(frame: &PreparedFrame, spp: u32) -> Layers {
     let settings = RenderSettings {
+        noise: None,
         max_depth: 0,
         seed: 0,
     };
@@ -389,6 +390,7 @@ fn an_animated_light_moves_with_its_node() {
         let prepared = prepare_frame(scene.clone(), &options).unwrap();
         assert!(!prepared.motion);
         let settings = RenderSettings {
+            noise: None,
             max_depth: 1,
             seed: 0,
         };

@@ -11,7 +11,7 @@ use tracer::film::{Layers, SampleRange, TileBuffer, TileRect};
 use tracer::light::{Environment, PunctualLight};
 use tracer::material::Material;
 use tracer::render::{
-    prepare_frame, render_region, render_tile, render_tile_cancellable, FrameOptions,
+    prepare_frame, render_region, render_tile, render_tile_cancellable, FrameOptions, NoiseTarget,
     PreparedFrame, RenderSettings,
 };
 use tracer::scene::{CameraDef, Scene, SceneBuilder};
@@ -103,6 +103,7 @@ fn white_furnace_conserves_energy() {
     for (name, material) in cases {
         let f = frame(furnace(material), 40, 40);
         let settings = RenderSettings {
+            noise: None,
             max_depth: 64,
             seed: 0,
         };
@@ -172,6 +173,7 @@ fn mean_radiance(layers: &Layers) -> f64 {
 /// Mean radiance of a [`lit_floor`] scene under direct light only.
 fn direct_floor_radiance(scene: Scene) -> f64 {
     let settings = RenderSettings {
+        noise: None,
         max_depth: 1,
         seed: 0,
     };
@@ -333,7 +335,16 @@ fn an_importance_sampled_environment_map_lights_a_furnace_like_a_constant_one() 
             ..Default::default()
         };
         let f = prepare_frame(Arc::new(furnace(white.clone())), &options).unwrap();
-        render(&f, &RenderSettings { max_depth: 8, seed }, spp).resolve()
+        render(
+            &f,
+            &RenderSettings {
+                noise: None,
+                max_depth: 8,
+                seed,
+            },
+            spp,
+        )
+        .resolve()
     };
     let (sphere, _) = furnace_means(&render_with(Environment::Map(uniform), 64, 0));
     assert!((sphere - 1.0).abs() < 0.01, "uniform map furnace {sphere}");
@@ -387,4 +398,101 @@ fn alpha_masked_cut_outs_let_light_through_for_shadow_rays_too() {
         solid, 0.0,
         "an opaque part of the sheet casts a full shadow"
     );
+}
+
+/// The measured error of `layers` against `reference`, per pixel, in the units of the
+/// noise estimate: `Σ|I − R| / (1e-4 + sqrt(Σ R))` over R, G, B.
+fn measured_noise(layers: &Layers, reference: &Layers) -> Vec<f32> {
+    layers
+        .beauty
+        .iter()
+        .zip(&reference.beauty)
+        .map(|(i, r)| {
+            let (i, r) = (i.truncate(), r.truncate());
+            (i - r).abs().element_sum() / (1e-4 + r.element_sum().max(0.0).sqrt())
+        })
+        .collect()
+}
+
+fn mean(v: &[f32]) -> f64 {
+    v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64
+}
+
+#[test]
+fn adaptive_sampling_meets_its_noise_threshold_on_average() {
+    let f = frame(tracer::demo::demo_scene(), 32, 24);
+    let reference = render(&f, &RenderSettings::default(), 4096).resolve();
+    let (threshold, max_spp) = (0.05, 1024);
+    let settings = RenderSettings {
+        noise: Some(NoiseTarget {
+            threshold,
+            min_samples: 16,
+        }),
+        ..RenderSettings::default()
+    };
+    let adaptive = render(&f, &settings, max_spp).resolve();
+    let reached = adaptive.sampling();
+    let measured = mean(&measured_noise(&adaptive, &reference));
+    let estimated = reached.mean_noise.expect("every pixel has an estimate");
+    println!(
+        "threshold {threshold}: measured error {measured:.4} against a 4096-spp reference, \
+         estimated {estimated:.4}; spp mean {:.1}, min {}, max {}",
+        reached.mean_samples, reached.min_samples, reached.max_samples
+    );
+    // The reference has noise of its own: at 4096 spp about a third of the threshold's
+    // at the pixels' mean count, which the measured error includes.
+    assert!(
+        measured <= f64::from(threshold),
+        "measured {measured} above {threshold}"
+    );
+    assert!(
+        estimated <= f64::from(threshold) * 1.05,
+        "estimated {estimated}"
+    );
+    // It is adaptive: pixels stop at different counts, and all took the minimum.
+    assert!(reached.min_samples >= 16);
+    assert!(reached.mean_samples < f64::from(max_spp) * 0.75);
+    assert!(reached.max_samples > reached.min_samples);
+    // A pixel that stopped early reached the threshold.
+    for (s, e) in adaptive.samples.iter().zip(&adaptive.noise) {
+        if (*s as u32) < max_spp {
+            assert!(*e <= threshold, "stopped at {s} spp with noise {e}");
+        }
+    }
+    // For the record (printed, not asserted): the same samples spread evenly.
+    let uniform = render(
+        &f,
+        &RenderSettings::default(),
+        reached.mean_samples.round() as u32,
+    );
+    let uniform = uniform.resolve();
+    let uniform_error = mean(&measured_noise(&uniform, &reference));
+    println!(
+        "uniform at the same mean spp: measured error {uniform_error:.4}, estimated {:.4}",
+        uniform.sampling().mean_noise.unwrap()
+    );
+}
+
+#[test]
+fn adaptive_sampling_is_bit_identical_under_any_tile_split() {
+    let f = demo_frame();
+    let settings = RenderSettings {
+        noise: Some(NoiseTarget {
+            threshold: 0.1,
+            min_samples: 4,
+        }),
+        ..RenderSettings::default()
+    };
+    let rect = TileRect::new(0, 0, 24, 24);
+    let samples = SampleRange::new(0, 64);
+    let whole = render_tile(&f, &settings, rect, samples);
+    let counts: Vec<u32> = whole.samples.clone();
+    assert!(
+        counts.iter().min() < counts.iter().max(),
+        "pixels should stop at different counts: {counts:?}"
+    );
+    for tile_size in [1, 5, 16] {
+        let split = render_region(&f, &settings, rect, samples, tile_size, &|_| {});
+        assert!(whole == split, "tiles of {tile_size} differ");
+    }
 }

@@ -47,6 +47,7 @@ pub fn frame_options(lease: &Lease) -> FrameOptions {
 /// The lease's light-transport settings.
 pub fn settings(lease: &Lease) -> RenderSettings {
     RenderSettings {
+        noise: None,
         max_depth: lease.max_depth,
         seed: lease.seed,
     }
@@ -182,6 +183,7 @@ mod tests {
         assert_eq!(
             settings(&l),
             RenderSettings {
+                noise: None,
                 max_depth: 5,
                 seed: 9
             }

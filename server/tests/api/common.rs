@@ -356,6 +356,7 @@ pub fn prepared(scene: Arc<tracer::scene::Scene>, lease: &Lease) -> PreparedFram
 
 pub fn settings(lease: &Lease) -> RenderSettings {
     RenderSettings {
+        noise: None,
         max_depth: lease.max_depth,
         seed: lease.seed,
     }

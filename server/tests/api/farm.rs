@@ -96,6 +96,18 @@ async fn single_pass_frames_equal_the_direct_render_bit_for_bit() {
             exr.attribute("tessera/frame"),
             Some(frame.to_string().as_str())
         );
+        // The header says what the samples reached and how long the tiles took.
+        assert_eq!(exr.attribute("tessera/spp-mean"), Some("4.000"));
+        assert_eq!(exr.attribute("tessera/spp-min"), Some("4"));
+        let noise: f64 = exr.attribute("tessera/noise").unwrap().parse().unwrap();
+        assert!(noise > 0.0 && noise.is_finite(), "noise {noise}");
+        let seconds: f64 = exr
+            .attribute("tessera/render-seconds")
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(seconds >= 0.0);
+        assert!(exr.attribute("tessera/features").is_some());
         let png = frame_file(&s, &c, job.id, frame, "png").await;
         assert_eq!(png, encode_preview_png((24, 16), &expected, 0.0).unwrap());
         // The files sit in the job's output folder, four-digit names.

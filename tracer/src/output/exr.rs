@@ -15,16 +15,18 @@ use ::exr::meta::MetaData;
 use ::exr::prelude::traits::{read, ReadChannels, ReadLayers, WritableImage};
 
 use super::{atomic, check_lengths, check_shape, rect_text, OutputError};
-use crate::film::{Layers, TileRect};
+use crate::film::{Layers, SamplingSummary, TileRect};
 
 /// The channels of a Tessera EXR, in the order of [`Layers`]' fields: beauty `R G B A`
-/// (linear Rec.709, alpha is coverage), albedo, world-space shading normal and depth `Z`.
-pub const CHANNEL_NAMES: [&str; 11] = [
-    "R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z",
+/// (linear Rec.709, alpha is coverage), albedo, world-space shading normal, depth `Z`,
+/// samples taken per pixel and the estimated relative error `noise`.
+pub const CHANNEL_NAMES: [&str; 13] = [
+    "R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z", "samples",
+    "noise",
 ];
 
 /// Where each of [`CHANNEL_NAMES`] lives in [`Layers`].
-const SLOTS: [Slot; 11] = [
+const SLOTS: [Slot; 13] = [
     Slot::Beauty(0),
     Slot::Beauty(1),
     Slot::Beauty(2),
@@ -36,6 +38,8 @@ const SLOTS: [Slot; 11] = [
     Slot::Normal(1),
     Slot::Normal(2),
     Slot::Depth,
+    Slot::Samples,
+    Slot::Noise,
 ];
 
 /// A layer of a Tessera EXR: the channels of one of [`Layers`]' fields.
@@ -49,15 +53,21 @@ pub enum ImageLayer {
     Normal,
     /// `Z`.
     Depth,
+    /// `samples`.
+    Samples,
+    /// `noise`.
+    Noise,
 }
 
 impl ImageLayer {
     /// Every layer, in file order.
-    pub const ALL: [ImageLayer; 4] = [
+    pub const ALL: [ImageLayer; 6] = [
         ImageLayer::Beauty,
         ImageLayer::Albedo,
         ImageLayer::Normal,
         ImageLayer::Depth,
+        ImageLayer::Samples,
+        ImageLayer::Noise,
     ];
 }
 
@@ -68,6 +78,8 @@ enum Slot {
     Albedo(usize),
     Normal(usize),
     Depth,
+    Samples,
+    Noise,
 }
 
 impl Slot {
@@ -78,6 +90,8 @@ impl Slot {
             Slot::Albedo(_) => ImageLayer::Albedo,
             Slot::Normal(_) => ImageLayer::Normal,
             Slot::Depth => ImageLayer::Depth,
+            Slot::Samples => ImageLayer::Samples,
+            Slot::Noise => ImageLayer::Noise,
         }
     }
 
@@ -88,6 +102,8 @@ impl Slot {
             Slot::Albedo(c) => layers.albedo[i][c],
             Slot::Normal(c) => layers.normal[i][c],
             Slot::Depth => layers.depth[i],
+            Slot::Samples => layers.samples[i],
+            Slot::Noise => layers.noise[i],
         }
     }
 
@@ -98,6 +114,8 @@ impl Slot {
             Slot::Albedo(c) => layers.albedo[i][c] = v,
             Slot::Normal(c) => layers.normal[i][c] = v,
             Slot::Depth => layers.depth[i] = v,
+            Slot::Samples => layers.samples[i] = v,
+            Slot::Noise => layers.noise[i] = v,
         }
     }
 }
@@ -123,16 +141,40 @@ pub struct ExrMetadata {
 impl ExrMetadata {
     /// Tessera version that rendered the image.
     pub const VERSION: &'static str = "tessera/version";
-    /// Samples per pixel.
+    /// Samples per pixel asked for (the most any pixel takes).
     pub const SPP: &'static str = "tessera/spp";
     /// The render settings (the job's settings, serialised).
     pub const SETTINGS: &'static str = "tessera/settings";
     /// The scene features the tracer enabled.
     pub const FEATURES: &'static str = "tessera/features";
+    /// Mean samples per pixel reached.
+    pub const SPP_MEAN: &'static str = "tessera/spp-mean";
+    /// Fewest samples a pixel took.
+    pub const SPP_MIN: &'static str = "tessera/spp-min";
+    /// Most samples a pixel took.
+    pub const SPP_MAX: &'static str = "tessera/spp-max";
+    /// Mean estimated relative error over the pixels (absent when no pixel had enough
+    /// samples for an estimate).
+    pub const NOISE: &'static str = "tessera/noise";
+    /// Seconds spent rendering the image (summed over its tiles on a farm).
+    pub const RENDER_SECONDS: &'static str = "tessera/render-seconds";
 
     /// No attributes.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// `self` with what the samples reached ([`SPP_MEAN`](Self::SPP_MEAN),
+    /// [`SPP_MIN`](Self::SPP_MIN), [`SPP_MAX`](Self::SPP_MAX), [`NOISE`](Self::NOISE)).
+    pub fn with_sampling(self, s: &SamplingSummary) -> Self {
+        let out = self
+            .with(Self::SPP_MEAN, format!("{:.3}", s.mean_samples))
+            .with(Self::SPP_MIN, s.min_samples.to_string())
+            .with(Self::SPP_MAX, s.max_samples.to_string());
+        match s.mean_noise {
+            Some(e) => out.with(Self::NOISE, format!("{e:.6}")),
+            None => out,
+        }
     }
 
     /// `self` with `name` set to `value`.

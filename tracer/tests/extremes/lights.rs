@@ -25,6 +25,7 @@ const RHO: f64 = 0.8;
 
 /// Direct light only: the closed forms below are for one bounce.
 const DIRECT: RenderSettings = RenderSettings {
+    noise: None,
     max_depth: 1,
     seed: 0,
 };

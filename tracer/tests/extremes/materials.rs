@@ -33,7 +33,15 @@ use crate::support::{assert_finite, options, prepare, render_buffer};
 /// infinite samples, so a finite image alone does not prove that none occurred, and the
 /// ray count is the integrator's path-length statistic.
 fn render_counted(frame: &PreparedFrame, max_depth: u32, spp: u32) -> (Layers, TileBuffer) {
-    let buf = render_buffer(frame, &RenderSettings { max_depth, seed: 0 }, spp);
+    let buf = render_buffer(
+        frame,
+        &RenderSettings {
+            noise: None,
+            max_depth,
+            seed: 0,
+        },
+        spp,
+    );
     (buf.resolve(), buf)
 }
 

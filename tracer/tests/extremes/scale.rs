@@ -437,6 +437,7 @@ fn enclosure_radiance(l: f64, a: f64, max_depth: u32) -> f64 {
 #[test]
 fn camera_inside_closed_objects_sees_the_analytic_radiance() {
     let settings = RenderSettings {
+        noise: None,
         max_depth: 12,
         ..Default::default()
     };
@@ -553,6 +554,7 @@ fn rectangle_form_factor(x: f64, z: f64, (hx, hz, c): (f64, f64, f64)) -> f64 {
 fn a_ceiling_lit_by_a_lamp_just_below_it_matches_the_form_factor() {
     // Direct light only: the ceiling's radiance is albedo x form factor, pixel by pixel.
     let settings = RenderSettings {
+        noise: None,
         max_depth: 1,
         ..Default::default()
     };

@@ -33,6 +33,7 @@ const SPP: u32 = 16;
 
 /// Two bounces: every object and its motion shows, with less caustic noise than eight.
 const SHORT: RenderSettings = RenderSettings {
+    noise: None,
     max_depth: 2,
     seed: 0,
 };
@@ -275,6 +276,7 @@ const RHO: f64 = 0.8;
 
 /// Direct light only: the floor's closed forms are for one bounce.
 const DIRECT: RenderSettings = RenderSettings {
+    noise: None,
     max_depth: 1,
     seed: 0,
 };

@@ -357,6 +357,7 @@ pub fn direct_frame(glb: &[u8], spec: &JobSpec, frame: i32) -> Layers {
     };
     let prepared = prepare_frame(scene, &options).unwrap();
     let settings = RenderSettings {
+        noise: None,
         max_depth: spec.max_depth,
         seed: spec.seed,
     };
