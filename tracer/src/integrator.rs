@@ -1,5 +1,6 @@
 //! Unidirectional path tracing with next-event estimation and multiple importance
-//! sampling (power heuristic), Russian roulette, and no NaN or infinity on the film.
+//! sampling (power heuristic), Russian roulette and splitting, and no NaN or infinity on
+//! the film.
 
 use glam::{Vec2, Vec3, Vec4};
 
@@ -175,6 +176,54 @@ fn consistent_side(sp: &SurfacePoint, wi: Vec3, wi_local: Vec3) -> bool {
     (wi.dot(sp.ng) > 0.0) == (wi_local.z > 0.0)
 }
 
+/// A path between two bounces: everything needed to continue it, so that a path that
+/// splits (see [`SPLIT_AT`]) can leave its copies for later.
+#[derive(Clone)]
+struct PathState {
+    ray: Ray,
+    /// Bounces so far (0: the camera ray).
+    depth: u32,
+    throughput: Vec3,
+    /// Product of η² over the refractions so far: the BTDF scales radiance by 1/η² on the
+    /// way into a denser medium, which is not energy lost; Russian roulette and splitting
+    /// look at `throughput · eta_scale` so a path inside glass is not killed for that
+    /// factor (and its survivors weighted up by η², a firefly per escaping path), as in
+    /// pbrt-v4.
+    eta_scale: f32,
+    /// pdf of the BSDF sample that produced `ray` (for MIS on emitters it hits), and
+    /// whether it came from a delta lobe (no MIS: lights could not have sampled it).
+    prev_pdf: f32,
+    prev_delta: bool,
+    prev_p: Vec3,
+    sampler: PixelSampler,
+}
+
+/// Splitting: a path whose throughput (times `eta_scale`) reaches this is split into
+/// that many copies, each carrying its share. Russian roulette keeps the throughput of
+/// a surviving path at 1 or above, and this keeps it below `SPLIT_AT`, a weight window
+/// as in particle transport. Without it, a path trapped for hundreds of bounces (rough
+/// glass of IOR 10 reflects everything but directions near the normal back inside)
+/// multiplies hundreds of per-bounce weights that only average to the albedo: most
+/// paths end with little and rare ones carry the rest, and any practical sample count
+/// underestimates (a white furnace read 0.78). Ordinary bounces weigh at most about 1, so
+/// this rarely triggers elsewhere.
+const SPLIT_AT: f32 = 2.0;
+/// Copies one split may make.
+const MAX_SPLIT: u32 = 8;
+/// Copies one camera sample may make in all: bounds its time in the worst case (not
+/// splitting is never wrong, only noisier).
+const MAX_BRANCHES: u32 = 1024;
+
+/// What one camera sample has gathered so far, over all of its paths.
+struct SampleWalk {
+    out: SampleValue,
+    albedo_done: bool,
+    /// Copies of split paths not yet traced.
+    pending: Vec<PathState>,
+    /// Copies made so far.
+    branches: u32,
+}
+
 /// Traces camera sample `index` of pixel (`x`, `y`).
 pub fn trace_sample(
     frame: &PreparedFrame,
@@ -191,46 +240,66 @@ pub fn trace_sample(
     );
     // Owen-scrambled Sobol points stratify this dimension over the pixel's samples too.
     let time = if frame.motion { sampler.next_1d() } else { 0.0 };
-    let mut ray = frame.camera.generate_ray(film, time);
+    let ray = frame.camera.generate_ray(film, time);
     let view_axis = frame
         .camera
         .to_world_at(time)
         .transform_vector3(Vec3::NEG_Z)
         .normalize();
 
-    let mut out = SampleValue::default();
-    let mut radiance = Vec3::ZERO;
-    let mut throughput = Vec3::ONE;
-    // pdf of the BSDF sample that produced `ray` (for MIS on emitters it hits), and
-    // whether it came from a delta lobe (no MIS: lights could not have sampled it).
-    let mut prev_pdf = 0.0f32;
-    let mut prev_delta = true;
-    let mut prev_p = ray.origin;
-    let mut albedo_done = false;
-    // Product of η² over the refractions so far: the BTDF scales radiance by 1/η² on the
-    // way into a denser medium, which is not energy lost; Russian roulette looks at
-    // `throughput · eta_scale` so a path inside glass is not killed for that factor (and
-    // its survivors weighted up by η², a firefly per escaping path), as in pbrt-v4.
-    let mut eta_scale = 1.0f32;
+    let mut walk = SampleWalk {
+        out: SampleValue::default(),
+        albedo_done: false,
+        pending: Vec::new(),
+        branches: 0,
+    };
+    let mut next = Some(PathState {
+        ray,
+        depth: 0,
+        throughput: Vec3::ONE,
+        eta_scale: 1.0,
+        prev_pdf: 0.0,
+        prev_delta: true,
+        prev_p: ray.origin,
+        sampler,
+    });
+    while let Some(path) = next {
+        trace_path(frame, settings, view_axis, path, &mut walk);
+        next = walk.pending.pop();
+    }
+    walk.out
+}
 
-    for depth in 0..=settings.max_depth {
+/// Follows one path from its state `s` until it ends, adding what it gathers to `walk`.
+fn trace_path(
+    frame: &PreparedFrame,
+    settings: &RenderSettings,
+    view_axis: Vec3,
+    mut s: PathState,
+    walk: &mut SampleWalk,
+) {
+    let out = &mut walk.out;
+    while s.depth <= settings.max_depth {
+        let depth = s.depth;
+        let ray = s.ray;
+        let sampler = &mut s.sampler;
         sampler.start_dimension(CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
         out.rays += 1;
         let Some(hit) = frame.intersect(&ray, f32::INFINITY) else {
             // The environment.
             let le = frame.lights.environment().radiance(ray.dir);
             if le != Vec3::ZERO {
-                let w = if prev_delta {
+                let w = if s.prev_delta {
                     1.0
                 } else {
-                    power_heuristic(prev_pdf, frame.lights.pdf_environment(ray.dir))
+                    power_heuristic(s.prev_pdf, frame.lights.pdf_environment(ray.dir))
                 };
-                radiance += throughput * le * w;
+                out.radiance += s.throughput * le * w;
             }
-            if !albedo_done {
+            if !walk.albedo_done {
                 out.albedo = le;
             }
-            break;
+            return;
         };
         let sp = surface_point(frame, &ray, &hit);
         let wo = -ray.dir.normalize();
@@ -244,25 +313,25 @@ pub fn trace_sample(
         // materials, seen from the front only).
         let le = sp.material.emission;
         if le != Vec3::ZERO && (sp.front || !sp.single_sided) {
-            let w = if prev_delta {
+            let w = if s.prev_delta {
                 1.0
             } else {
                 let light_pdf =
                     frame
                         .lights
-                        .pdf_triangle(hit.instance, hit.triangle, prev_p, sp.p, sp.ng);
-                power_heuristic(prev_pdf, light_pdf)
+                        .pdf_triangle(hit.instance, hit.triangle, s.prev_p, sp.p, sp.ng);
+                power_heuristic(s.prev_pdf, light_pdf)
             };
-            radiance += throughput * le * w;
+            out.radiance += s.throughput * le * w;
         }
 
         let bsdf = Bsdf::new(sp.material.surface);
-        if !albedo_done && !bsdf.is_delta() {
+        if !walk.albedo_done && !bsdf.is_delta() {
             out.albedo = bsdf.albedo();
-            albedo_done = true;
+            walk.albedo_done = true;
         }
         if depth == settings.max_depth {
-            break;
+            return;
         }
         let wo_local = sp.frame.to_local(wo);
 
@@ -305,7 +374,7 @@ pub fn trace_sample(
                             } else {
                                 power_heuristic(ls.pdf, bsdf_pdf)
                             };
-                            radiance += throughput * f * le * (w / ls.pdf);
+                            out.radiance += s.throughput * f * le * (w / ls.pdf);
                         }
                     }
                 }
@@ -316,18 +385,18 @@ pub fn trace_sample(
         let u_lobe = sampler.next_1d();
         let u_dir = sampler.next_2d();
         let Some(bs) = bsdf.sample(wo_local, u_lobe, u_dir) else {
-            break;
+            return;
         };
         if !(bs.pdf > 0.0) {
-            break;
+            return;
         }
         let wi = sp.frame.to_world(bs.wi);
         if !consistent_side(&sp, wi, bs.wi) {
-            break;
+            return;
         }
-        throughput *= bs.f * (bs.wi.z.abs() / bs.pdf);
-        if !throughput.is_finite() || throughput == Vec3::ZERO {
-            break;
+        s.throughput *= bs.f * (bs.wi.z.abs() / bs.pdf);
+        if !s.throughput.is_finite() || s.throughput == Vec3::ZERO {
+            return;
         }
         if bs.wi.z * wo_local.z < 0.0 {
             let eta_rel = if wo_local.z > 0.0 {
@@ -335,24 +404,34 @@ pub fn trace_sample(
             } else {
                 1.0 / bsdf.eta()
             };
-            eta_scale *= eta_rel * eta_rel;
+            s.eta_scale *= eta_rel * eta_rel;
         }
-        prev_pdf = bs.pdf;
-        prev_delta = bs.delta;
-        prev_p = sp.p;
-        ray = spawn(&sp, wi, ray.time);
+        s.prev_pdf = bs.pdf;
+        s.prev_delta = bs.delta;
+        s.prev_p = sp.p;
+        s.ray = spawn(&sp, wi, ray.time);
+        s.depth += 1;
 
         // Russian roulette once the path has a few bounces.
-        if depth + 1 >= RR_START_DEPTH {
-            let survive = (throughput.max_element() * eta_scale).min(1.0);
-            if sampler.next_1d() >= survive {
-                break;
+        let weight = s.throughput.max_element() * s.eta_scale;
+        if s.depth >= RR_START_DEPTH && weight < 1.0 {
+            if sampler.next_1d() >= weight {
+                return;
             }
-            throughput /= survive;
+            s.throughput /= weight;
+        } else if weight >= SPLIT_AT && walk.branches < MAX_BRANCHES {
+            let copies = (weight as u32)
+                .min(MAX_SPLIT)
+                .min(MAX_BRANCHES - walk.branches + 1);
+            s.throughput /= copies as f32;
+            for _ in 1..copies {
+                walk.branches += 1;
+                let mut copy = s.clone();
+                copy.sampler = s.sampler.branch(walk.branches);
+                walk.pending.push(copy);
+            }
         }
     }
-    out.radiance = radiance;
-    out
 }
 
 /// Radiance leaving emissive triangle `triangle` of `instance` at barycentrics (b1, b2)

@@ -127,6 +127,16 @@ impl PixelSampler {
         self.dimension = dimension;
     }
 
+    /// An independent sampler for copy `branch` of a split path, at the same dimension:
+    /// the copies must not repeat each other's choices, and remain a pure function of
+    /// the sample and the order in which the path split.
+    pub fn branch(&self, branch: u32) -> Self {
+        Self {
+            pixel_seed: hash_combine(self.pixel_seed, 0xb5ad_4ece ^ branch),
+            ..*self
+        }
+    }
+
     /// The next dimension pair as a point in [0,1)².
     pub fn next_2d(&mut self) -> Vec2 {
         let seed = hash_combine(self.pixel_seed, self.dimension);
