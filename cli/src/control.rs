@@ -226,11 +226,16 @@ pub fn job_details(j: &JobStatus, frames: &FrameList, now_ms: i64) -> String {
                 f.frame.to_string(),
                 frame_state_name(f.state).to_string(),
                 format!("{}/{}", f.tasks_done, f.tasks_total),
+                f.spp_mean.map_or("-".into(), |s| format!("{s:.1}")),
+                f.noise.map_or("-".into(), |e| format!("{e:.4}")),
                 f.file.clone(),
             ]
         })
         .collect();
-    out.push_str(&table(&["FRAME", "STATE", "TASKS", "FILE"], &rows));
+    out.push_str(&table(
+        &["FRAME", "STATE", "TASKS", "SPP", "NOISE", "FILE"],
+        &rows,
+    ));
     out
 }
 
@@ -439,6 +444,8 @@ mod tests {
                     state: FrameState::Done,
                     tasks_total: 8,
                     tasks_done: 8,
+                    spp_mean: Some(37.25),
+                    noise: Some(0.0123),
                     file: "frame_0001.exr".into(),
                 },
                 FrameStatus {
@@ -446,6 +453,8 @@ mod tests {
                     state: FrameState::Rendering,
                     tasks_total: 8,
                     tasks_done: 3,
+                    spp_mean: None,
+                    noise: None,
                     file: "frame_0002.exr".into(),
                 },
             ],
@@ -464,9 +473,9 @@ mod tests {
         assert!(text.contains("created 1m 00s ago"), "{text}");
         assert!(
             text.ends_with(
-                "FRAME  STATE      TASKS  FILE\n\
-                 1      done       8/8    frame_0001.exr\n\
-                 2      rendering  3/8    frame_0002.exr"
+                "FRAME  STATE      TASKS  SPP   NOISE   FILE\n\
+                 1      done       8/8    37.2  0.0123  frame_0001.exr\n\
+                 2      rendering  3/8    -     -       frame_0002.exr"
             ),
             "{text}"
         );

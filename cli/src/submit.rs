@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
+use proto::job::Quality;
 use proto::{CameraSpec, JobSpec, SceneInfo};
 use tracer::motion::Shutter;
 use tracer::render::CameraChoice;
@@ -25,9 +26,21 @@ pub struct JobArgs {
     /// Frames per second: frame f shows time f / fps [default: 24].
     #[arg(long)]
     pub fps: Option<f64>,
-    /// Samples per pixel [default: 64].
+    /// A quality preset: draft, preview or final (README.md lists what each sets);
+    /// --spp, --max-depth, --noise-threshold and --min-spp override its parts.
+    #[arg(long)]
+    pub quality: Option<Quality>,
+    /// Samples per pixel; with a noise threshold, the most a pixel takes [default: 64].
     #[arg(long)]
     pub spp: Option<u32>,
+    /// Adaptive sampling: a pixel stops once its estimated relative error is at most
+    /// this (0.01 is clean, 0.1 rough) [default: off].
+    #[arg(long)]
+    pub noise_threshold: Option<f64>,
+    /// With a noise threshold, the samples every pixel takes before it may stop
+    /// [default: 16, or the preset's; at most --spp].
+    #[arg(long)]
+    pub min_spp: Option<u32>,
     /// Image size WIDTHxHEIGHT [default: 1280x720].
     #[arg(long, value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
@@ -83,8 +96,23 @@ impl JobArgs {
         if let Some((w, h)) = self.size {
             (spec.width, spec.height) = (w, h);
         }
+        if let Some(q) = self.quality {
+            let preset = q.settings();
+            spec.spp = preset.spp;
+            spec.max_depth = preset.max_depth;
+            spec.noise_threshold = Some(preset.noise_threshold);
+            spec.min_spp = Some(preset.min_spp);
+        }
         if let Some(spp) = self.spp {
             spec.spp = spp;
+            // A preset's minimum is cut to an explicit maximum.
+            spec.min_spp = spec.min_spp.map(|m| m.min(spp));
+        }
+        if let Some(t) = self.noise_threshold {
+            spec.noise_threshold = Some(t);
+        }
+        if self.min_spp.is_some() {
+            spec.min_spp = self.min_spp;
         }
         if let Some(depth) = self.max_depth {
             spec.max_depth = depth;

@@ -179,6 +179,14 @@ pub struct JobSpec {
     /// Maximum bounces (default 8).
     #[serde(default = "default_max_depth")]
     pub max_depth: u32,
+    /// Adaptive sampling: each pixel stops once its estimated relative error is at most
+    /// this (0 < e <= 1; default: off, every pixel takes `spp`). Needs `sample_passes` 1.
+    #[serde(default)]
+    pub noise_threshold: Option<f64>,
+    /// With a noise threshold, the samples every pixel takes before it may stop (1 to
+    /// `spp`; default 16, or `spp` if lower).
+    #[serde(default)]
+    pub min_spp: Option<u32>,
     /// Seed mixed into every random number (default 0).
     #[serde(default)]
     pub seed: u32,
@@ -223,6 +231,8 @@ impl JobSpec {
             camera: CameraSpec::Default,
             spp: default_spp(),
             max_depth: default_max_depth(),
+            noise_threshold: None,
+            min_spp: None,
             seed: 0,
             shutter: [0.0, 0.0],
             motion_steps: None,
@@ -361,7 +371,7 @@ pub enum FrameState {
 }
 
 /// One frame of a job.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct FrameStatus {
     /// Frame number.
@@ -372,12 +382,17 @@ pub struct FrameStatus {
     pub tasks_total: u64,
     /// Tasks accepted.
     pub tasks_done: u64,
+    /// Mean samples per pixel the frame reached, once assembled.
+    pub spp_mean: Option<f64>,
+    /// Mean estimated relative error of its pixels, once assembled (absent where no
+    /// pixel had enough samples to tell).
+    pub noise: Option<f64>,
     /// The EXR's file name in the job's output folder (`frame_0001.exr`).
     pub file: String,
 }
 
 /// `GET /jobs/{id}/frames`.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct FrameList {
     /// Frames in order.

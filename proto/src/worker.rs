@@ -129,7 +129,7 @@ pub struct SampleSpan {
 
 /// Everything a worker needs to render one task with the tracer: `FrameOptions` (frame,
 /// fps, size, camera, shutter, motion steps, animation), `RenderSettings` (max depth,
-/// seed), the tile and the sample range.
+/// seed, noise target), the tile and the sample range.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Lease {
@@ -159,6 +159,12 @@ pub struct Lease {
     pub max_depth: u32,
     /// Seed.
     pub seed: u32,
+    /// Adaptive sampling's error target, if the job set one.
+    #[serde(default)]
+    pub noise_threshold: Option<f64>,
+    /// With a noise threshold, the samples every pixel takes before it may stop.
+    #[serde(default)]
+    pub min_spp: u32,
     /// The tile to render.
     pub tile: Rect,
     /// The samples to render.

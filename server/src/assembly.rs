@@ -9,7 +9,7 @@ use std::path::Path;
 
 use glam::{Vec3, Vec4};
 use proto::{JobSpec, OutputLayer, ResultMetadata};
-use tracer::film::{Layers, TileRect, NO_HIT_DEPTH, NO_NOISE_ESTIMATE};
+use tracer::film::{Layers, SamplingSummary, TileRect, NO_HIT_DEPTH, NO_NOISE_ESTIMATE};
 use tracer::output::{self, ExrMetadata, ImageLayer};
 
 use crate::error::{Error, Result, StorageProblem};
@@ -126,8 +126,10 @@ pub fn build_frame(store: &Store, spec: &JobSpec, tasks: &[TaskRow]) -> Result<L
     Ok(frame)
 }
 
-/// What a frame's EXR header says beyond its spec and pixels.
+/// What a frame's EXR header says beyond its spec.
 pub struct FrameFacts {
+    /// What its samples reached.
+    pub reached: SamplingSummary,
     /// Seconds the workers spent on its tiles.
     pub render_seconds: f64,
     /// What the scene needs from the tracer.
@@ -149,7 +151,7 @@ pub fn write_frame(
     let meta = ExrMetadata::new()
         .with(ExrMetadata::VERSION, env!("CARGO_PKG_VERSION"))
         .with(ExrMetadata::SPP, spec.spp.to_string())
-        .with_sampling(&frame.sampling())
+        .with_sampling(&facts.reached)
         .with(
             ExrMetadata::RENDER_SECONDS,
             format!("{:.3}", facts.render_seconds),

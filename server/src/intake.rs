@@ -138,15 +138,13 @@ fn judge(
 /// marked assembled, then its tile files removed.
 pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     let _guard = app.assembly.lock().unwrap_or_else(|p| p.into_inner());
-    let (spec, tasks, assembled, facts) = app.db.with(|c| -> Result<_> {
+    let (spec, tasks, assembled, render_seconds, features) = app.db.with(|c| -> Result<_> {
         Ok((
             scheduler::job_spec(c, job)?,
             scheduler::done_tasks_of_frame(c, job, frame)?,
             is_assembled(c, job, frame)?,
-            assembly::FrameFacts {
-                render_seconds: scheduler::frame_render_seconds(c, job, frame)?,
-                features: scheduler::job_scene_features(c, job)?,
-            },
+            scheduler::frame_render_seconds(c, job, frame)?,
+            scheduler::job_scene_features(c, job)?,
         ))
     })?;
     // Another caller (the upload that completed it, or the sweeper) got here first.
@@ -154,10 +152,15 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
         return Ok(());
     }
     let layers = assembly::build_frame(&app.store, &spec, &tasks)?;
+    let facts = assembly::FrameFacts {
+        reached: layers.sampling(),
+        render_seconds,
+        features,
+    };
     assembly::write_frame(&app.store, job, frame, &spec, &layers, &facts)?;
     let now = now_ms();
     app.db
-        .with(|c| scheduler::mark_assembled(c, job, frame, now))?;
+        .with(|c| scheduler::mark_assembled(c, job, frame, now, &facts.reached))?;
     let checks = app
         .db
         .with(|c| scheduler::done_checks_of_frame(c, job, frame))?;

@@ -102,6 +102,11 @@ const MIGRATIONS: &[&str] = &[
     ALTER TABLE workers ADD COLUMN quarantined_ms INTEGER;   -- proven wrong: no more work
     ALTER TABLE workers ADD COLUMN quarantine_reason TEXT;
     "#,
+    // 4: what an assembled frame reached (adaptive sampling stops pixels early).
+    r#"
+    ALTER TABLE frames ADD COLUMN spp_mean REAL;
+    ALTER TABLE frames ADD COLUMN noise REAL;   -- mean estimated error; NULL: no estimate
+    "#,
 ];
 
 /// The schema version this build writes.

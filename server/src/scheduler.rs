@@ -6,7 +6,7 @@
 
 use proto::{FailureAck, JobSpec, Lease, Rect, SampleSpan, TaskToken};
 use rusqlite::{params, Connection, OptionalExtension, Transaction};
-use tracer::film::{SampleRange, TileRect};
+use tracer::film::{SampleRange, SamplingSummary, TileRect};
 
 use crate::error::{Error, Result};
 use crate::spec::Plan;
@@ -364,6 +364,8 @@ pub fn lease(
         animation: spec.animation,
         max_depth: spec.max_depth,
         seed: spec.seed,
+        noise_threshold: spec.noise_threshold,
+        min_spp: spec.min_spp.unwrap_or(0),
         tile: Rect {
             x: task.rect.x,
             y: task.rect.y,
@@ -893,11 +895,18 @@ pub fn delete_job(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
 }
 
 /// Marks a frame assembled.
-pub fn mark_assembled(conn: &mut Connection, job: u64, frame: i32, now: i64) -> Result<()> {
+pub fn mark_assembled(
+    conn: &mut Connection,
+    job: u64,
+    frame: i32,
+    now: i64,
+    reached: &SamplingSummary,
+) -> Result<()> {
     let tx = conn.transaction()?;
     tx.execute(
-        "UPDATE frames SET assembled_ms = ?3 WHERE job_id = ?1 AND frame = ?2",
-        params![job, frame, now],
+        "UPDATE frames SET assembled_ms = ?3, spp_mean = ?4, noise = ?5
+         WHERE job_id = ?1 AND frame = ?2",
+        params![job, frame, now, reached.mean_samples, reached.mean_noise],
     )?;
     log(&tx, now, Some(job), "frame_assembled", &frame.to_string())?;
     update_finished(&tx, job, now)?;

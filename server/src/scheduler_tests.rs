@@ -216,7 +216,13 @@ fn failures_requeue_until_max_attempts_then_fail_the_job_while_others_finish() {
     assert_eq!((status.state, status.tasks.done), (JobState::Failed, 7));
     // Frame 2 is complete but not yet written: the job is not finished until it is.
     assert_eq!(status.finished_ms, None);
-    mark_assembled(&mut c, j, 2, 13).unwrap();
+    let reached = SamplingSummary {
+        mean_samples: 4.0,
+        min_samples: 4,
+        max_samples: 4,
+        mean_noise: Some(0.05),
+    };
+    mark_assembled(&mut c, j, 2, 13, &reached).unwrap();
     let status = job_status(&c, j, 14).unwrap();
     assert_eq!(
         (status.state, status.frames_done, status.finished_ms),

@@ -103,6 +103,9 @@ pub fn default_tile_size(spp_per_pass: u32) -> u32 {
     s
 }
 
+/// Samples a pixel takes before adaptive sampling may stop it, unless the job says.
+pub const DEFAULT_MIN_SPP: u32 = 16;
+
 /// Checks `spec` against the limits and `scene`, and plans its tasks.
 pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan, FieldError> {
     if spec.scene != scene.digest {
@@ -258,6 +261,33 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
                 spec.sample_passes
             ),
         );
+    }
+    match (spec.noise_threshold, spec.min_spp) {
+        (Some(t), _) if !(t.is_finite() && t > 0.0 && t <= 1.0) => {
+            return bad(
+                "noise_threshold",
+                format!("must be above 0 and at most 1 (0.01 is clean, 0.1 rough), got {t}"),
+            );
+        }
+        (Some(_), _) if spec.sample_passes != 1 => {
+            return bad(
+                "noise_threshold",
+                format!(
+                    "needs sample_passes 1 (a pixel decides when to stop over all its \
+                     samples), got {}",
+                    spec.sample_passes
+                ),
+            );
+        }
+        (Some(_), Some(m)) if m == 0 || m > spec.spp => {
+            return bad(
+                "min_spp",
+                format!("must be 1 to spp ({}), got {m}", spec.spp),
+            );
+        }
+        (Some(_), None) => spec.min_spp = Some(DEFAULT_MIN_SPP.min(spec.spp)),
+        (None, Some(_)) => return bad("min_spp", "needs a noise_threshold"),
+        _ => {}
     }
     let tile_size = match spec.tile_size {
         Some(s) if !(MIN_TILE_SIZE..=MAX_TILE_SIZE).contains(&s) => {
@@ -464,6 +494,40 @@ mod tests {
             ("fps", Box::new(|s| s.fps = f64::NAN)),
             ("fps", Box::new(|s| s.fps = MAX_FPS * 2.0)),
             ("max_depth", Box::new(|s| s.max_depth = MAX_DEPTH + 1)),
+            (
+                "noise_threshold",
+                Box::new(|s| s.noise_threshold = Some(0.0)),
+            ),
+            (
+                "noise_threshold",
+                Box::new(|s| s.noise_threshold = Some(f64::NAN)),
+            ),
+            (
+                "noise_threshold",
+                Box::new(|s| s.noise_threshold = Some(1.5)),
+            ),
+            (
+                "noise_threshold",
+                Box::new(|s| {
+                    s.noise_threshold = Some(0.1);
+                    s.sample_passes = 2;
+                }),
+            ),
+            (
+                "min_spp",
+                Box::new(|s| {
+                    s.noise_threshold = Some(0.1);
+                    s.min_spp = Some(s.spp + 1);
+                }),
+            ),
+            (
+                "min_spp",
+                Box::new(|s| {
+                    s.noise_threshold = Some(0.1);
+                    s.min_spp = Some(0);
+                }),
+            ),
+            ("min_spp", Box::new(|s| s.min_spp = Some(4))),
             ("shutter", Box::new(|s| s.shutter = [0.5, 0.0])),
             (
                 "shutter",

@@ -148,6 +148,7 @@ pub fn list_jobs(conn: &Connection, now: i64) -> Result<Vec<JobStatus>> {
 }
 
 const FRAME_QUERY: &str = "SELECT f.frame, f.tasks_total, f.tasks_done, f.assembled_ms,
+        f.spp_mean, f.noise,
         (SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id AND t.frame = f.frame
            AND t.state = 'failed'),
         (SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id AND t.frame = f.frame
@@ -159,8 +160,9 @@ fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
     let frame: i32 = r.get(0)?;
     let (total, done): (u64, u64) = (r.get(1)?, r.get(2)?);
     let assembled: Option<i64> = r.get(3)?;
-    let (failed, leased): (u64, u64) = (r.get(4)?, r.get(5)?);
-    let control: String = r.get(6)?;
+    let (spp_mean, noise): (Option<f64>, Option<f64>) = (r.get(4)?, r.get(5)?);
+    let (failed, leased): (u64, u64) = (r.get(6)?, r.get(7)?);
+    let control: String = r.get(8)?;
     let state = if assembled.is_some() {
         FrameState::Done
     } else if failed > 0 {
@@ -177,6 +179,8 @@ fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
         state,
         tasks_total: total,
         tasks_done: done,
+        spp_mean,
+        noise,
         file: proto::job::frame_file_name(frame, "exr"),
     })
 }

@@ -10,7 +10,7 @@ use tracer::film::{SampleRange, TileBuffer, TileRect};
 use tracer::motion::Shutter;
 use tracer::output::{encode_exr, ExrMetadata, OutputError};
 use tracer::render::{
-    render_tile_cancellable, CameraChoice, FrameOptions, PreparedFrame, RenderSettings,
+    render_tile_cancellable, CameraChoice, FrameOptions, NoiseTarget, PreparedFrame, RenderSettings,
 };
 
 use crate::cache::sha256_hex;
@@ -47,7 +47,10 @@ pub fn frame_options(lease: &Lease) -> FrameOptions {
 /// The lease's light-transport settings.
 pub fn settings(lease: &Lease) -> RenderSettings {
     RenderSettings {
-        noise: None,
+        noise: lease.noise_threshold.map(|t| NoiseTarget {
+            threshold: t as f32,
+            min_samples: lease.min_spp,
+        }),
         max_depth: lease.max_depth,
         seed: lease.seed,
     }
@@ -160,6 +163,8 @@ mod tests {
             animation: Some("Walk".into()),
             max_depth: 5,
             seed: 9,
+            noise_threshold: Some(0.02),
+            min_spp: 6,
             tile: Rect {
                 x: 16,
                 y: 32,
@@ -183,7 +188,10 @@ mod tests {
         assert_eq!(
             settings(&l),
             RenderSettings {
-                noise: None,
+                noise: Some(NoiseTarget {
+                    threshold: 0.02,
+                    min_samples: 6
+                }),
                 max_depth: 5,
                 seed: 9
             }

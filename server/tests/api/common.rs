@@ -356,7 +356,10 @@ pub fn prepared(scene: Arc<tracer::scene::Scene>, lease: &Lease) -> PreparedFram
 
 pub fn settings(lease: &Lease) -> RenderSettings {
     RenderSettings {
-        noise: None,
+        noise: lease.noise_threshold.map(|t| tracer::render::NoiseTarget {
+            threshold: t as f32,
+            min_samples: lease.min_spp,
+        }),
         max_depth: lease.max_depth,
         seed: lease.seed,
     }

@@ -303,3 +303,46 @@ async fn a_finished_pass_gives_a_progressive_preview_before_the_frame_is_done() 
     let final_png = frame_file(&s, &c, job.id, 3, "png").await;
     assert_ne!(final_png, png);
 }
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_noise_threshold_job_stops_pixels_early_and_reports_what_it_reached() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let mut want = spec(&scene.digest, 1);
+    want.spp = 64;
+    want.noise_threshold = Some(0.05);
+    let job = create_job(&s, &c, &want).await;
+    // The server fills in the minimum.
+    assert_eq!(job.spec.min_spp, Some(16));
+
+    let mut w = SimWorker::register(&s, "sim").await;
+    let tiles = run_job(&s, &mut w).await;
+    let frames: FrameList = c
+        .get(s.url(&format!("/jobs/{}/frames", job.id)))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    for (frame, status) in [1, 2].into_iter().zip(&frames.frames) {
+        // Bit for bit the tracer's adaptive render of the same tiles.
+        let expected = expected_frame(&tiles, frame);
+        let exr = decode_exr(&frame_file(&s, &c, job.id, frame, "exr").await).unwrap();
+        assert_eq!(exr.layers, expected, "frame {frame}");
+        let reached = expected.sampling();
+        assert!(reached.min_samples >= 16 && reached.max_samples <= 64);
+        assert!(reached.mean_samples < 64.0, "{reached:?}");
+        // The frame list and the header say the same.
+        let spp = status.spp_mean.unwrap();
+        assert!((spp - reached.mean_samples).abs() < 1e-9, "{spp}");
+        let noise = status.noise.unwrap();
+        assert!((noise - reached.mean_noise.unwrap()).abs() < 1e-9);
+        assert_eq!(
+            exr.attribute("tessera/spp-mean"),
+            Some(format!("{:.3}", reached.mean_samples).as_str())
+        );
+    }
+}
