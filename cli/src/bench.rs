@@ -9,8 +9,11 @@ use clap::{Args, Subcommand};
 use glam::Vec2;
 use rayon::prelude::*;
 
+use proto::job::Quality;
 use tracer::film::{Layers, SampleRange, TileRect};
-use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
+use tracer::render::{
+    prepare_frame, render_region, FrameOptions, NoiseTarget, PreparedFrame, RenderSettings,
+};
 
 use crate::args::parse_size;
 use crate::render::load_scene;
@@ -113,8 +116,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
 
     // The sweep uses another seed than the reference, so that its samples are not a prefix
     // of the reference's, which would flatter the error.
-    let render = |spp: u32, seed: u32| {
-        let settings = RenderSettings { seed, ..settings };
+    let render_with = |settings: RenderSettings, spp: u32| {
         let start = Instant::now();
         let tile = render_region(
             &frame,
@@ -126,6 +128,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         );
         (tile, start.elapsed().as_secs_f64())
     };
+    let render = |spp: u32, seed: u32| render_with(RenderSettings { seed, ..settings }, spp);
     let (tile, secs) = render(16, 1);
     let paths = rect.area() as f64 * 16.0;
     println!(
@@ -134,8 +137,20 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         tile.rays as f64 / secs / 1e6
     );
 
-    println!("reference: {reference_spp} spp ...");
-    let (reference, ref_secs) = render(reference_spp, 0);
+    // As deep as the deepest preset, so that no preset is measured against a reference
+    // that lacks light it gathers.
+    let reference_depth = Quality::ALL
+        .iter()
+        .map(|q| q.settings().max_depth)
+        .max()
+        .unwrap_or(settings.max_depth)
+        .max(settings.max_depth);
+    println!("reference: {reference_spp} spp, max depth {reference_depth} ...");
+    let reference_settings = RenderSettings {
+        max_depth: reference_depth,
+        ..settings
+    };
+    let (reference, ref_secs) = render_with(reference_settings, reference_spp);
     let reference = reference.resolve();
     println!("reference took {ref_secs:.1} s");
     println!("| spp | time (s) | RMSE | RMSE x sqrt(time) |");
@@ -149,6 +164,37 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         let (tile, secs) = render(spp, 1);
         let e = rmse(&tile.resolve(), &reference);
         println!("| {spp} | {secs:.3} | {e:.5} | {:.5} |", e * secs.sqrt());
+    }
+
+    println!();
+    println!("quality presets (--quality; adaptive sampling stops each pixel at its threshold):");
+    println!("| preset | max spp | max depth | threshold | time (s) | mean spp | estimated error | RMSE |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
+    for q in Quality::ALL {
+        let p = q.settings();
+        let preset = RenderSettings {
+            max_depth: p.max_depth,
+            seed: 1,
+            noise: Some(NoiseTarget {
+                threshold: p.noise_threshold as f32,
+                min_samples: p.min_spp,
+            }),
+        };
+        let (tile, secs) = render_with(preset, p.spp);
+        let layers = tile.resolve();
+        let reached = layers.sampling();
+        println!(
+            "| {} | {} | {} | {} | {secs:.3} | {:.1} | {} | {:.5} |",
+            q.name(),
+            p.spp,
+            p.max_depth,
+            p.noise_threshold,
+            reached.mean_samples,
+            reached
+                .mean_noise
+                .map_or("-".to_string(), |e| format!("{e:.4}")),
+            rmse(&layers, &reference)
+        );
     }
     Ok(())
 }
