@@ -374,6 +374,17 @@ pub fn tile_exr(lease: &Lease, layers: &Layers) -> Vec<u8> {
     encode_exr((lease.width, lease.height), layers, &meta).unwrap()
 }
 
+/// `GET path` answered 200, its JSON body.
+pub async fn get_json<T: serde::de::DeserializeOwned>(
+    s: &TestServer,
+    c: &reqwest::Client,
+    path: &str,
+) -> T {
+    let res = c.get(s.url(path)).send().await.unwrap();
+    assert_eq!(res.status(), StatusCode::OK, "GET {path}");
+    res.json().await.unwrap()
+}
+
 /// The server's Prometheus text.
 pub async fn metrics(s: &TestServer, c: &reqwest::Client) -> String {
     let res = c.get(format!("{}/metrics", s.base)).send().await.unwrap();

@@ -124,14 +124,7 @@ async fn single_pass_frames_equal_the_direct_render_bit_for_bit() {
         .count();
     assert_eq!(left, 0);
 
-    let status: JobStatus = c
-        .get(s.url(&format!("/jobs/{}", job.id)))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let status: JobStatus = get_json(&s, &c, &format!("/jobs/{}", job.id)).await;
     assert_eq!(status.state, JobState::Done);
     assert_eq!(
         (status.tasks.done, status.frames_done, status.frames_total),
@@ -140,14 +133,7 @@ async fn single_pass_frames_equal_the_direct_render_bit_for_bit() {
     assert_eq!(status.progress, 1.0);
     assert_eq!(status.eta_seconds, None);
     assert!(status.finished_ms.is_some());
-    let frames: FrameList = c
-        .get(s.url(&format!("/jobs/{}/frames", job.id)))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let frames: FrameList = get_json(&s, &c, &format!("/jobs/{}/frames", job.id)).await;
     assert_eq!(frames.frames.len(), 2);
     assert!(frames
         .frames
@@ -319,14 +305,7 @@ async fn a_noise_threshold_job_stops_pixels_early_and_reports_what_it_reached() 
 
     let mut w = SimWorker::register(&s, "sim").await;
     let tiles = run_job(&s, &mut w).await;
-    let frames: FrameList = c
-        .get(s.url(&format!("/jobs/{}/frames", job.id)))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let frames: FrameList = get_json(&s, &c, &format!("/jobs/{}/frames", job.id)).await;
     for (frame, status) in [1, 2].into_iter().zip(&frames.frames) {
         // Bit for bit the tracer's adaptive render of the same tiles.
         let expected = expected_frame(&tiles, frame);
