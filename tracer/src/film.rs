@@ -446,6 +446,35 @@ mod tests {
     }
 
     #[test]
+    fn the_noise_estimate_compares_the_odd_half_with_the_whole() {
+        let mut b = TileBuffer::new(TileRect::new(0, 0, 2, 1));
+        let sample = |v: f32| SampleValue {
+            radiance: Vec3::splat(v),
+            ..Default::default()
+        };
+        // Pixel 0: samples 0..4 are 1, 3, 1, 3: mean 2, odd half 3.
+        for (i, v) in [1.0, 3.0, 1.0, 3.0].into_iter().enumerate() {
+            b.add(0, i as u32, &sample(v));
+        }
+        // |2 − 3| · 3 channels / sqrt(2 · 3).
+        let expected = 3.0 / (1e-4 + 6f32.sqrt());
+        assert!((b.noise(0) - expected).abs() < 1e-6, "{}", b.noise(0));
+        // Pixel 1: one sample, or only even ones, cannot tell.
+        b.add(1, 0, &sample(1.0));
+        assert_eq!(b.noise(1), NO_NOISE_ESTIMATE);
+        b.add(1, 2, &sample(5.0));
+        assert_eq!(b.noise(1), NO_NOISE_ESTIMATE);
+        let layers = b.resolve();
+        assert_eq!(layers.samples, [4.0, 2.0]);
+        let s = layers.sampling();
+        assert_eq!((s.min_samples, s.max_samples, s.mean_samples), (2, 4, 3.0));
+        // Only pixel 0 has an estimate.
+        assert_eq!(s.mean_noise, Some(f64::from(expected)));
+        // Equal halves: no difference, no error.
+        assert_eq!(noise_estimate(Vec3::ONE, Vec3::ONE), 0.0);
+    }
+
+    #[test]
     fn paste_then_crop_round_trips() {
         let mut frame = Layers::new(TileRect::new(0, 0, 8, 6));
         let mut tile = Layers::new(TileRect::new(2, 3, 4, 2));
