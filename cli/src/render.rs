@@ -9,7 +9,7 @@ use anyhow::{bail, Context};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use proto::job::Quality;
+use proto::job::{Quality, DEFAULT_MIN_SPP};
 use tracer::animation::AnimationChoice;
 use tracer::film::{SampleRange, TileRect};
 use tracer::light::{Environment, EnvironmentMap};
@@ -137,9 +137,6 @@ pub fn load_scene(path: Option<&PathBuf>, demo: fn() -> Scene) -> anyhow::Result
         None => Ok(demo()),
     }
 }
-
-/// Samples a pixel takes before adaptive sampling may stop it, unless set.
-const DEFAULT_MIN_SPP: u32 = 16;
 
 /// The sampling settings of `--quality`, `--spp`, `--max-depth`, `--noise-threshold` and
 /// `--min-spp`, checked: (spp, settings).

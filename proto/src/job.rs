@@ -61,6 +61,10 @@ pub enum Quality {
     Final,
 }
 
+/// Samples a pixel takes before adaptive sampling may stop it, unless a job, the command
+/// line or a preset says otherwise (at most the job's spp).
+pub const DEFAULT_MIN_SPP: u32 = 16;
+
 /// What a [`Quality`] preset sets.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QualitySettings {

@@ -103,9 +103,6 @@ pub fn default_tile_size(spp_per_pass: u32) -> u32 {
     s
 }
 
-/// Samples a pixel takes before adaptive sampling may stop it, unless the job says.
-pub const DEFAULT_MIN_SPP: u32 = 16;
-
 /// Checks `spec` against the limits and `scene`, and plans its tasks.
 pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan, FieldError> {
     if spec.scene != scene.digest {
@@ -285,7 +282,7 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
                 format!("must be 1 to spp ({}), got {m}", spec.spp),
             );
         }
-        (Some(_), None) => spec.min_spp = Some(DEFAULT_MIN_SPP.min(spec.spp)),
+        (Some(_), None) => spec.min_spp = Some(proto::job::DEFAULT_MIN_SPP.min(spec.spp)),
         (None, Some(_)) => return bad("min_spp", "needs a noise_threshold"),
         _ => {}
     }
