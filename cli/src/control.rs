@@ -174,7 +174,7 @@ pub fn job_details(j: &JobStatus, frames: &FrameList, now_ms: i64) -> String {
             duration((f - j.created_ms) as f64 / 1000.0)
         ));
     }
-    let fields = [
+    let mut fields = vec![
         ("scene", s.scene.chars().take(16).collect::<String>()),
         (
             "frames",
@@ -213,6 +213,32 @@ pub fn job_details(j: &JobStatus, frames: &FrameList, now_ms: i64) -> String {
         ("progress", progress),
         ("time", when),
     ];
+    if let Some(b) = &j.budget {
+        let predicted = b
+            .predicted_end_ms
+            .map_or("not yet predicted".into(), |end| {
+                let late = if end > b.deadline_ms {
+                    ", past the deadline"
+                } else {
+                    ""
+                };
+                format!(
+                    "predicted to end {} after submission{late}",
+                    duration((end - j.created_ms) as f64 / 1000.0)
+                )
+            });
+        fields.push((
+            "budget",
+            format!(
+                "{}: {predicted}; {} passes added; {} on {} worker(s); {}",
+                duration(b.budget_seconds),
+                b.passes_added,
+                rate(b.samples_per_second),
+                b.workers,
+                b.stage
+            ),
+        ));
+    }
     let mut out = format!("job {} \"{}\": {}\n", j.id, j.name, state_name(j.state));
     for (k, v) in fields {
         out.push_str(&format!("  {k:<9} {v}\n"));
@@ -399,6 +425,7 @@ mod tests {
             progress: 0.125,
             samples_per_second: 2.5e6,
             eta_seconds: eta,
+            budget: None,
         }
     }
 
@@ -477,6 +504,35 @@ mod tests {
                  1      done       8/8    37.2  0.0123  frame_0001.exr\n\
                  2      rendering  3/8    -     -       frame_0002.exr"
             ),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_time_budget_job_shows_its_plan() {
+        let mut j = job(7, "camp", JobState::Running, Some(12.0));
+        j.budget = Some(proto::BudgetPlan {
+            budget_seconds: 256.0,
+            deadline_ms: j.created_ms + 256_000,
+            planned_ms: 61_000,
+            samples_per_second: 4.2e6,
+            workers: 3,
+            predicted_end_ms: Some(j.created_ms + 250_000),
+            passes_added: 17,
+            stage: "refining: the noisiest frames get more samples".into(),
+        });
+        let text = job_details(&j, &FrameList { frames: vec![] }, 61_000);
+        assert!(
+            text.contains(
+                "budget    4m 16s: predicted to end 4m 10s after submission; 17 passes added; \
+                 4.20 M samples/s on 3 worker(s); refining: the noisiest frames get more samples"
+            ),
+            "{text}"
+        );
+        j.budget.as_mut().unwrap().predicted_end_ms = Some(j.created_ms + 300_000);
+        let text = job_details(&j, &FrameList { frames: vec![] }, 61_000);
+        assert!(
+            text.contains("5m 00s after submission, past the deadline;"),
             "{text}"
         );
     }

@@ -103,6 +103,9 @@ pub fn progress_message(s: &JobStatus) -> String {
     if let Some(eta) = s.eta_seconds {
         parts.push(format!("ETA {}", duration(eta)));
     }
+    if let Some(b) = &s.budget {
+        parts.push(format!("{} passes added", b.passes_added));
+    }
     match s.state {
         JobState::Running => {}
         JobState::Queued => parts.push("waiting for a worker".into()),
@@ -318,6 +321,7 @@ mod tests {
             progress: 0.5,
             samples_per_second: 1_234_567.0,
             eta_seconds: Some(65.2),
+            budget: None,
         }
     }
 

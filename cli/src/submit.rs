@@ -38,9 +38,16 @@ pub struct JobArgs {
     #[arg(long)]
     pub noise_threshold: Option<f64>,
     /// With a noise threshold, the samples every pixel takes before it may stop
-    /// [default: 16, or the preset's; at most --spp].
+    /// [default: 16, or the preset's; at most --spp]. With a time budget, the first
+    /// pass's samples [default: 4].
     #[arg(long)]
     pub min_spp: Option<u32>,
+    /// Finish within this many seconds of submission on the workers there are: every
+    /// frame first at --min-spp, then more samples for the noisiest frames while the
+    /// farm's measured speed says they end in time (--spp caps a pixel; a preset gives
+    /// the cap and the bounces, not its noise threshold) [default: off].
+    #[arg(long)]
+    pub time_budget: Option<f64>,
     /// Image size WIDTHxHEIGHT [default: 1280x720].
     #[arg(long, value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
@@ -112,6 +119,14 @@ impl JobArgs {
             spec.noise_threshold = Some(t);
         }
         if self.min_spp.is_some() {
+            spec.min_spp = self.min_spp;
+        }
+        if let Some(budget) = self.time_budget {
+            spec.time_budget = Some(budget);
+            // The budget decides the samples: a preset's threshold and minimum stand down.
+            if self.noise_threshold.is_none() {
+                spec.noise_threshold = None;
+            }
             spec.min_spp = self.min_spp;
         }
         if let Some(depth) = self.max_depth {
@@ -433,6 +448,28 @@ mod tests {
         want.animation = Some("Walk".into());
         want.name = Some("shot 1".into());
         assert_eq!(spec, want);
+    }
+
+    /// With a time budget, a preset gives the spp cap and the bounces; its noise threshold
+    /// and minimum stand down (the budget decides the samples), unless given explicitly.
+    #[test]
+    fn a_time_budget_takes_a_presets_cap_but_not_its_threshold() {
+        let spec = parse(&["--quality", "final", "--time-budget", "256"])
+            .to_spec(&scene())
+            .unwrap();
+        let preset = Quality::Final.settings();
+        assert_eq!(spec.time_budget, Some(256.0));
+        assert_eq!((spec.spp, spec.max_depth), (preset.spp, preset.max_depth));
+        assert_eq!((spec.noise_threshold, spec.min_spp), (None, None));
+        let spec = parse(&["--time-budget", "60", "--min-spp", "8"])
+            .to_spec(&scene())
+            .unwrap();
+        assert_eq!((spec.time_budget, spec.min_spp), (Some(60.0), Some(8)));
+        // Both controls at once go to the server, which refuses them by field name.
+        let spec = parse(&["--time-budget", "60", "--noise-threshold", "0.1"])
+            .to_spec(&scene())
+            .unwrap();
+        assert_eq!(spec.noise_threshold, Some(0.1));
     }
 
     #[test]

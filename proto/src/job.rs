@@ -65,6 +65,10 @@ pub enum Quality {
 /// line or a preset says otherwise (at most the job's spp).
 pub const DEFAULT_MIN_SPP: u32 = 16;
 
+/// The first pass's samples of a time-budget job, unless the job says otherwise (at most
+/// the job's spp): few, so that every frame exists early.
+pub const DEFAULT_BUDGET_MIN_SPP: u32 = 4;
+
 /// What a [`Quality`] preset sets.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QualitySettings {
@@ -188,9 +192,16 @@ pub struct JobSpec {
     #[serde(default)]
     pub noise_threshold: Option<f64>,
     /// With a noise threshold, the samples every pixel takes before it may stop (1 to
-    /// `spp`; default 16, or `spp` if lower).
+    /// `spp`; default 16, or `spp` if lower). With a time budget, the first pass's samples:
+    /// every frame is rendered at this before any is refined (default 4, or `spp`).
     #[serde(default)]
     pub min_spp: Option<u32>,
+    /// A time budget in seconds from submission: every frame is rendered at `min_spp`
+    /// first, then sample passes go to the frames with the highest estimated error for as
+    /// long as the workers' measured speed says they end in time (`spp` caps any pixel).
+    /// Needs `sample_passes` 1 and no `noise_threshold` (default: off).
+    #[serde(default)]
+    pub time_budget: Option<f64>,
     /// Seed mixed into every random number (default 0).
     #[serde(default)]
     pub seed: u32,
@@ -237,6 +248,7 @@ impl JobSpec {
             max_depth: default_max_depth(),
             noise_threshold: None,
             min_spp: None,
+            time_budget: None,
             seed: 0,
             shutter: [0.0, 0.0],
             motion_steps: None,
@@ -345,8 +357,39 @@ pub struct JobStatus {
     pub progress: f64,
     /// Pixel samples per second over the accepted tiles, measured from the first lease.
     pub samples_per_second: f64,
-    /// Seconds left at that rate, when there is one.
+    /// Seconds left at that rate, when there is one (for a time-budget job: until the
+    /// plan's predicted end).
     pub eta_seconds: Option<f64>,
+    /// A time-budget job's plan, as of its last planning.
+    pub budget: Option<BudgetPlan>,
+}
+
+/// Where a time-budget job's plan stands. The server plans again whenever a frame is
+/// assembled: it measures each live worker's speed on the job, predicts when the work
+/// queued and leased ends, and adds a sample pass to the frame with the highest estimated
+/// error while the prediction stays inside the deadline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct BudgetPlan {
+    /// The budget, seconds.
+    pub budget_seconds: f64,
+    /// Submission plus the budget, Unix ms: no work is issued that is predicted to end
+    /// after it.
+    pub deadline_ms: i64,
+    /// When the plan was last made, Unix ms.
+    pub planned_ms: i64,
+    /// The farm's measured speed on this job: pixel samples per second, summed over the
+    /// live workers that have finished one of its tiles.
+    pub samples_per_second: f64,
+    /// Workers in that sum.
+    pub workers: u32,
+    /// When the queued and leased work is predicted to end, Unix ms (absent before the
+    /// first speed is measured).
+    pub predicted_end_ms: Option<i64>,
+    /// Sample passes added after the first, over all frames.
+    pub passes_added: u32,
+    /// What the planner is doing, in words (first pass, refining, or why it stopped).
+    pub stage: String,
 }
 
 /// `GET /jobs`.

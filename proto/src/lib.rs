@@ -22,8 +22,8 @@ pub mod worker;
 pub use error::ErrorBody;
 pub use event::Event;
 pub use job::{
-    CameraSpec, FrameList, FrameRange, FrameState, FrameStatus, JobList, JobSpec, JobState,
-    JobStatus, OutputLayer, TaskCounts,
+    BudgetPlan, CameraSpec, FrameList, FrameRange, FrameState, FrameStatus, JobList, JobSpec,
+    JobState, JobStatus, OutputLayer, TaskCounts,
 };
 pub use scene::{AnimationInfo, CameraInfo, SceneInfo};
 pub use worker::{

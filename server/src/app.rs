@@ -50,6 +50,7 @@ impl App {
             lease_ms: self.config.lease_ms(),
             block_after_failures: self.config.block_after_failures,
             verify_fraction: self.config.verify_fraction,
+            max_tasks_per_job: self.config.max_tasks_per_job,
         }
     }
 

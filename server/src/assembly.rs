@@ -108,22 +108,85 @@ pub fn read_tile(store: &Store, job: u64, task: u64) -> Result<Layers> {
     Ok(image.layers)
 }
 
+/// A frame as built from its tiles.
+pub struct BuiltFrame {
+    /// Its layers.
+    pub layers: Layers,
+    /// Sample passes merged into it (the passes of its tiles are `0..passes`).
+    pub passes: u32,
+}
+
+/// The header attribute of a merged frame that says how many passes it holds.
+const MERGED_PASSES: &str = "tessera/passes";
+
 /// Builds a frame (or, for a preview, as much of it as is in) from the accepted tiles of
-/// `tasks` (one frame's done tasks, by tile then pass).
-pub fn build_frame(store: &Store, spec: &JobSpec, tasks: &[TaskRow]) -> Result<Layers> {
-    let mut frame = Layers::new(TileRect::new(0, 0, spec.width, spec.height));
-    let mut i = 0;
-    while i < tasks.len() {
-        let tile = tasks[i].tile;
-        let mut parts = Vec::new();
-        while i < tasks.len() && tasks[i].tile == tile {
-            let t = &tasks[i];
+/// `tasks` (one frame's done tasks, by tile then pass). A time-budget frame that was
+/// assembled before starts from its merged frame, and only the passes it lacks are read.
+pub fn build_frame(
+    store: &Store,
+    spec: &JobSpec,
+    job: u64,
+    frame_no: i32,
+    tasks: &[TaskRow],
+) -> Result<BuiltFrame> {
+    let (mut frame, merged) = match read_merged(store, job, frame_no)? {
+        Some(built) => (built.layers, built.passes),
+        None => (Layers::new(TileRect::new(0, 0, spec.width, spec.height)), 0),
+    };
+    let fresh: Vec<&TaskRow> = tasks.iter().filter(|t| t.pass >= merged).collect();
+    let mut passes = merged;
+    for group in fresh.chunk_by(|a, b| a.tile == b.tile) {
+        let mut parts = Vec::with_capacity(group.len() + 1);
+        if merged > 0 {
+            parts.push(frame.crop(group[0].rect));
+        }
+        for t in group {
             parts.push(read_tile(store, t.job_id, t.id)?);
-            i += 1;
+            passes = passes.max(t.pass + 1);
         }
         frame.paste(&merge_passes(&parts));
     }
-    Ok(frame)
+    Ok(BuiltFrame {
+        layers: frame,
+        passes,
+    })
+}
+
+/// The merged frame of a time-budget job's frame, if it was assembled before.
+fn read_merged(store: &Store, job: u64, frame_no: i32) -> Result<Option<BuiltFrame>> {
+    let path = store.merged_frame(job, frame_no);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let image = output::read_exr(&path)
+        .map_err(|e| Error::Internal(format!("reading the merged frame {frame_no}: {e}")))?;
+    let passes = image
+        .attribute(MERGED_PASSES)
+        .and_then(|p| p.parse().ok())
+        .ok_or_else(|| {
+            Error::Internal(format!(
+                "the merged frame {frame_no} of job {job} does not say its passes"
+            ))
+        })?;
+    Ok(Some(BuiltFrame {
+        layers: image.layers,
+        passes,
+    }))
+}
+
+/// Keeps every layer of a time-budget frame, atomically, for its next pass to merge into.
+pub fn write_merged(
+    store: &Store,
+    job: u64,
+    frame_no: i32,
+    spec: &JobSpec,
+    frame: &BuiltFrame,
+) -> Result<()> {
+    let meta = ExrMetadata::new().with(MERGED_PASSES, frame.passes.to_string());
+    let bytes = output::encode_exr((spec.width, spec.height), &frame.layers, &meta)
+        .map_err(|e| Error::Internal(format!("encoding the merged frame {frame_no}: {e}")))?;
+    store::write_atomic(&store.merged_frame(job, frame_no), &bytes)?;
+    Ok(())
 }
 
 /// What a frame's EXR header says beyond its spec.
@@ -214,6 +277,7 @@ fn encode_layers(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tracer::film::SampleRange;
 
     fn layers(rect: TileRect, v: f32, depth: f32, samples: f32) -> Layers {
         let mut l = Layers::new(rect);
@@ -251,6 +315,60 @@ mod tests {
         assert_eq!(none.depth[1], NO_HIT_DEPTH);
         // Two halves of equal error make an error 1/√2 of it.
         assert!((none.noise[0] - 0.1 / 2f32.sqrt()).abs() < 1e-7);
+    }
+
+    /// A time-budget frame: its first pass is merged and kept, the tiles go, the next pass
+    /// merges into it; assembling again after a crash (the merged frame written, the frame
+    /// not yet marked) reads no tile and merges nothing twice.
+    #[test]
+    fn a_merged_frame_takes_only_the_passes_it_lacks() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(dir.path()).unwrap();
+        let mut spec = JobSpec::new("s");
+        (spec.width, spec.height) = (4, 2);
+        let (left, right) = (TileRect::new(0, 0, 2, 2), TileRect::new(2, 0, 2, 2));
+        let task = |id, tile, pass, rect| TaskRow {
+            id,
+            job_id: 1,
+            frame: 3,
+            tile,
+            pass,
+            rect,
+            samples: SampleRange::new(0, 4),
+            state: crate::state::TaskState::Done,
+            attempt: 1,
+            failures: 0,
+            worker_id: Some(1),
+            check_of: None,
+        };
+        let put = |t: &TaskRow, v: f32| {
+            let bytes =
+                output::encode_exr((4, 2), &layers(t.rect, v, 1.0, 4.0), &ExrMetadata::new())
+                    .unwrap();
+            std::fs::create_dir_all(store.tile_dir(1)).unwrap();
+            std::fs::write(store.tile(1, t.id), bytes).unwrap();
+        };
+        let first = [task(10, 0, 0, left), task(11, 1, 0, right)];
+        put(&first[0], 1.0);
+        put(&first[1], 1.0);
+        let built = build_frame(&store, &spec, 1, 3, &first).unwrap();
+        assert_eq!(built.passes, 1);
+        write_merged(&store, 1, 3, &spec, &built).unwrap();
+        for t in &first {
+            std::fs::remove_file(store.tile(1, t.id)).unwrap();
+        }
+        // The next pass covers the left tile: 4 samples of 3.0 join 4 of 1.0 there.
+        let second = task(12, 0, 1, left);
+        put(&second, 3.0);
+        let all = [first[0].clone(), second.clone(), first[1].clone()];
+        let built = build_frame(&store, &spec, 1, 3, &all).unwrap();
+        assert_eq!(built.passes, 2);
+        let at = |b: &BuiltFrame, x: usize| (b.layers.beauty[x].x, b.layers.samples[x]);
+        assert_eq!((at(&built, 0), at(&built, 3)), ((2.0, 8.0), (1.0, 4.0)));
+        write_merged(&store, 1, 3, &spec, &built).unwrap();
+        std::fs::remove_file(store.tile(1, second.id)).unwrap();
+        let again = build_frame(&store, &spec, 1, 3, &all).unwrap();
+        assert_eq!((again.passes, again.layers), (2, built.layers));
     }
 
     #[test]

@@ -135,14 +135,16 @@ fn judge(
 }
 
 /// Assembles a frame whose tasks are all done: EXR and PNG written atomically, the frame
-/// marked assembled, then its tile files removed.
+/// marked assembled (a time-budget job plans its next passes then), then its tile files
+/// removed. A time-budget frame also keeps every layer merged so far, for its next pass;
+/// those go once the job finishes cleanly.
 pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     let _guard = app.assembly.lock().unwrap_or_else(|p| p.into_inner());
     let (spec, tasks, assembled, render_seconds, features) = app.db.with(|c| -> Result<_> {
         Ok((
             scheduler::job_spec(c, job)?,
             scheduler::done_tasks_of_frame(c, job, frame)?,
-            is_assembled(c, job, frame)?,
+            scheduler::is_assembled(c, job, frame)?,
             scheduler::frame_render_seconds(c, job, frame)?,
             scheduler::job_scene_features(c, job)?,
         ))
@@ -151,16 +153,19 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     if assembled {
         return Ok(());
     }
-    let layers = assembly::build_frame(&app.store, &spec, &tasks)?;
+    let built = assembly::build_frame(&app.store, &spec, job, frame, &tasks)?;
+    if spec.time_budget.is_some() {
+        assembly::write_merged(&app.store, job, frame, &spec, &built)?;
+    }
     let facts = assembly::FrameFacts {
-        reached: layers.sampling(),
+        reached: built.layers.sampling(),
         render_seconds,
         features,
     };
-    assembly::write_frame(&app.store, job, frame, &spec, &layers, &facts)?;
-    let now = now_ms();
+    assembly::write_frame(&app.store, job, frame, &spec, &built.layers, &facts)?;
+    let (now, timing) = (now_ms(), app.timing());
     app.db
-        .with(|c| scheduler::mark_assembled(c, job, frame, now, &facts.reached))?;
+        .with(|c| scheduler::mark_assembled(c, job, frame, now, &facts.reached, timing))?;
     let checks = app
         .db
         .with(|c| scheduler::done_checks_of_frame(c, job, frame))?;
@@ -168,7 +173,27 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
         // The frame holds them now; a leftover tile only costs disk.
         let _ = std::fs::remove_file(app.store.tile(job, id));
     }
+    if spec.time_budget.is_some() {
+        // Passes planned just now are waiting to be leased.
+        app.work.notify_waiters();
+        if app.db.with(|c| scheduler::finished_cleanly(c, job))? {
+            remove_merged_frames(app, job);
+        }
+    }
     Ok(())
+}
+
+/// Removes a finished time-budget job's merged frames (kept while a failed task could
+/// still be retried).
+fn remove_merged_frames(app: &App, job: u64) {
+    let Ok(entries) = std::fs::read_dir(app.store.tile_dir(job)) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        if entry.file_name().to_string_lossy().ends_with(".merged.exr") {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
 }
 
 /// Writes a progressive PNG of a frame from the passes accepted so far (not once the frame
@@ -176,25 +201,15 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
 pub fn preview_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     let _guard = app.assembly.lock().unwrap_or_else(|p| p.into_inner());
     let (spec, tasks, assembled) = app.db.with(|c| -> Result<_> {
-        let assembled = is_assembled(c, job, frame)?;
         Ok((
             scheduler::job_spec(c, job)?,
             scheduler::done_tasks_of_frame(c, job, frame)?,
-            assembled,
+            scheduler::is_assembled(c, job, frame)?,
         ))
     })?;
     if assembled {
         return Ok(());
     }
-    let layers = assembly::build_frame(&app.store, &spec, &tasks)?;
-    assembly::write_preview(&app.store, job, frame, &spec, &layers)
-}
-
-/// Whether the frame is marked assembled.
-fn is_assembled(c: &rusqlite::Connection, job: u64, frame: i32) -> Result<bool> {
-    Ok(c.query_row(
-        "SELECT assembled_ms IS NOT NULL FROM frames WHERE job_id = ?1 AND frame = ?2",
-        rusqlite::params![job, frame],
-        |r| r.get(0),
-    )?)
+    let built = assembly::build_frame(&app.store, &spec, job, frame, &tasks)?;
+    assembly::write_preview(&app.store, job, frame, &spec, &built.layers)
 }

@@ -10,6 +10,7 @@
 //! | [`state`] | the task state machine: one transition table |
 //! | [`scheduler`] | leases, heartbeats, failures, expiry, job controls: one transaction each |
 //! | [`spec`] | job-spec checks (each error names its field) and the split into tasks |
+//! | [`budget`] | time-budget jobs: the farm's measured speed decides which passes fit |
 //! | [`scene`] | scene uploads checked with the tracer's loader and summarised |
 //! | [`intake`], [`assembly`] | tile uploads checked and accepted; frames assembled |
 //! | [`status`] | read models: job progress, frames, workers |
@@ -25,6 +26,7 @@ pub mod api;
 pub mod app;
 pub mod assembly;
 pub mod auth;
+pub mod budget;
 pub mod config;
 pub mod dashboard;
 pub mod db;
@@ -169,8 +171,9 @@ pub fn openapi() -> utoipa::openapi::OpenApi {
     api::api(app).1
 }
 
-/// Every `sweep_interval`: re-queues expired leases, and assembles frames whose tiles are
-/// all in but whose assembly failed (a full disk, say) when their last tile came.
+/// Every `sweep_interval`: re-queues expired leases, plans time-budget jobs again (the
+/// workers may have changed), and assembles frames whose tiles are all in but whose
+/// assembly failed (a full disk, say) when their last tile came.
 async fn sweep(app: AppState) {
     let mut tick = tokio::time::interval(app.config.sweep_interval);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -187,6 +190,20 @@ async fn sweep(app: AppState) {
             }
             Ok(_) => {}
             Err(e) => tracing::error!("expiring leases: {e}"),
+        }
+        match app
+            .db
+            .run(move |c| scheduler::replan_budgets(c, now, timing))
+            .await
+        {
+            Ok(jobs) if !jobs.is_empty() => {
+                app.work.notify_waiters();
+                for job in jobs {
+                    app.publish_job(job).await;
+                }
+            }
+            Ok(_) => {}
+            Err(e) => tracing::error!("planning time budgets: {e}"),
         }
         let a = app.clone();
         let finished = tokio::task::spawn_blocking(move || -> error::Result<Vec<(u64, i32)>> {

@@ -27,6 +27,8 @@ pub const MAX_ATTEMPTS: u32 = 100;
 pub const MAX_SHUTTER_FRAMES: f64 = 10.0;
 /// Motion steps across the shutter.
 pub const MAX_MOTION_STEPS: u32 = 256;
+/// A job's time budget, seconds (30 days).
+pub const MAX_TIME_BUDGET_SECONDS: f64 = 30.0 * 24.0 * 3600.0;
 /// Length of a job name, bytes.
 pub const MAX_NAME_BYTES: usize = 200;
 /// Default bound on tasks per job (configurable in [`crate::Config`]).
@@ -41,6 +43,9 @@ pub const MAX_JSON_BYTES: usize = 64 << 10;
 pub const MAX_WORKER_TEXT_BYTES: usize = 200;
 /// Failure message kept per report, bytes (longer ones are cut).
 pub const MAX_FAILURE_MESSAGE_BYTES: usize = 4_096;
+/// A time-budget job's default tile is sized for passes of this many samples (its passes
+/// run from min_spp up to spp).
+pub const BUDGET_TILE_SPP: u32 = 64;
 /// Pixel samples one task should hold by default: a few seconds on a worker (64×64
 /// pixels at 256 samples, about 1M camera paths).
 pub const TARGET_TASK_PIXEL_SAMPLES: u64 = 1 << 20;

@@ -107,6 +107,13 @@ const MIGRATIONS: &[&str] = &[
     ALTER TABLE frames ADD COLUMN spp_mean REAL;
     ALTER TABLE frames ADD COLUMN noise REAL;   -- mean estimated error; NULL: no estimate
     "#,
+    // 5: time budgets. A frame can be refined after it was assembled, so "assembled" is
+    // "assembled from all of its tasks so far"; a budget job keeps its latest plan.
+    r#"
+    ALTER TABLE frames ADD COLUMN assembled_tasks INTEGER;  -- tasks_total at the last assembly
+    UPDATE frames SET assembled_tasks = tasks_total WHERE assembled_ms IS NOT NULL;
+    ALTER TABLE jobs ADD COLUMN budget_plan TEXT;           -- proto::BudgetPlan as JSON
+    "#,
 ];
 
 /// The schema version this build writes.

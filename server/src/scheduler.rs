@@ -8,6 +8,7 @@ use proto::{FailureAck, JobSpec, Lease, Rect, SampleSpan, TaskToken};
 use rusqlite::{params, Connection, OptionalExtension, Transaction};
 use tracer::film::{SampleRange, SamplingSummary, TileRect};
 
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::spec::Plan;
 use crate::state::{transition, TaskEvent, TaskState};
@@ -22,6 +23,8 @@ pub struct Timing {
     pub block_after_failures: u32,
     /// The fraction of tasks rendered a second time to check the first (see [`verify`]).
     pub verify_fraction: f64,
+    /// Tasks one job may hold, the passes a time budget adds included.
+    pub max_tasks_per_job: u64,
 }
 
 /// One row of `tasks`.
@@ -130,9 +133,11 @@ pub fn update_finished(tx: &Transaction, job: u64, now: i64) -> Result<()> {
     // EXISTS, not count(*): this runs on every accepted tile, and a count of a big job's
     // queue grows with the job (measured with `tessera bench farm`).
     let open: bool = tx.query_row(
-        "SELECT EXISTS (SELECT 1 FROM tasks WHERE job_id = ?1 AND state IN ('queued', 'leased'))
-             OR EXISTS (SELECT 1 FROM frames WHERE job_id = ?1
-                          AND tasks_done = tasks_total AND assembled_ms IS NULL)",
+        &format!(
+            "SELECT EXISTS (SELECT 1 FROM tasks WHERE job_id = ?1
+                              AND state IN ('queued', 'leased'))
+                 OR EXISTS (SELECT 1 FROM frames WHERE job_id = ?1 AND {FRAME_NEEDS_ASSEMBLY})"
+        ),
         [job],
         |r| r.get(0),
     )?;
@@ -163,7 +168,7 @@ fn touch_worker(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
 }
 
 /// A worker counts as live if it called within two lease periods.
-fn live_since(now: i64, timing: Timing) -> i64 {
+pub(crate) fn live_since(now: i64, timing: Timing) -> i64 {
     now - 2 * timing.lease_ms
 }
 
@@ -193,26 +198,12 @@ pub fn create_job(conn: &mut Connection, plan: &Plan, now: i64) -> Result<u64> {
         for &f in &plan.frames {
             frame.execute(params![id, f, plan.tasks_per_frame()])?;
         }
-        let mut task = tx.prepare(
-            "INSERT INTO tasks (job_id, frame, tile, pass, x, y, w, h, sample_start,
-                                sample_end, state)
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued')",
-        )?;
         for t in plan.tasks() {
-            task.execute(params![
-                id,
-                t.frame,
-                t.tile,
-                t.pass,
-                t.rect.x,
-                t.rect.y,
-                t.rect.width,
-                t.rect.height,
-                t.samples.start,
-                t.samples.end
-            ])?;
+            insert_task(&tx, id, t.frame, t.tile, t.pass, t.rect, t.samples)?;
         }
     }
+    // No worker has a speed on a new job: the plan says the first pass is queued.
+    budget::replan(&tx, id, spec, now, now, u64::MAX)?;
     log(
         &tx,
         now,
@@ -222,6 +213,36 @@ pub fn create_job(conn: &mut Connection, plan: &Plan, now: i64) -> Result<u64> {
     )?;
     tx.commit()?;
     Ok(id)
+}
+
+/// Queues one task.
+pub(crate) fn insert_task(
+    tx: &Transaction,
+    job: u64,
+    frame: i32,
+    tile: u32,
+    pass: u32,
+    rect: TileRect,
+    samples: SampleRange,
+) -> Result<()> {
+    tx.prepare_cached(
+        "INSERT INTO tasks (job_id, frame, tile, pass, x, y, w, h, sample_start, sample_end,
+                            state)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued')",
+    )?
+    .execute(params![
+        job,
+        frame,
+        tile,
+        pass,
+        rect.x,
+        rect.y,
+        rect.width,
+        rect.height,
+        samples.start,
+        samples.end
+    ])?;
+    Ok(())
 }
 
 /// Registers a worker; returns its id.
@@ -894,34 +915,97 @@ pub fn delete_job(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
     Ok(())
 }
 
-/// Marks a frame assembled.
+/// Marks a frame assembled from all of its tasks so far, with what it reached; a time-budget
+/// job then plans its next passes (before it can count as finished).
 pub fn mark_assembled(
     conn: &mut Connection,
     job: u64,
     frame: i32,
     now: i64,
     reached: &SamplingSummary,
+    timing: Timing,
 ) -> Result<()> {
     let tx = conn.transaction()?;
     tx.execute(
-        "UPDATE frames SET assembled_ms = ?3, spp_mean = ?4, noise = ?5
+        "UPDATE frames SET assembled_ms = ?3, assembled_tasks = tasks_total, spp_mean = ?4,
+                           noise = ?5
          WHERE job_id = ?1 AND frame = ?2",
         params![job, frame, now, reached.mean_samples, reached.mean_noise],
     )?;
     log(&tx, now, Some(job), "frame_assembled", &frame.to_string())?;
+    replan(&tx, job, now, timing)?;
     update_finished(&tx, job, now)?;
     tx.commit()?;
     Ok(())
 }
 
-/// Frames whose tasks are all done but which are not assembled (a crash in between).
+/// [`budget::replan`] with the scheduler's settings.
+fn replan(tx: &Transaction, job: u64, now: i64, timing: Timing) -> Result<()> {
+    budget::replan(
+        tx,
+        job,
+        &job_spec(tx, job)?,
+        now,
+        live_since(now, timing),
+        timing.max_tasks_per_job,
+    )
+}
+
+/// Plans every unfinished active time-budget job again (the sweeper does, every tick, so
+/// that a worker joining or leaving between two frames changes the plan at once);
+/// returns those jobs.
+pub fn replan_budgets(conn: &mut Connection, now: i64, timing: Timing) -> Result<Vec<u64>> {
+    let tx = conn.transaction()?;
+    let jobs: Vec<u64> = {
+        let mut stmt = tx.prepare(
+            "SELECT id FROM jobs
+             WHERE budget_plan IS NOT NULL AND finished_ms IS NULL AND control = 'active'",
+        )?;
+        let rows = stmt.query_map([], |r| r.get(0))?;
+        rows.collect::<rusqlite::Result<_>>()?
+    };
+    for &job in &jobs {
+        replan(&tx, job, now, timing)?;
+        update_finished(&tx, job, now)?;
+    }
+    tx.commit()?;
+    Ok(jobs)
+}
+
+/// Whether a job has finished with no failed task (nothing of it can run again).
+pub fn finished_cleanly(conn: &Connection, job: u64) -> Result<bool> {
+    Ok(conn.query_row(
+        "SELECT finished_ms IS NOT NULL
+                AND NOT EXISTS (SELECT 1 FROM tasks WHERE job_id = ?1 AND state = 'failed')
+         FROM jobs WHERE id = ?1",
+        [job],
+        |r| r.get(0),
+    )?)
+}
+
+/// Frames whose tasks are all done but which are not assembled from all of them (a crash
+/// in between, or a full disk).
 pub fn unassembled_frames(conn: &Connection) -> Result<Vec<(u64, i32)>> {
-    let mut stmt = conn.prepare(
-        "SELECT job_id, frame FROM frames WHERE tasks_done = tasks_total AND assembled_ms IS NULL",
-    )?;
+    let mut stmt = conn.prepare(&format!(
+        "SELECT job_id, frame FROM frames WHERE {FRAME_NEEDS_ASSEMBLY}"
+    ))?;
     let rows = stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?;
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
+
+/// Whether a frame is assembled from all of its tasks so far.
+pub fn is_assembled(conn: &Connection, job: u64, frame: i32) -> Result<bool> {
+    Ok(conn.query_row(
+        "SELECT assembled_tasks IS tasks_total FROM frames WHERE job_id = ?1 AND frame = ?2",
+        params![job, frame],
+        |r| r.get(0),
+    )?)
+}
+
+/// A frame (row of `frames`) whose tasks are all done but that is not assembled from all
+/// of them: a time-budget frame that got a pass is assembled again.
+const FRAME_NEEDS_ASSEMBLY: &str =
+    "tasks_done = tasks_total AND assembled_tasks IS NOT tasks_total";
 
 /// The done render tasks of one frame (for assembly), by tile then pass.
 pub fn done_tasks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<TaskRow>> {

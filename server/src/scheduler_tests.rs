@@ -11,6 +11,7 @@ const TIMING: Timing = Timing {
     lease_ms: LEASE_MS,
     block_after_failures: 2,
     verify_fraction: 0.0,
+    max_tasks_per_job: 1_000_000,
 };
 
 fn scene() -> SceneInfo {
@@ -222,7 +223,7 @@ fn failures_requeue_until_max_attempts_then_fail_the_job_while_others_finish() {
         max_samples: 4,
         mean_noise: Some(0.05),
     };
-    mark_assembled(&mut c, j, 2, 13, &reached).unwrap();
+    mark_assembled(&mut c, j, 2, 13, &reached, TIMING).unwrap();
     let status = job_status(&c, j, 14).unwrap();
     assert_eq!(
         (status.state, status.frames_done, status.finished_ms),
@@ -629,4 +630,250 @@ fn quarantine_sends_the_workers_other_tiles_to_checks() {
         )
         .unwrap();
     assert_eq!(open, 3);
+}
+
+/// A time-budget job of `frames` frames of 16×16 in 8×8 tiles, at most 64 spp.
+fn budget_job(c: &mut Connection, frames: i32, seconds: f64, now: i64) -> u64 {
+    let mut spec = JobSpec::new(scene().digest);
+    (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 16, Some(8), 64);
+    spec.frames = Some(FrameRange {
+        start: 1,
+        end: frames,
+        step: 1,
+    });
+    spec.time_budget = Some(seconds);
+    let plan = crate::spec::plan(spec, &scene(), 1_000).unwrap();
+    create_job(c, &plan, now).unwrap()
+}
+
+/// The samples every pixel of a frame has, from its tasks.
+fn reached(c: &Connection, job: u64, frame: i32) -> u32 {
+    c.query_row(
+        "SELECT max(sample_end) FROM tasks WHERE job_id = ?1 AND frame = ?2",
+        params![job, frame],
+        |r| r.get(0),
+    )
+    .unwrap()
+}
+
+/// Renders whatever is queued on `workers` in turn, one at a time, each task taking `ms`
+/// per 256 pixel samples; every frame whose last tile comes in is assembled with an
+/// estimated error of `base(frame) / sqrt(spp)` (as a real frame's falls). Stops when no
+/// worker gets a task.
+fn render_budget(
+    c: &mut Connection,
+    workers: &[u64],
+    t: &mut i64,
+    ms: i64,
+    base: impl Fn(i32) -> f64,
+) {
+    let mut idle = 0;
+    for &w in workers.iter().cycle() {
+        let Some(l) = lease(c, w, *t, TIMING).unwrap() else {
+            idle += 1;
+            if idle == workers.len() {
+                return;
+            }
+            continue;
+        };
+        idle = 0;
+        let pixel_samples =
+            i64::from(l.tile.width * l.tile.height * (l.samples.end - l.samples.start));
+        *t += ms * pixel_samples / 256;
+        let accepted = accept(c, w, l.token, 1, 1, None, *t, TIMING).unwrap();
+        if let Accepted::New {
+            job,
+            frame,
+            frame_complete: true,
+            ..
+        } = accepted
+        {
+            let spp = reached(c, job, frame);
+            let summary = SamplingSummary {
+                mean_samples: f64::from(spp),
+                min_samples: spp,
+                max_samples: spp,
+                mean_noise: Some(base(frame) / f64::from(spp).sqrt()),
+            };
+            mark_assembled(c, job, frame, *t, &summary, TIMING).unwrap();
+        }
+    }
+}
+
+/// A time budget: every frame at the first pass's 4 spp first, then passes to the
+/// noisiest frames, each at most doubling it, until the next would end after the
+/// deadline; the job finishes inside the budget with every frame assembled.
+#[test]
+fn a_time_budget_renders_every_frame_then_refines_the_noisiest_inside_the_deadline() {
+    let mut c = db();
+    let j = budget_job(&mut c, 3, 10.0, 0);
+    let plan = job_status(&c, j, 0).unwrap().budget.unwrap();
+    assert_eq!((plan.deadline_ms, plan.passes_added), (10_000, 0));
+    assert_eq!(plan.predicted_end_ms, None);
+    assert!(plan.stage.starts_with("first pass"), "{}", plan.stage);
+    let w = worker(&mut c, "w", 0);
+    // The first pass: 12 tiles of 8×8 at 4 spp, frame by frame; nothing else is planned
+    // while any of it is queued.
+    let mut t = 0;
+    for _ in 0..12 {
+        let l = lease(&mut c, w, t, TIMING).unwrap().unwrap();
+        assert_eq!(l.samples, SampleSpan { start: 0, end: 4 });
+        t += 100;
+        if let Accepted::New {
+            frame,
+            frame_complete: true,
+            ..
+        } = accept(&mut c, w, l.token, 1, 1, None, t, TIMING).unwrap()
+        {
+            let summary = SamplingSummary {
+                mean_samples: 4.0,
+                min_samples: 4,
+                max_samples: 4,
+                // Frame 2 is the noisiest.
+                mean_noise: Some(if frame == 2 { 0.3 } else { 0.1 }),
+            };
+            mark_assembled(&mut c, j, frame, t, &summary, TIMING).unwrap();
+        }
+    }
+    let status = job_status(&c, j, t).unwrap();
+    assert_eq!((status.frames_done, status.finished_ms), (3, None));
+    assert_eq!(status.state, JobState::Running);
+    // Then a pass that doubles frame 2: 256 pixel samples per 0.1 s, less 10 %.
+    let plan = status.budget.unwrap();
+    assert_eq!((plan.passes_added, plan.workers), (1, 1));
+    assert!((plan.samples_per_second - 2_304.0).abs() < 1e-6);
+    assert!(plan.stage.starts_with("refining"), "{}", plan.stage);
+    let l = lease(&mut c, w, t, TIMING).unwrap().unwrap();
+    assert_eq!((l.frame, l.samples), (2, SampleSpan { start: 4, end: 8 }));
+    assert!(!is_assembled(&c, j, 2).unwrap());
+    // Open work (4 tiles at 4 spp) on the one worker, then its last tile again.
+    let expect = t + ((1024.0 + 256.0) / 2_304.0 * 1000.0_f64).round() as i64;
+    assert_eq!(plan.predicted_end_ms, Some(expect));
+    revoke_all_leases(&mut c, t).unwrap();
+
+    // Frame 2 stays the noisiest until it is twice the others' samples... and so on,
+    // until the deadline.
+    render_budget(
+        &mut c,
+        &[w],
+        &mut t,
+        100,
+        |f| if f == 2 { 0.6 } else { 0.2 },
+    );
+    let status = job_status(&c, j, t).unwrap();
+    let finished = status.finished_ms.expect("the job finished");
+    assert!(finished <= 10_000, "finished at {finished} ms");
+    assert_eq!((status.state, status.frames_done), (JobState::Done, 3));
+    let spp: Vec<u32> = (1..=3).map(|f| reached(&c, j, f)).collect();
+    assert!(spp[1] > spp[0] && spp[0] > 4, "{spp:?}");
+    assert!(spp.iter().all(|&s| s <= 64), "{spp:?}");
+    // 9.3 s of work at 2304 samples/s is 83 spp over 3 frames of 256 pixels.
+    let total: u32 = spp.iter().sum();
+    assert!(total >= 60, "{spp:?}");
+    let plan = status.budget.unwrap();
+    assert!(plan.stage.starts_with("stopped"), "{}", plan.stage);
+    assert!(plan.passes_added >= 4, "{plan:?}");
+    assert_eq!(status.progress, 1.0);
+}
+
+/// Every frame that reached the job's spp leaves nothing to refine: the job ends early.
+#[test]
+fn a_time_budget_ends_early_when_every_frame_reaches_spp() {
+    let mut c = db();
+    let j = budget_job(&mut c, 2, 3_600.0, 0);
+    let w = worker(&mut c, "w", 0);
+    let mut t = 0;
+    render_budget(&mut c, &[w], &mut t, 10, |_| 1.0);
+    let status = job_status(&c, j, t).unwrap();
+    assert_eq!(status.state, JobState::Done);
+    assert_eq!((reached(&c, j, 1), reached(&c, j, 2)), (64, 64));
+    // 4, 4, 8, 16, 32: each pass doubles a frame.
+    let passes: i64 = c
+        .query_row(
+            "SELECT count(DISTINCT pass) FROM tasks WHERE job_id = ?1 AND frame = 1",
+            [j],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(passes, 5);
+    let plan = status.budget.unwrap();
+    assert!(plan.stage.starts_with("done"), "{}", plan.stage);
+}
+
+/// Workers that join or leave change the measured speed, so the plan; the deadline stays.
+#[test]
+fn a_worker_joining_or_leaving_changes_the_plan_not_the_deadline() {
+    let mut c = db();
+    let j = budget_job(&mut c, 4, 60.0, 0);
+    let a = worker(&mut c, "a", 0);
+    let mut t = 0;
+    // Worker a renders the first pass alone.
+    while job_status(&c, j, t).unwrap().budget.unwrap().passes_added == 0 {
+        let l = lease(&mut c, a, t, TIMING).unwrap().unwrap();
+        t += 100;
+        if let Accepted::New {
+            frame,
+            frame_complete: true,
+            ..
+        } = accept(&mut c, a, l.token, 1, 1, None, t, TIMING).unwrap()
+        {
+            let summary = SamplingSummary {
+                mean_samples: 4.0,
+                min_samples: 4,
+                max_samples: 4,
+                mean_noise: Some(0.1 * f64::from(frame)),
+            };
+            mark_assembled(&mut c, j, frame, t, &summary, TIMING).unwrap();
+        }
+    }
+    let alone = job_status(&c, j, t).unwrap().budget.unwrap();
+    assert_eq!(alone.workers, 1);
+    // Worker b joins and renders a tile as fast: the farm is measured twice as fast.
+    let b = worker(&mut c, "b", t);
+    let l = lease(&mut c, b, t, TIMING).unwrap().unwrap();
+    accept(&mut c, b, l.token, 1, 1, None, t + 100, TIMING).unwrap();
+    t += 100;
+    assert_eq!(replan_budgets(&mut c, t, TIMING).unwrap(), vec![j]);
+    let both = job_status(&c, j, t).unwrap().budget.unwrap();
+    assert_eq!(both.workers, 2);
+    let ratio = both.samples_per_second / alone.samples_per_second;
+    assert!((ratio - 2.0).abs() < 1e-9, "{both:?} {alone:?}");
+    // It leaves: the plan is back to one worker's speed.
+    leave(&mut c, b, t).unwrap();
+    replan_budgets(&mut c, t, TIMING).unwrap();
+    let after = job_status(&c, j, t).unwrap().budget.unwrap();
+    assert_eq!(after.workers, 1);
+    assert_eq!(after.samples_per_second, alone.samples_per_second);
+    assert!(
+        after.predicted_end_ms > both.predicted_end_ms,
+        "{after:?} {both:?}"
+    );
+    assert_eq!(
+        (after.deadline_ms, both.deadline_ms),
+        (alone.deadline_ms, alone.deadline_ms)
+    );
+    // Close to the deadline, the passes nobody started no longer fit: they are withdrawn.
+    // The pass b started stays (its frame is refined whole or not at all).
+    let queued = |c: &Connection, started: bool| -> i64 {
+        c.query_row(
+            "SELECT count(*) FROM tasks t WHERE job_id = ?1 AND state = 'queued'
+               AND ?2 = EXISTS (SELECT 1 FROM tasks s WHERE s.job_id = t.job_id
+                                  AND s.frame = t.frame AND s.pass = t.pass
+                                  AND (s.state != 'queued' OR s.attempt > 0))",
+            params![j, started],
+            |r| r.get(0),
+        )
+        .unwrap()
+    };
+    let started = queued(&c, true);
+    assert!(queued(&c, false) > 0);
+    t = after.deadline_ms - 100;
+    heartbeat(&mut c, a, None, t, TIMING).unwrap();
+    replan_budgets(&mut c, t, TIMING).unwrap();
+    assert_eq!((queued(&c, false), queued(&c, true)), (0, started));
+    let status = job_status(&c, j, t).unwrap();
+    let plan = status.budget.unwrap();
+    assert!(plan.stage.starts_with("slowed down"), "{plan:?}");
+    let open = status.tasks.queued + status.tasks.leased;
+    assert_eq!(status.tasks.done + open, status.tasks.total());
 }

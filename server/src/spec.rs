@@ -62,12 +62,10 @@ impl Plan {
         self.tiles.len() as u64 * self.passes.len() as u64
     }
 
-    /// Pixel samples of the whole job.
+    /// Pixel samples of the tasks planned (a time budget adds more as it goes).
     pub fn pixel_samples(&self) -> u64 {
-        self.frames.len() as u64
-            * self.spec.width as u64
-            * self.spec.height as u64
-            * self.spec.spp as u64
+        let per_pixel: u64 = self.passes.iter().map(|p| u64::from(p.len())).sum();
+        self.frames.len() as u64 * self.spec.width as u64 * self.spec.height as u64 * per_pixel
     }
 
     /// Every task, frame by frame, pass by pass, tile by tile.
@@ -259,6 +257,41 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
             ),
         );
     }
+    if let Some(budget) = spec.time_budget {
+        if !(budget.is_finite() && budget > 0.0 && budget <= MAX_TIME_BUDGET_SECONDS) {
+            return bad(
+                "time_budget",
+                format!(
+                    "must be above 0 and at most {MAX_TIME_BUDGET_SECONDS} seconds, got {budget}"
+                ),
+            );
+        }
+        if spec.noise_threshold.is_some() {
+            return bad(
+                "time_budget",
+                "cannot be combined with a noise_threshold: the budget decides the samples",
+            );
+        }
+        if spec.sample_passes != 1 {
+            return bad(
+                "time_budget",
+                format!(
+                    "needs sample_passes 1 (the budget adds the passes), got {}",
+                    spec.sample_passes
+                ),
+            );
+        }
+        match spec.min_spp {
+            Some(m) if m == 0 || m > spec.spp => {
+                return bad(
+                    "min_spp",
+                    format!("must be 1 to spp ({}), got {m}", spec.spp),
+                )
+            }
+            Some(_) => {}
+            None => spec.min_spp = Some(proto::job::DEFAULT_BUDGET_MIN_SPP.min(spec.spp)),
+        }
+    }
     match (spec.noise_threshold, spec.min_spp) {
         (Some(t), _) if !(t.is_finite() && t > 0.0 && t <= 1.0) => {
             return bad(
@@ -283,7 +316,9 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
             );
         }
         (Some(_), None) => spec.min_spp = Some(proto::job::DEFAULT_MIN_SPP.min(spec.spp)),
-        (None, Some(_)) => return bad("min_spp", "needs a noise_threshold"),
+        (None, Some(_)) if spec.time_budget.is_none() => {
+            return bad("min_spp", "needs a noise_threshold or a time_budget")
+        }
         _ => {}
     }
     let tile_size = match spec.tile_size {
@@ -294,6 +329,9 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
             )
         }
         Some(s) => s,
+        // A time budget's passes grow from min_spp towards spp: tiles sized for a middle
+        // pass keep the first pass's tasks from being tiny and the last ones from being long.
+        None if spec.time_budget.is_some() => default_tile_size(spec.spp.min(BUDGET_TILE_SPP)),
         None => default_tile_size(spec.spp.div_ceil(spec.sample_passes)),
     };
     spec.tile_size = Some(tile_size);
@@ -342,12 +380,16 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
     }
 
     let tiles = TileRect::new(0, 0, spec.width, spec.height).tiles(tile_size);
-    let passes = (0..n)
-        .map(|p| {
-            let at = |k: u64| (spec.spp as u64 * k / n) as u32;
-            SampleRange::new(at(p), at(p + 1))
-        })
-        .collect();
+    let passes = match (spec.time_budget, spec.min_spp) {
+        // A time budget starts with one pass of min_spp; it plans the rest as it goes.
+        (Some(_), Some(first)) => vec![SampleRange::new(0, first)],
+        _ => (0..n)
+            .map(|p| {
+                let at = |k: u64| (spec.spp as u64 * k / n) as u32;
+                SampleRange::new(at(p), at(p + 1))
+            })
+            .collect(),
+    };
     let plan = Plan {
         frames: frames.frames().collect(),
         tiles,
@@ -525,6 +567,36 @@ mod tests {
                 }),
             ),
             ("min_spp", Box::new(|s| s.min_spp = Some(4))),
+            ("time_budget", Box::new(|s| s.time_budget = Some(0.0))),
+            (
+                "time_budget",
+                Box::new(|s| s.time_budget = Some(f64::INFINITY)),
+            ),
+            (
+                "time_budget",
+                Box::new(|s| s.time_budget = Some(MAX_TIME_BUDGET_SECONDS + 1.0)),
+            ),
+            (
+                "time_budget",
+                Box::new(|s| {
+                    s.time_budget = Some(60.0);
+                    s.noise_threshold = Some(0.1);
+                }),
+            ),
+            (
+                "time_budget",
+                Box::new(|s| {
+                    s.time_budget = Some(60.0);
+                    s.sample_passes = 2;
+                }),
+            ),
+            (
+                "min_spp",
+                Box::new(|s| {
+                    s.time_budget = Some(60.0);
+                    s.min_spp = Some(s.spp + 1);
+                }),
+            ),
             ("shutter", Box::new(|s| s.shutter = [0.5, 0.0])),
             (
                 "shutter",
@@ -638,6 +710,30 @@ mod tests {
         let p = plan(s, &scene(), 1_000_000).unwrap();
         assert_eq!(p.tiles.len(), 16);
         assert_eq!(p.spec.layers, vec![OutputLayer::Beauty, OutputLayer::Depth]);
+        let mut s = spec();
+        s.time_budget = Some(MAX_TIME_BUDGET_SECONDS);
+        s.min_spp = Some(s.spp);
+        plan(s, &scene(), 1_000_000).unwrap();
+    }
+
+    /// A time budget starts with one pass of min_spp (default 4) per tile; the rest is
+    /// planned as the job runs.
+    #[test]
+    fn a_time_budget_plans_only_the_first_pass() {
+        let mut s = spec();
+        s.spp = 1024;
+        s.time_budget = Some(20.0);
+        let p = plan(s.clone(), &scene(), 1_000_000).unwrap();
+        assert_eq!(p.spec.min_spp, Some(proto::job::DEFAULT_BUDGET_MIN_SPP));
+        assert_eq!(p.passes, vec![SampleRange::new(0, 4)]);
+        assert_eq!(p.spec.tile_size, Some(default_tile_size(BUDGET_TILE_SPP)));
+        assert_eq!(
+            p.pixel_samples(),
+            p.frames.len() as u64 * u64::from(s.width * s.height) * 4
+        );
+        s.min_spp = Some(16);
+        let p = plan(s, &scene(), 1_000_000).unwrap();
+        assert_eq!(p.passes, vec![SampleRange::new(0, 16)]);
     }
 
     /// Bytes allocated by the current thread, for the test below: a wrapper around the

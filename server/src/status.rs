@@ -2,8 +2,8 @@
 //! lists, workers. Nothing here writes.
 
 use proto::{
-    FrameList, FrameState, FrameStatus, JobSpec, JobState, JobStatus, TaskCounts, TaskToken,
-    WorkerInfo, WorkerList,
+    BudgetPlan, FrameList, FrameState, FrameStatus, JobSpec, JobState, JobStatus, TaskCounts,
+    TaskToken, WorkerInfo, WorkerList,
 };
 use rusqlite::{params, Connection, OptionalExtension};
 
@@ -13,7 +13,8 @@ use crate::error::{Error, Result};
 pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
     let row = conn
         .query_row(
-            "SELECT name, spec, control, created_ms, first_lease_ms, finished_ms, pixel_samples
+            "SELECT name, spec, control, created_ms, first_lease_ms, finished_ms, pixel_samples,
+                    budget_plan
              FROM jobs WHERE id = ?1",
             [job],
             |r| {
@@ -25,13 +26,15 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
                     r.get::<_, Option<i64>>(4)?,
                     r.get::<_, Option<i64>>(5)?,
                     r.get::<_, i64>(6)?,
+                    r.get::<_, Option<String>>(7)?,
                 ))
             },
         )
         .optional()?
         .ok_or_else(|| Error::NotFound(format!("job {job} does not exist")))?;
-    let (name, spec, control, created_ms, first_lease_ms, finished_ms, pixel_samples) = row;
+    let (name, spec, control, created_ms, first_lease_ms, finished_ms, pixel_samples, plan) = row;
     let spec: JobSpec = serde_json::from_str(&spec)?;
+    let budget: Option<BudgetPlan> = plan.map(|p| serde_json::from_str(&p)).transpose()?;
 
     let mut tasks = TaskCounts::default();
     let mut done_samples = 0i64;
@@ -83,7 +86,9 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
         JobState::Cancelled
     } else if tasks.failed > 0 {
         JobState::Failed
-    } else if frames_done == frames_total {
+    } else if frames_done == frames_total && finished_ms.is_some() {
+        // (A time-budget job's frames all exist after its first pass; it is done when
+        // nothing more is planned.)
         JobState::Done
     } else if control == "paused" {
         JobState::Paused
@@ -106,13 +111,32 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
         _ => 0.0,
     };
     let remaining = (pixel_samples - done_samples).max(0) as f64;
-    let eta_seconds = match state {
+    let running = matches!(
+        state,
         JobState::Running | JobState::Queued | JobState::Failed
-            if samples_per_second > 0.0 && finished_ms.is_none() =>
-        {
-            Some(remaining / samples_per_second)
-        }
-        _ => None,
+    ) && finished_ms.is_none();
+    // A time-budget job's samples grow as it goes: its progress is the budget's time, and
+    // it ends when its plan says.
+    let (progress, eta_seconds) = match &budget {
+        Some(plan) => (
+            match finished_ms {
+                Some(_) => 1.0,
+                None => {
+                    ((now - created_ms) as f64 / (plan.budget_seconds * 1000.0)).clamp(0.0, 1.0)
+                }
+            },
+            plan.predicted_end_ms
+                .filter(|_| running)
+                .map(|end| (end - now).max(0) as f64 / 1000.0),
+        ),
+        None => (
+            if pixel_samples > 0 {
+                done_samples as f64 / pixel_samples as f64
+            } else {
+                0.0
+            },
+            (running && samples_per_second > 0.0).then(|| remaining / samples_per_second),
+        ),
     };
     Ok(JobStatus {
         id: job,
@@ -125,13 +149,10 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
         frames_total,
         frames_done,
         frames_failed,
-        progress: if pixel_samples > 0 {
-            done_samples as f64 / pixel_samples as f64
-        } else {
-            0.0
-        },
+        progress,
         samples_per_second,
         eta_seconds,
+        budget,
     })
 }
 

@@ -57,6 +57,13 @@ impl Store {
             .join(format!("{task}.exr"))
     }
 
+    /// Every layer of a time-budget job's frame as assembled so far, with the passes it
+    /// holds: the next pass of the frame merges into it (its tiles are gone by then).
+    pub fn merged_frame(&self, job: u64, frame: i32) -> PathBuf {
+        self.tile_dir(job)
+            .join(proto::job::frame_file_name(frame, "merged.exr"))
+    }
+
     /// The folder holding a job's accepted tiles.
     pub fn tile_dir(&self, job: u64) -> PathBuf {
         self.root.join("tiles").join(job.to_string())

@@ -267,6 +267,11 @@ pub fn record(
     }
 }
 
+/// A done task `t` whose tile is not yet in its frame `f` (which keeps it until then):
+/// the frame was never assembled, or the task came after its last assembly (a time-budget
+/// frame's next pass).
+const UNMERGED: &str = "(f.assembled_ms IS NULL OR t.done_ms > f.assembled_ms)";
+
 /// Quarantines `worker`: its leases go back to the queue, it gets no more work, and its
 /// unchecked tiles in frames not yet assembled are checked.
 fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<()> {
@@ -288,18 +293,20 @@ fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<(
     for task in select("t.state = 'leased'")? {
         revoke(tx, &task)?;
     }
-    let unchecked = select(
+    let unchecked = select(&format!(
         "t.state = 'done' AND t.check_of IS NULL
          AND NOT EXISTS (SELECT 1 FROM tasks c WHERE c.check_of = t.id)
          AND EXISTS (SELECT 1 FROM frames f WHERE f.job_id = t.job_id AND f.frame = t.frame
-                       AND f.assembled_ms IS NULL)",
-    )?;
+                       AND {UNMERGED})"
+    ))?;
     for task in &unchecked {
         add_check(tx, task, now, &format!("worker {worker} quarantined"))?;
     }
     let assembled: i64 = tx.query_row(
-        "SELECT count(*) FROM tasks t JOIN frames f ON f.job_id = t.job_id AND f.frame = t.frame
-         WHERE t.worker_id = ?1 AND t.state = 'done' AND f.assembled_ms IS NOT NULL",
+        &format!(
+            "SELECT count(*) FROM tasks t JOIN frames f ON f.job_id = t.job_id AND f.frame = t.frame
+             WHERE t.worker_id = ?1 AND t.state = 'done' AND NOT {UNMERGED}"
+        ),
         [worker],
         |r| r.get(0),
     )?;

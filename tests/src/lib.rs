@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use proto::{JobStatus, WorkerList};
+use proto::{FrameStatus, JobStatus, WorkerList};
 use tracer::film::Layers;
 use tracer::output::read_exr;
 
@@ -512,17 +512,24 @@ impl Farm {
         job_id_in(&out).unwrap_or_else(|| panic!("no job id in the output of submit:\n{out}"))
     }
 
-    /// The job's status, through `tessera status JOB --json` (`{"job": ..., "frames": ...}`).
+    /// The job's status, through `tessera status JOB --json`.
     pub fn job(&self, id: u64) -> JobStatus {
+        self.job_and_frames(id).0
+    }
+
+    /// The job's status and its frames, through `tessera status JOB --json`
+    /// (`{"job": ..., "frames": ...}`).
+    pub fn job_and_frames(&self, id: u64) -> (JobStatus, Vec<FrameStatus>) {
         #[derive(serde::Deserialize)]
         struct Detail {
             job: JobStatus,
+            frames: Vec<FrameStatus>,
         }
         let id = id.to_string();
         let out = self.client(&["status", &id, "--json"]);
         let detail: Detail =
             serde_json::from_str(&out).unwrap_or_else(|e| panic!("status --json: {e}:\n{out}"));
-        detail.job
+        (detail.job, detail.frames)
     }
 
     /// The workers, through `tessera workers --json`.

@@ -338,3 +338,60 @@ fn json_logs_name_the_request_and_the_task_on_every_line_about_them() {
     assert!(ids.iter().all(|id| id.len() == 36), "{ids:?}");
     assert_ne!(ids[0], ids[1]);
 }
+
+/// The seconds a time-budget job may run past its budget: the last tasks are planned on
+/// measured speeds, and CI's two cores are shared with the other tests.
+const BUDGET_MARGIN_MS: i64 = 2_000;
+
+/// "Frames 1-4 within 20 seconds on the workers I have": the job ends inside the budget
+/// (plus [`BUDGET_MARGIN_MS`]) with every frame present and finite, and a smaller budget
+/// on the same job reaches fewer samples.
+#[test]
+fn a_time_budget_job_ends_in_time_with_every_frame_and_more_time_buys_more_samples() {
+    let mut farm = Farm::new();
+    farm.start_server(60);
+    farm.start_worker("w1", 1);
+    farm.start_worker("w2", 1);
+    let scene = farm.demo_scene();
+    let scene = scene.to_str().unwrap();
+    let mut reached = Vec::new();
+    for budget in ["8", "20"] {
+        // An spp cap the farm cannot reach in the budget: the clock decides.
+        let mut args = vec![scene, "--frames", FRAMES, "--tile", "16"];
+        args.extend(settings("65536"));
+        let out = format!("budget-{budget}");
+        args.extend(["--time-budget", budget, "--wait", "--out", &out]);
+        let job = farm.submit(&args);
+        let (st, frames) = farm.job_and_frames(job);
+        assert_eq!(st.state, JobState::Done, "{st:?}");
+        let took = st.finished_ms.unwrap() - st.created_ms;
+        let budget_ms = budget.parse::<i64>().unwrap() * 1000;
+        let plan = st.budget.clone().unwrap();
+        eprintln!("budget {budget} s: took {took} ms; {plan:?}; frames {frames:?}");
+        assert!(
+            took <= budget_ms + BUDGET_MARGIN_MS,
+            "a {budget} s budget took {took} ms: {plan:?}\n{}",
+            farm.logs()
+        );
+        assert!(plan.passes_added > 0, "{plan:?}");
+        let mut spp = 0.0;
+        for f in &frames {
+            let image = read_exr(&farm.path().join(&out).join(&f.file)).unwrap();
+            let samples = &image.layers.samples;
+            assert!(samples.iter().all(|&s| s >= 4.0), "frame {}", f.frame);
+            let (beauty, albedo) = flat(&image.layers);
+            assert!(beauty.iter().chain(&albedo).all(|v| v.is_finite()));
+            let mean = samples.iter().sum::<f32>() as f64 / samples.len() as f64;
+            assert_eq!(f.spp_mean, Some(mean), "frame {}", f.frame);
+            spp += mean / frames.len() as f64;
+        }
+        assert_eq!(frames.len(), 4);
+        reached.push(spp);
+    }
+    assert!(
+        reached[1] > 1.5 * reached[0],
+        "20 s reached {} spp on average, 8 s {}",
+        reached[1],
+        reached[0]
+    );
+}
