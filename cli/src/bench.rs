@@ -1,19 +1,29 @@
-//! `tessera bench`: what the tracer costs and what each sample count buys, on the
-//! built-in demo scene (or any scene).
+//! `tessera bench`: what the tracer costs and what each setting buys, on the reference
+//! scenes (or any one scene). Every figure goes into a report: markdown (the form of
+//! BENCHMARKS.md) on stdout and in `DIR/report.md`, and the same as JSON in
+//! `DIR/report.json`.
+//!
+//! Errors are measured against a reference of the same scene rendered with many more
+//! samples, another seed and the deepest preset's bounces, so no setting is measured
+//! against light the reference lacks or against its own samples.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+use anyhow::Context;
 use clap::{Args, Subcommand};
 use glam::Vec2;
 use rayon::prelude::*;
+use serde::Serialize;
 
 use proto::job::Quality;
 use tracer::film::{Layers, SampleRange, TileRect};
+use tracer::motion::Shutter;
 use tracer::render::{
     prepare_frame, render_region, FrameOptions, NoiseTarget, PreparedFrame, RenderSettings,
 };
+use tracer::scene::Scene;
 
 use crate::args::parse_size;
 use crate::render::load_scene;
@@ -24,17 +34,20 @@ pub struct BenchArgs {
     /// Another benchmark instead of the tracer's.
     #[command(subcommand)]
     pub command: Option<BenchCommand>,
-    /// Scene to measure; the built-in demo scene when left out.
+    /// Scene to measure; the three reference scenes when left out.
     scene: Option<PathBuf>,
-    /// Image size for the measurements.
-    #[arg(long, default_value = "64x64", value_parser = parse_size)]
-    size: (u32, u32),
-    /// Samples per pixel of the reference image that errors are measured against.
-    #[arg(long, default_value_t = 4096)]
-    reference_spp: u32,
-    /// Smaller reference and sweep, for a first look in seconds.
+    /// Image size for the measurements [default: 64x64; 32x32 with --quick].
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Samples per pixel of the reference images [default: 4096; 512 with --quick].
+    #[arg(long)]
+    reference_spp: Option<u32>,
+    /// Smaller images, references and sweeps: the whole report in under two minutes.
     #[arg(long)]
     quick: bool,
+    /// Where report.md and report.json go.
+    #[arg(long, default_value = "bench-report")]
+    out: PathBuf,
 }
 
 /// The benchmarks other than the tracer's.
@@ -45,18 +58,156 @@ pub enum BenchCommand {
     Farm(crate::bench_farm::FarmBenchArgs),
 }
 
+/// The RMSE at which "time to reach an error" is read off each sweep.
+const TARGET_RMSE: f64 = 0.05;
+/// The bounces of the sweeps (the tracer's default).
+const SWEEP_DEPTH: u32 = 8;
+/// Seed of everything measured; the references use another.
+const SEED: u32 = 1;
+const REFERENCE_SEED: u32 = 0;
+
+/// Everything one run measured; `report.json` is this.
+#[derive(Serialize)]
+pub struct Report {
+    /// The machine it ran on.
+    pub machine: Machine,
+    /// The command line that reproduces it.
+    pub command: String,
+    /// One per scene measured.
+    pub scenes: Vec<SceneReport>,
+    /// The efficiency comparison on the measured Cornell box (reference scenes only).
+    pub cornell: Option<CornellEfficiency>,
+}
+
+/// What ran the benchmark.
+#[derive(Serialize)]
+pub struct Machine {
+    /// CPU model, from `/proc/cpuinfo` where there is one.
+    pub cpu: String,
+    /// Threads the tracer used.
+    pub threads: usize,
+    /// Operating system and architecture.
+    pub os: String,
+    /// Tessera's version.
+    pub version: String,
+}
+
+/// The figures of one scene.
+#[derive(Serialize)]
+pub struct SceneReport {
+    /// Its name.
+    pub name: String,
+    /// What it holds, in words.
+    pub description: String,
+    /// Image size.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Reference samples per pixel.
+    pub reference_spp: u32,
+    /// Reference bounces.
+    pub reference_depth: u32,
+    /// Seconds the reference took.
+    pub reference_seconds: f64,
+    /// Closest-hit camera rays per second.
+    pub camera_rays_per_second: f64,
+    /// Camera paths per second at 16 spp and the sweep's depth.
+    pub paths_per_second: f64,
+    /// Rays of every kind per second over those paths.
+    pub rays_per_second: f64,
+    /// Samples per pixel against time and error.
+    pub spp_sweep: Vec<Point>,
+    /// Seconds to reach an RMSE of [`TARGET_RMSE`], read off the spp sweep (log-log
+    /// between the two points around it); absent if the sweep never got there.
+    pub seconds_to_target: Option<f64>,
+    /// The spp of the depth and motion sweeps.
+    pub fixed_spp: u32,
+    /// Bounces against time and error, at `fixed_spp`.
+    pub depth_sweep: Vec<Point>,
+    /// Motion steps against blur error, where the scene moves.
+    pub motion_sweep: Vec<Point>,
+    /// The quality presets.
+    pub presets: Vec<PresetPoint>,
+}
+
+/// One setting: its time and its error.
+#[derive(Clone, Copy, Serialize)]
+pub struct Point {
+    /// The setting (spp, max depth or motion steps).
+    pub value: u32,
+    /// Wall seconds.
+    pub seconds: f64,
+    /// Root-mean-square error of the beauty RGB.
+    pub rmse: f64,
+    /// Mean of (x - r)² / (r² + 0.01), per channel (pbrt's relative MSE).
+    pub rel_mse: f64,
+}
+
+/// One quality preset.
+#[derive(Serialize)]
+pub struct PresetPoint {
+    /// Its name.
+    pub preset: String,
+    /// Its settings.
+    pub max_spp: u32,
+    /// Bounces.
+    pub max_depth: u32,
+    /// Noise threshold.
+    pub threshold: f64,
+    /// Wall seconds.
+    pub seconds: f64,
+    /// Mean samples per pixel reached.
+    pub mean_spp: f64,
+    /// Mean estimated error.
+    pub estimated_error: Option<f64>,
+    /// Measured RMSE.
+    pub rmse: f64,
+}
+
+/// The measured Cornell box at the comparison's setup: 256x256, max depth 8.
+#[derive(Serialize)]
+pub struct CornellEfficiency {
+    /// Samples per pixel of the measured render.
+    pub spp: u32,
+    /// Samples per pixel of its reference.
+    pub reference_spp: u32,
+    /// Camera paths per second.
+    pub paths_per_second: f64,
+    /// Mean squared error of the beauty RGB.
+    pub mse: f64,
+    /// MSE times seconds: lower is more efficient.
+    pub mse_times_seconds: f64,
+}
+
 /// Root-mean-square error of the beauty RGB of `a` against `reference`.
 pub fn rmse(a: &Layers, reference: &Layers) -> f64 {
+    mse(a, reference).sqrt()
+}
+
+/// Mean squared error of the beauty RGB of `a` against `reference`.
+fn mse(a: &Layers, reference: &Layers) -> f64 {
+    let sum: f64 = a
+        .beauty
+        .iter()
+        .zip(&reference.beauty)
+        .map(|(x, r)| (x.truncate() - r.truncate()).as_dvec3().length_squared() / 3.0)
+        .sum();
+    sum / a.beauty.len() as f64
+}
+
+/// pbrt's relative MSE: (x - r)² / (r² + 0.01), averaged over pixels and channels.
+fn rel_mse(a: &Layers, reference: &Layers) -> f64 {
     let sum: f64 = a
         .beauty
         .iter()
         .zip(&reference.beauty)
         .map(|(x, r)| {
-            let d = (x.truncate() - r.truncate()).as_dvec3();
-            d.length_squared() / 3.0
+            let (x, r) = (x.truncate().as_dvec3(), r.truncate().as_dvec3());
+            let d = (x - r) * (x - r) / (r * r + 0.01);
+            (d.x + d.y + d.z) / 3.0
         })
         .sum();
-    (sum / a.beauty.len() as f64).sqrt()
+    sum / a.beauty.len() as f64
 }
 
 /// Closest-hit rays per second for the camera rays of one pass over the image.
@@ -84,117 +235,500 @@ fn camera_rays_per_second(frame: &PreparedFrame) -> f64 {
     (rays.len() * passes) as f64 / start.elapsed().as_secs_f64()
 }
 
-pub fn run(args: BenchArgs) -> anyhow::Result<()> {
-    let (width, height) = if args.quick { (32, 32) } else { args.size };
-    let reference_spp = if args.quick {
-        args.reference_spp.min(512)
-    } else {
-        args.reference_spp
+/// Renders the whole frame at `settings` and `spp`: the image and the wall seconds.
+fn render(frame: &PreparedFrame, settings: RenderSettings, spp: u32) -> (Layers, u64, f64) {
+    let rect = TileRect::new(0, 0, frame.width, frame.height);
+    let start = Instant::now();
+    let tile = render_region(
+        frame,
+        &settings,
+        rect,
+        SampleRange::new(0, spp),
+        32,
+        &|_| {},
+    );
+    let seconds = start.elapsed().as_secs_f64();
+    (tile.resolve(), tile.rays, seconds)
+}
+
+fn point(value: u32, image: &Layers, seconds: f64, reference: &Layers) -> Point {
+    Point {
+        value,
+        seconds,
+        rmse: rmse(image, reference),
+        rel_mse: rel_mse(image, reference),
+    }
+}
+
+/// The seconds at which the sweep reaches `target` RMSE: log-log between the last point
+/// above it and the first at or below it.
+fn seconds_to_reach(sweep: &[Point], target: f64) -> Option<f64> {
+    let i = sweep.iter().position(|p| p.rmse <= target)?;
+    let b = sweep[i];
+    let Some(a) = i.checked_sub(1).map(|j| sweep[j]) else {
+        return Some(b.seconds);
     };
-    // The still demo: benchmark figures stay comparable from one build to the next.
-    let scene = Arc::new(load_scene(args.scene.as_ref(), tracer::demo::demo_scene)?);
-    let frame = prepare_frame(
-        scene,
-        &FrameOptions {
-            width,
-            height,
-            ..Default::default()
+    let t = (a.rmse.ln() - target.ln()) / (a.rmse.ln() - b.rmse.ln());
+    Some((a.seconds.ln() + t * (b.seconds.ln() - a.seconds.ln())).exp())
+}
+
+/// A scene to measure and how to frame it.
+struct Subject {
+    name: String,
+    description: String,
+    scene: Scene,
+    options: FrameOptions,
+}
+
+/// The reference scenes: the measured diffuse Cornell box; the demo with its polished
+/// metal and glass spheres; the animated demo with motion blur.
+fn reference_subjects(size: (u32, u32)) -> Vec<Subject> {
+    let still = FrameOptions {
+        width: size.0,
+        height: size.1,
+        ..Default::default()
+    };
+    vec![
+        Subject {
+            name: "cornell".into(),
+            description: "the measured Cornell box: white, red and green Lambertian walls, two \
+                          diffuse blocks, one area light"
+                .into(),
+            scene: tracer::demo::cornell_box(),
+            options: still.clone(),
         },
-    )?;
-    let settings = RenderSettings::default();
-    let rect = TileRect::new(0, 0, width, height);
-    let threads = rayon::current_num_threads();
-    println!(
-        "tessera bench: {width}x{height}, max depth {}, {threads} threads",
-        settings.max_depth
-    );
+        Subject {
+            name: "glossy-glass".into(),
+            description: "the demo: Cornell walls, a diffuse box, a polished metal sphere \
+                          (roughness 0.15) and a glass sphere (IOR 1.5)"
+                .into(),
+            scene: tracer::demo::demo_scene(),
+            options: still.clone(),
+        },
+        Subject {
+            name: "motion-blur".into(),
+            description: "the animated demo at frame 12 (the sphere bouncing, the box turning, \
+                          the glass sliding), shutter -0.25..0.25 frames"
+                .into(),
+            scene: tracer::demo::animated_demo_scene(),
+            options: FrameOptions {
+                frame: 12,
+                shutter: Shutter {
+                    open: -0.25,
+                    close: 0.25,
+                },
+                ..still
+            },
+        },
+    ]
+}
 
-    println!(
-        "camera rays (closest hit): {:.2} M rays/s",
-        camera_rays_per_second(&frame) / 1e6
-    );
-
-    // The sweep uses another seed than the reference, so that its samples are not a prefix
-    // of the reference's, which would flatter the error.
-    let render_with = |settings: RenderSettings, spp: u32| {
-        let start = Instant::now();
-        let tile = render_region(
-            &frame,
-            &settings,
-            rect,
-            SampleRange::new(0, spp),
-            32,
-            &|_| {},
-        );
-        (tile, start.elapsed().as_secs_f64())
+fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::Result<SceneReport> {
+    let scene = Arc::new(subject.scene);
+    let frame = prepare_frame(scene.clone(), &subject.options)?;
+    let settings = RenderSettings {
+        max_depth: SWEEP_DEPTH,
+        seed: SEED,
+        noise: None,
     };
-    let render = |spp: u32, seed: u32| render_with(RenderSettings { seed, ..settings }, spp);
-    let (tile, secs) = render(16, 1);
-    let paths = rect.area() as f64 * 16.0;
-    println!(
-        "full paths: {:.3} M paths/s, {:.2} M rays/s (all ray kinds, 16 spp)",
-        paths / secs / 1e6,
-        tile.rays as f64 / secs / 1e6
-    );
-
     // As deep as the deepest preset, so that no preset is measured against a reference
     // that lacks light it gathers.
     let reference_depth = Quality::ALL
         .iter()
         .map(|q| q.settings().max_depth)
-        .max()
-        .unwrap_or(settings.max_depth)
-        .max(settings.max_depth);
-    println!("reference: {reference_spp} spp, max depth {reference_depth} ...");
-    let reference_settings = RenderSettings {
-        max_depth: reference_depth,
-        ..settings
-    };
-    let (reference, ref_secs) = render_with(reference_settings, reference_spp);
-    let reference = reference.resolve();
-    println!("reference took {ref_secs:.1} s");
-    println!("| spp | time (s) | RMSE | RMSE x sqrt(time) |");
-    println!("|---:|---:|---:|---:|");
-    let sweep: &[u32] = if args.quick {
+        .fold(SWEEP_DEPTH, u32::max);
+    eprintln!(
+        "{}: reference at {reference_spp} spp, depth {reference_depth} ...",
+        subject.name
+    );
+    let (reference, _, reference_seconds) = render(
+        &frame,
+        RenderSettings {
+            max_depth: reference_depth,
+            seed: REFERENCE_SEED,
+            noise: None,
+        },
+        reference_spp,
+    );
+
+    let camera_rays_per_second = camera_rays_per_second(&frame);
+    let (_, rays, seconds) = render(&frame, settings, 16);
+    let paths = f64::from(frame.width * frame.height) * 16.0;
+
+    let spps: &[u32] = if quick {
         &[1, 4, 16, 64]
     } else {
-        &[1, 4, 16, 64, 256]
+        &[1, 4, 16, 64, 256, 1024]
     };
-    for &spp in sweep {
-        let (tile, secs) = render(spp, 1);
-        let e = rmse(&tile.resolve(), &reference);
-        println!("| {spp} | {secs:.3} | {e:.5} | {:.5} |", e * secs.sqrt());
-    }
+    let spp_sweep: Vec<Point> = spps
+        .iter()
+        .map(|&spp| {
+            let (image, _, secs) = render(&frame, settings, spp);
+            point(spp, &image, secs, &reference)
+        })
+        .collect();
 
-    println!();
-    println!("quality presets (--quality; adaptive sampling stops each pixel at its threshold):");
-    println!("| preset | max spp | max depth | threshold | time (s) | mean spp | estimated error | RMSE |");
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
-    for q in Quality::ALL {
-        let p = q.settings();
-        let preset = RenderSettings {
-            max_depth: p.max_depth,
-            seed: 1,
-            noise: Some(NoiseTarget {
-                threshold: p.noise_threshold as f32,
-                min_samples: p.min_spp,
-            }),
+    let fixed_spp = if quick { 16 } else { 64 };
+    let depth_sweep = [0, 1, 2, 4, 8, 12]
+        .into_iter()
+        .map(|max_depth| {
+            let (image, _, secs) = render(
+                &frame,
+                RenderSettings {
+                    max_depth,
+                    ..settings
+                },
+                fixed_spp,
+            );
+            point(max_depth, &image, secs, &reference)
+        })
+        .collect();
+
+    // Motion steps: every render uses the same seed and spp as one with many steps, so
+    // their difference is the interpolation's error more than noise.
+    let moves = subject.options.shutter.open != subject.options.shutter.close;
+    let motion_sweep = if moves {
+        let at_steps = |steps: u32| -> anyhow::Result<(Layers, f64)> {
+            let options = FrameOptions {
+                motion_steps: Some(steps),
+                ..subject.options.clone()
+            };
+            let f = prepare_frame(scene.clone(), &options)?;
+            let (image, _, secs) = render(&f, settings, fixed_spp);
+            Ok((image, secs))
         };
-        let (tile, secs) = render_with(preset, p.spp);
-        let layers = tile.resolve();
-        let reached = layers.sampling();
-        println!(
-            "| {} | {} | {} | {} | {secs:.3} | {:.1} | {} | {:.5} |",
-            q.name(),
-            p.spp,
-            p.max_depth,
-            p.noise_threshold,
-            reached.mean_samples,
-            reached
-                .mean_noise
-                .map_or("-".to_string(), |e| format!("{e:.4}")),
-            rmse(&layers, &reference)
+        let (fine, _) = at_steps(64)?;
+        [1, 2, 3, 5, 9, 17]
+            .into_iter()
+            .map(|steps| {
+                let (image, secs) = at_steps(steps)?;
+                Ok(point(steps, &image, secs, &fine))
+            })
+            .collect::<anyhow::Result<_>>()?
+    } else {
+        Vec::new()
+    };
+
+    let presets = Quality::ALL
+        .into_iter()
+        .map(|q| {
+            let p = q.settings();
+            let preset = RenderSettings {
+                max_depth: p.max_depth,
+                seed: SEED,
+                noise: Some(NoiseTarget {
+                    threshold: p.noise_threshold as f32,
+                    min_samples: p.min_spp,
+                }),
+            };
+            let (image, _, secs) = render(&frame, preset, p.spp);
+            let reached = image.sampling();
+            PresetPoint {
+                preset: q.name().into(),
+                max_spp: p.spp,
+                max_depth: p.max_depth,
+                threshold: p.noise_threshold,
+                seconds: secs,
+                mean_spp: reached.mean_samples,
+                estimated_error: reached.mean_noise,
+                rmse: rmse(&image, &reference),
+            }
+        })
+        .collect();
+
+    Ok(SceneReport {
+        name: subject.name,
+        description: subject.description,
+        width: frame.width,
+        height: frame.height,
+        reference_spp,
+        reference_depth,
+        reference_seconds,
+        camera_rays_per_second,
+        paths_per_second: paths / seconds,
+        rays_per_second: rays as f64 / seconds,
+        seconds_to_target: seconds_to_reach(&spp_sweep, TARGET_RMSE),
+        spp_sweep,
+        fixed_spp,
+        depth_sweep,
+        motion_sweep,
+        presets,
+    })
+}
+
+/// The measured Cornell box at 256x256 and max depth 8, as the efficiency target states
+/// it: camera paths per second, and MSE × seconds against a reference.
+fn cornell_efficiency(quick: bool) -> anyhow::Result<CornellEfficiency> {
+    let (spp, reference_spp) = if quick { (4, 64) } else { (16, 1024) };
+    let options = FrameOptions {
+        width: 256,
+        height: 256,
+        ..Default::default()
+    };
+    let frame = prepare_frame(Arc::new(tracer::demo::cornell_box()), &options)?;
+    let settings = RenderSettings {
+        max_depth: 8,
+        seed: SEED,
+        noise: None,
+    };
+    eprintln!("cornell 256x256: reference at {reference_spp} spp ...");
+    let (reference, _, _) = render(
+        &frame,
+        RenderSettings {
+            seed: REFERENCE_SEED,
+            ..settings
+        },
+        reference_spp,
+    );
+    let (image, _, seconds) = render(&frame, settings, spp);
+    let mse = mse(&image, &reference);
+    Ok(CornellEfficiency {
+        spp,
+        reference_spp,
+        paths_per_second: 256.0 * 256.0 * f64::from(spp) / seconds,
+        mse,
+        mse_times_seconds: mse * seconds,
+    })
+}
+
+fn machine() -> Machine {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|info| {
+            info.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".into());
+    Machine {
+        cpu,
+        threads: rayon::current_num_threads(),
+        os: format!("{} {}", std::env::consts::OS, std::env::consts::ARCH),
+        version: env!("CARGO_PKG_VERSION").into(),
+    }
+}
+
+pub fn run(args: BenchArgs) -> anyhow::Result<()> {
+    let size = args
+        .size
+        .unwrap_or(if args.quick { (32, 32) } else { (64, 64) });
+    let reference_spp = args
+        .reference_spp
+        .unwrap_or(if args.quick { 512 } else { 4096 });
+    let subjects = match &args.scene {
+        Some(path) => vec![Subject {
+            name: path.display().to_string(),
+            description: "a scene given on the command line".into(),
+            scene: load_scene(Some(path), tracer::demo::demo_scene)?,
+            options: FrameOptions {
+                width: size.0,
+                height: size.1,
+                ..Default::default()
+            },
+        }],
+        None => reference_subjects(size),
+    };
+    let scenes = subjects
+        .into_iter()
+        .map(|s| measure_scene(s, reference_spp, args.quick))
+        .collect::<anyhow::Result<_>>()?;
+    let cornell = match args.scene {
+        None => Some(cornell_efficiency(args.quick)?),
+        Some(_) => None,
+    };
+    let report = Report {
+        machine: machine(),
+        command: std::env::args()
+            .collect::<Vec<_>>()
+            .join(" ")
+            .replace(&std::env::args().next().unwrap_or_default(), "tessera"),
+        scenes,
+        cornell,
+    };
+    let markdown = markdown(&report);
+    print!("{markdown}");
+    write_report(&args.out, &report, &markdown)
+}
+
+fn write_report(dir: &Path, report: &Report, markdown: &str) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::write(dir.join("report.md"), markdown)?;
+    std::fs::write(
+        dir.join("report.json"),
+        serde_json::to_string_pretty(report)? + "\n",
+    )?;
+    eprintln!(
+        "report written to {} (report.md, report.json)",
+        dir.display()
+    );
+    Ok(())
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".into(), |v| format!("{v:.digits$}"))
+}
+
+/// The report as markdown: the machine, then each scene's tables.
+pub fn markdown(r: &Report) -> String {
+    let m = &r.machine;
+    let mut out = format!(
+        "Machine: {}, {} threads, {}; tessera {}.\nCommand: `{}`\n",
+        m.cpu, m.threads, m.os, m.version, r.command
+    );
+    if let Some(c) = &r.cornell {
+        out += &format!(
+            "\n### Cornell box, 256x256, max depth 8\n\n\
+             {:.3} M camera paths/s at {} spp; MSE {:.3e} against {} spp; \
+             MSE x seconds {:.3e}.\n",
+            c.paths_per_second / 1e6,
+            c.spp,
+            c.mse,
+            c.reference_spp,
+            c.mse_times_seconds
         );
     }
-    Ok(())
+    for s in &r.scenes {
+        out += &format!(
+            "\n### {} ({}x{})\n\n{}. Reference: {} spp at depth {} ({:.1} s).\n\n\
+             {:.2} M camera rays/s (closest hit); {:.3} M paths/s and {:.2} M rays/s of all \
+             kinds at 16 spp, depth {SWEEP_DEPTH}. RMSE {TARGET_RMSE} is reached in {} s.\n",
+            s.name,
+            s.width,
+            s.height,
+            s.description,
+            s.reference_spp,
+            s.reference_depth,
+            s.reference_seconds,
+            s.camera_rays_per_second / 1e6,
+            s.paths_per_second / 1e6,
+            s.rays_per_second / 1e6,
+            opt(s.seconds_to_target, 3),
+        );
+        let table = |out: &mut String, title: &str, head: &str, points: &[Point]| {
+            if points.is_empty() {
+                return;
+            }
+            *out += &format!(
+                "\n{title}\n\n| {head} | time (s) | RMSE | relMSE | RMSE x sqrt(time) |\n\
+                 |---:|---:|---:|---:|---:|\n"
+            );
+            for p in points {
+                *out += &format!(
+                    "| {} | {:.3} | {:.5} | {:.5} | {:.5} |\n",
+                    p.value,
+                    p.seconds,
+                    p.rmse,
+                    p.rel_mse,
+                    p.rmse * p.seconds.sqrt()
+                );
+            }
+        };
+        table(
+            &mut out,
+            &format!("Samples per pixel (depth {SWEEP_DEPTH}):"),
+            "spp",
+            &s.spp_sweep,
+        );
+        table(
+            &mut out,
+            &format!(
+                "Maximum depth ({} spp; the reference's depth is {}):",
+                s.fixed_spp, s.reference_depth
+            ),
+            "max depth",
+            &s.depth_sweep,
+        );
+        table(
+            &mut out,
+            &format!(
+                "Motion steps ({} spp; error against 64 steps at the same seed and spp: the \
+                 blur's interpolation more than noise):",
+                s.fixed_spp
+            ),
+            "steps",
+            &s.motion_sweep,
+        );
+        out += "\nQuality presets (`--quality`; adaptive sampling stops each pixel at its \
+                threshold):\n\n\
+                | preset | max spp | max depth | threshold | time (s) | mean spp | \
+                estimated error | RMSE |\n|---|---:|---:|---:|---:|---:|---:|---:|\n";
+        for p in &s.presets {
+            out += &format!(
+                "| {} | {} | {} | {} | {:.3} | {:.1} | {} | {:.5} |\n",
+                p.preset,
+                p.max_spp,
+                p.max_depth,
+                p.threshold,
+                p.seconds,
+                p.mean_spp,
+                opt(p.estimated_error, 4),
+                p.rmse
+            );
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(value: u32, seconds: f64, rmse: f64) -> Point {
+        Point {
+            value,
+            seconds,
+            rmse,
+            rel_mse: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_time_to_an_error_is_read_log_log_between_its_neighbours() {
+        let sweep = [p(1, 1.0, 0.4), p(4, 4.0, 0.2), p(16, 16.0, 0.1)];
+        // RMSE halves as time quadruples: 0.141 is half-way in log, at 8 s.
+        let t = seconds_to_reach(&sweep, 0.2 / 2f64.sqrt()).unwrap();
+        assert!((t - 8.0).abs() < 1e-9, "{t}");
+        assert_eq!(seconds_to_reach(&sweep, 0.5), Some(1.0));
+        assert_eq!(seconds_to_reach(&sweep, 0.05), None);
+    }
+
+    /// The report of a tiny motion-blurred scene: every sweep is there, errors fall with
+    /// samples and with motion steps, and it reads as markdown and JSON.
+    #[test]
+    fn a_scene_report_has_every_sweep_and_serialises() {
+        let subject = reference_subjects((8, 8)).pop().unwrap();
+        let s = measure_scene(subject, 64, true).unwrap();
+        assert_eq!(s.spp_sweep.len(), 4);
+        assert_eq!(s.depth_sweep.len(), 6);
+        assert_eq!(s.motion_sweep.len(), 6);
+        assert_eq!(s.presets.len(), 3);
+        let first = s.spp_sweep[0].rmse;
+        let last = s.spp_sweep.last().unwrap().rmse;
+        assert!(last < first / 2.0, "{first} -> {last}");
+        let steps = &s.motion_sweep;
+        assert!(steps.last().unwrap().rmse < steps[0].rmse, "motion steps");
+        let report = Report {
+            machine: machine(),
+            command: "tessera bench".into(),
+            scenes: vec![s],
+            cornell: None,
+        };
+        let text = markdown(&report);
+        assert!(text.contains("### motion-blur (8x8)"), "{text}");
+        assert!(text.contains("| final | 1024 | 12 | 0.01 |"), "{text}");
+        let json: serde_json::Value = serde_json::to_value(&report).unwrap();
+        assert_eq!(json["scenes"][0]["spp_sweep"][3]["value"], 64);
+    }
+
+    #[test]
+    fn errors_compare_the_beauty_only() {
+        let rect = TileRect::new(0, 0, 2, 1);
+        let mut a = Layers::new(rect);
+        let b = Layers::new(rect);
+        a.beauty[0] = glam::Vec4::new(0.3, 0.3, 0.3, 1.0);
+        a.albedo[1] = glam::Vec3::ONE;
+        assert!((mse(&a, &b) - 0.045).abs() < 1e-7);
+        assert!((rel_mse(&a, &b) - 0.09 / 0.01 / 2.0).abs() < 1e-6);
+    }
 }
