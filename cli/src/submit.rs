@@ -264,9 +264,18 @@ pub async fn upload_and_create(
             format!("{}-{}:{}", f.start, f.end, f.step)
         }
     });
+    let samples = match status.spec.time_budget {
+        Some(budget) => format!(
+            "at most {} spp within {budget} s, {} tasks in the first pass of {} spp",
+            status.spec.spp,
+            status.tasks.total(),
+            status.spec.min_spp.unwrap_or(1)
+        ),
+        None => format!("{} spp, {} tasks", status.spec.spp, status.tasks.total()),
+    };
     println!(
-        "scene {} ({:.1} MB, {} triangles); job {} \"{}\": frames {frames} ({}), {}x{} at {} spp, \
-         {} tasks",
+        "scene {} ({:.1} MB, {} triangles); job {} \"{}\": frames {frames} ({}), {}x{} at \
+         {samples}",
         &scene.digest[..scene.digest.len().min(12)],
         size as f64 / 1e6,
         scene.triangles,
@@ -275,8 +284,6 @@ pub async fn upload_and_create(
         status.frames_total,
         status.spec.width,
         status.spec.height,
-        status.spec.spp,
-        status.tasks.total()
     );
     Ok(status)
 }

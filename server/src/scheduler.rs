@@ -271,13 +271,21 @@ const NOT_IN_CHECK_GROUP: &str = "(t.check_of IS NULL OR NOT EXISTS (
           AND g.state = 'done' AND g.worker_id = ?2))";
 
 /// The next queued task for `worker` in job `job`: tasks it has not failed first; a task
-/// it failed only when no other live worker could take it.
+/// it failed only when no other live worker could take it. Frame by frame, pass by pass;
+/// a time-budget job's in the order its plan issued them (frame order would starve a
+/// late frame's pass behind the passes planned for earlier frames after it).
 fn next_task_in_job(
     tx: &Transaction,
     job: u64,
+    budget: bool,
     worker: u64,
     live_since: i64,
 ) -> Result<Option<u64>> {
+    let order = if budget {
+        "t.id"
+    } else {
+        "t.frame, t.pass, t.tile"
+    };
     let fresh: Option<u64> = tx
         .query_row(
             &format!(
@@ -285,7 +293,7 @@ fn next_task_in_job(
              WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
                AND NOT EXISTS (SELECT 1 FROM task_failures f
                                WHERE f.task_id = t.id AND f.worker_id = ?2)
-             ORDER BY t.frame, t.pass, t.tile LIMIT 1"
+             ORDER BY {order} LIMIT 1"
             ),
             params![job, worker],
             |r| r.get(0),
@@ -307,7 +315,7 @@ fn next_task_in_job(
                                      WHERE f.task_id = t.id AND f.worker_id = w.id)
                      AND NOT EXISTS (SELECT 1 FROM job_blocks b
                                      WHERE b.job_id = t.job_id AND b.worker_id = w.id))
-             ORDER BY t.frame, t.pass, t.tile LIMIT 1"
+             ORDER BY {order} LIMIT 1"
             ),
             params![job, worker, live_since],
             |r| r.get(0),
@@ -330,21 +338,21 @@ pub fn lease(
         return Ok(None);
     }
     let live_since = live_since(now, timing);
-    let jobs: Vec<u64> = {
+    let jobs: Vec<(u64, bool)> = {
         let mut stmt = tx.prepare(
-            "SELECT j.id FROM jobs j
+            "SELECT j.id, j.budget_plan IS NOT NULL FROM jobs j
              WHERE j.control = 'active'
                AND EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = j.id AND t.state = 'queued')
                AND NOT EXISTS (SELECT 1 FROM job_blocks b
                                WHERE b.job_id = j.id AND b.worker_id = ?1)
              ORDER BY j.priority DESC, j.created_ms, j.id",
         )?;
-        let rows = stmt.query_map([worker], |r| r.get(0))?;
+        let rows = stmt.query_map([worker], |r| Ok((r.get(0)?, r.get(1)?)))?;
         rows.collect::<rusqlite::Result<_>>()?
     };
     let mut chosen = None;
-    for job in jobs {
-        if let Some(id) = next_task_in_job(&tx, job, worker, live_since)? {
+    for (job, budget) in jobs {
+        if let Some(id) = next_task_in_job(&tx, job, budget, worker, live_since)? {
             chosen = Some(id);
             break;
         }

@@ -632,10 +632,10 @@ fn quarantine_sends_the_workers_other_tiles_to_checks() {
     assert_eq!(open, 3);
 }
 
-/// A time-budget job of `frames` frames of 16×16 in 8×8 tiles, at most 64 spp.
-fn budget_job(c: &mut Connection, frames: i32, seconds: f64, now: i64) -> u64 {
+/// A time-budget job of `frames` frames of 16×16 in `tile`-pixel tiles, at most 64 spp.
+fn budget_job(c: &mut Connection, frames: i32, tile: u32, seconds: f64, now: i64) -> u64 {
     let mut spec = JobSpec::new(scene().digest);
-    (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 16, Some(8), 64);
+    (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 16, Some(tile), 64);
     spec.frames = Some(FrameRange {
         start: 1,
         end: frames,
@@ -706,7 +706,7 @@ fn render_budget(
 #[test]
 fn a_time_budget_renders_every_frame_then_refines_the_noisiest_inside_the_deadline() {
     let mut c = db();
-    let j = budget_job(&mut c, 3, 10.0, 0);
+    let j = budget_job(&mut c, 3, 8, 10.0, 0);
     let plan = job_status(&c, j, 0).unwrap().budget.unwrap();
     assert_eq!((plan.deadline_ms, plan.passes_added), (10_000, 0));
     assert_eq!(plan.predicted_end_ms, None);
@@ -776,11 +776,40 @@ fn a_time_budget_renders_every_frame_then_refines_the_noisiest_inside_the_deadli
     assert_eq!(status.progress, 1.0);
 }
 
+/// A budget job's passes are leased in the order they were planned: the noisiest
+/// frame's pass first, whatever its frame number, and a late frame's pass is never
+/// starved by passes planned after it for earlier frames.
+#[test]
+fn a_time_budgets_passes_are_leased_in_plan_order() {
+    let mut c = db();
+    let j = budget_job(&mut c, 3, 16, 60.0, 0);
+    let w = worker(&mut c, "w", 0);
+    let mut t = 0;
+    let noise = [0.2, 0.1, 0.3];
+    for _ in 0..3 {
+        let l = lease(&mut c, w, t, TIMING).unwrap().unwrap();
+        t += 100;
+        accept(&mut c, w, l.token, 1, 1, None, t, TIMING).unwrap();
+        let summary = SamplingSummary {
+            mean_samples: 4.0,
+            min_samples: 4,
+            max_samples: 4,
+            mean_noise: Some(noise[l.frame as usize - 1]),
+        };
+        mark_assembled(&mut c, j, l.frame, t, &summary, TIMING).unwrap();
+    }
+    // One tile a frame, two queued tasks for the one worker: frames 3 and 1, in that order.
+    let frames: Vec<i32> = (0..2)
+        .map(|_| lease(&mut c, w, t, TIMING).unwrap().unwrap().frame)
+        .collect();
+    assert_eq!(frames, [3, 1]);
+}
+
 /// Every frame that reached the job's spp leaves nothing to refine: the job ends early.
 #[test]
 fn a_time_budget_ends_early_when_every_frame_reaches_spp() {
     let mut c = db();
-    let j = budget_job(&mut c, 2, 3_600.0, 0);
+    let j = budget_job(&mut c, 2, 8, 3_600.0, 0);
     let w = worker(&mut c, "w", 0);
     let mut t = 0;
     render_budget(&mut c, &[w], &mut t, 10, |_| 1.0);
@@ -804,7 +833,7 @@ fn a_time_budget_ends_early_when_every_frame_reaches_spp() {
 #[test]
 fn a_worker_joining_or_leaving_changes_the_plan_not_the_deadline() {
     let mut c = db();
-    let j = budget_job(&mut c, 4, 60.0, 0);
+    let j = budget_job(&mut c, 4, 8, 60.0, 0);
     let a = worker(&mut c, "a", 0);
     let mut t = 0;
     // Worker a renders the first pass alone.
