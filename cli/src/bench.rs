@@ -13,8 +13,6 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use glam::Vec2;
-use rayon::prelude::*;
 use serde::Serialize;
 
 use proto::job::Quality;
@@ -26,6 +24,9 @@ use tracer::render::{
 use tracer::scene::Scene;
 
 use crate::args::parse_size;
+use crate::bench_features::{self, FeatureCost};
+use crate::bench_rays::{self, BigMesh, RayRate};
+use crate::bench_scaling::{self, FarmCosts, Work};
 use crate::render::load_scene;
 
 #[derive(Args)]
@@ -58,6 +59,8 @@ pub enum BenchCommand {
     Farm(crate::bench_farm::FarmBenchArgs),
 }
 
+/// The generated mesh is a grid of this many quads a side: 1,002,528 triangles.
+const BIG_MESH_SIDE: usize = 708;
 /// The RMSE at which "time to reach an error" is read off each sweep.
 const TARGET_RMSE: f64 = 0.05;
 /// The bounces of the sweeps (the tracer's default).
@@ -77,6 +80,12 @@ pub struct Report {
     pub scenes: Vec<SceneReport>,
     /// The efficiency comparison on the measured Cornell box (reference scenes only).
     pub cornell: Option<CornellEfficiency>,
+    /// The generated mesh of a million triangles (reference scenes only).
+    pub big_mesh: Option<BigMesh>,
+    /// What each scene feature costs (reference scenes only).
+    pub features: Vec<FeatureCost>,
+    /// The farm against direct renders (reference scenes only).
+    pub farm: Option<FarmCosts>,
 }
 
 /// What ran the benchmark.
@@ -109,8 +118,8 @@ pub struct SceneReport {
     pub reference_depth: u32,
     /// Seconds the reference took.
     pub reference_seconds: f64,
-    /// Closest-hit camera rays per second.
-    pub camera_rays_per_second: f64,
+    /// Camera, shadow and bounce rays per second.
+    pub rays: Vec<RayRate>,
     /// Camera paths per second at 16 spp and the sweep's depth.
     pub paths_per_second: f64,
     /// Rays of every kind per second over those paths.
@@ -208,31 +217,6 @@ fn rel_mse(a: &Layers, reference: &Layers) -> f64 {
         })
         .sum();
     sum / a.beauty.len() as f64
-}
-
-/// Closest-hit rays per second for the camera rays of one pass over the image.
-fn camera_rays_per_second(frame: &PreparedFrame) -> f64 {
-    let (w, h) = (frame.width, frame.height);
-    let rays: Vec<_> = (0..w * h)
-        .map(|i| {
-            let film = Vec2::new(
-                ((i % w) as f32 + 0.5) / w as f32,
-                ((i / w) as f32 + 0.5) / h as f32,
-            );
-            frame.camera.generate_ray(film, 0.0)
-        })
-        .collect();
-    let passes = 8;
-    let start = Instant::now();
-    let hits: usize = (0..passes)
-        .map(|_| {
-            rays.par_iter()
-                .filter(|r| frame.intersect(r, f32::INFINITY).is_some())
-                .count()
-        })
-        .sum();
-    std::hint::black_box(hits);
-    (rays.len() * passes) as f64 / start.elapsed().as_secs_f64()
 }
 
 /// Renders the whole frame at `settings` and `spp`: the image and the wall seconds.
@@ -351,8 +335,8 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
         reference_spp,
     );
 
-    let camera_rays_per_second = camera_rays_per_second(&frame);
-    let (_, rays, seconds) = render(&frame, settings, 16);
+    let rays = bench_rays::scene_rates(&frame)?;
+    let (_, path_rays, seconds) = render(&frame, settings, 16);
     let paths = f64::from(frame.width * frame.height) * 16.0;
 
     let spps: &[u32] = if quick {
@@ -444,9 +428,9 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
         reference_spp,
         reference_depth,
         reference_seconds,
-        camera_rays_per_second,
+        rays,
         paths_per_second: paths / seconds,
-        rays_per_second: rays as f64 / seconds,
+        rays_per_second: path_rays as f64 / seconds,
         seconds_to_target: seconds_to_reach(&spp_sweep, TARGET_RMSE),
         spp_sweep,
         fixed_spp,
@@ -533,9 +517,33 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         .into_iter()
         .map(|s| measure_scene(s, reference_spp, args.quick))
         .collect::<anyhow::Result<_>>()?;
-    let cornell = match args.scene {
-        None => Some(cornell_efficiency(args.quick)?),
-        Some(_) => None,
+    let (cornell, big_mesh, features, farm) = match args.scene {
+        None => {
+            let cornell = cornell_efficiency(args.quick)?;
+            eprintln!("a generated mesh of 1M triangles ...");
+            let mesh = bench_rays::big_mesh(BIG_MESH_SIDE)?;
+            eprintln!("feature costs ...");
+            let spp = if args.quick { 8 } else { 32 };
+            let features = bench_features::feature_costs(size, spp)?;
+            let work = if args.quick {
+                Work {
+                    frames: 4,
+                    width: 64,
+                    height: 48,
+                    spp: 16,
+                }
+            } else {
+                Work {
+                    frames: 8,
+                    width: 128,
+                    height: 96,
+                    spp: 32,
+                }
+            };
+            let farm = bench_scaling::farm_costs(work, rayon::current_num_threads() as u32)?;
+            (Some(cornell), Some(mesh), features, Some(farm))
+        }
+        Some(_) => (None, None, Vec::new(), None),
     };
     let report = Report {
         machine: machine(),
@@ -545,6 +553,9 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             .replace(&std::env::args().next().unwrap_or_default(), "tessera"),
         scenes,
         cornell,
+        big_mesh,
+        features,
+        farm,
     };
     let markdown = markdown(&report);
     print!("{markdown}");
@@ -588,11 +599,44 @@ pub fn markdown(r: &Report) -> String {
             c.mse_times_seconds
         );
     }
+    if let Some(b) = &r.big_mesh {
+        out += &format!(
+            "\n### A generated mesh of {} triangles\n\n\
+             BVH build {:.2} s on 1 thread, {:.2} s on all; {:.1} bytes per triangle.\n\n{}",
+            b.triangles,
+            b.build_seconds_one_thread,
+            b.build_seconds_all_threads,
+            b.bytes_per_triangle,
+            bench_rays::table(&b.rays)
+        );
+    }
+    if let Some(f) = &r.farm {
+        out += &format!(
+            "\n### The farm against a direct render\n\nThe animated demo's frames 1-{} at \
+             {}x{}, {} spp, motion blur, tiles of 32: a server and worker processes on this \
+             machine (from the job's creation to its end) against `tessera render` of the \
+             same frames in one process with as many threads:\n\n{}",
+            f.work.frames,
+            f.work.width,
+            f.work.height,
+            f.work.spp,
+            bench_scaling::table(f)
+        );
+    }
+    if !r.features.is_empty() {
+        out += &format!(
+            "\n### What each feature costs\n\nCamera paths per second of the same scene \
+             without a feature and with it ({}x{}):\n\n{}",
+            r.scenes.first().map_or(0, |s| s.width),
+            r.scenes.first().map_or(0, |s| s.height),
+            bench_features::table(&r.features)
+        );
+    }
     for s in &r.scenes {
         out += &format!(
             "\n### {} ({}x{})\n\n{}. Reference: {} spp at depth {} ({:.1} s).\n\n\
-             {:.2} M camera rays/s (closest hit); {:.3} M paths/s and {:.2} M rays/s of all \
-             kinds at 16 spp, depth {SWEEP_DEPTH}. RMSE {TARGET_RMSE} is reached in {} s.\n",
+             {:.3} M paths/s and {:.2} M rays/s of all kinds at 16 spp, depth \
+             {SWEEP_DEPTH}. RMSE {TARGET_RMSE} is reached in {} s.\n\n{}",
             s.name,
             s.width,
             s.height,
@@ -600,10 +644,10 @@ pub fn markdown(r: &Report) -> String {
             s.reference_spp,
             s.reference_depth,
             s.reference_seconds,
-            s.camera_rays_per_second / 1e6,
             s.paths_per_second / 1e6,
             s.rays_per_second / 1e6,
             opt(s.seconds_to_target, 3),
+            bench_rays::table(&s.rays),
         );
         let table = |out: &mut String, title: &str, head: &str, points: &[Point]| {
             if points.is_empty() {
@@ -713,6 +757,9 @@ mod tests {
             command: "tessera bench".into(),
             scenes: vec![s],
             cornell: None,
+            big_mesh: None,
+            features: Vec::new(),
+            farm: None,
         };
         let text = markdown(&report);
         assert!(text.contains("### motion-blur (8x8)"), "{text}");

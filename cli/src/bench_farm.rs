@@ -492,7 +492,7 @@ fn bench_spec(digest: &str, shape: Shape) -> JobSpec {
 }
 
 /// The data folder: the one given (new or empty), or a fresh temporary one.
-fn data_folder(given: Option<&PathBuf>) -> anyhow::Result<(PathBuf, bool)> {
+pub(crate) fn data_folder(given: Option<&PathBuf>) -> anyhow::Result<(PathBuf, bool)> {
     match given {
         Some(dir) => {
             let empty = match std::fs::read_dir(dir) {

@@ -96,13 +96,13 @@ struct WorkerProcess {
 
 /// The demo's worker processes. Dropping it stops them, so that no worker outlives the demo
 /// on an error or a panic; on Linux they also get SIGTERM if the demo itself is killed.
-struct Workers {
+pub(crate) struct Workers {
     procs: Vec<WorkerProcess>,
 }
 
 impl Workers {
     /// Starts `n` workers of `threads` threads each against `server`.
-    fn spawn(
+    pub(crate) fn spawn(
         server: &str,
         n: u32,
         threads: u32,
@@ -160,7 +160,7 @@ impl Workers {
     /// SIGTERM to every running worker (each gives its lease back and exits), then waits up
     /// to `grace`; whoever is still running after that is killed. Returns the names of the
     /// killed ones.
-    fn stop(&mut self, grace: Duration) -> Vec<String> {
+    pub(crate) fn stop(&mut self, grace: Duration) -> Vec<String> {
         for p in &mut self.procs {
             if p.exited.is_none() {
                 if let Ok(Some(status)) = p.child.try_wait() {
@@ -262,14 +262,14 @@ fn tail(path: &Path, n: usize) -> String {
 }
 
 /// The farm server, running on this process's runtime.
-struct LocalServer {
-    url: String,
+pub(crate) struct LocalServer {
+    pub(crate) url: String,
     task: JoinHandle<Result<(), server::StartError>>,
     stop: Option<oneshot::Sender<()>>,
 }
 
 impl LocalServer {
-    async fn start(data: &Path) -> anyhow::Result<LocalServer> {
+    pub(crate) async fn start(data: &Path) -> anyhow::Result<LocalServer> {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await
             .context("binding a loopback port for the demo server")?;
@@ -290,7 +290,7 @@ impl LocalServer {
     }
 
     /// Stops accepting, lets open requests finish for up to [`SERVER_GRACE`].
-    async fn shutdown(mut self) -> anyhow::Result<()> {
+    pub(crate) async fn shutdown(mut self) -> anyhow::Result<()> {
         if let Some(stop) = self.stop.take() {
             let _ = stop.send(());
         }

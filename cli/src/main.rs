@@ -3,6 +3,9 @@
 mod args;
 mod bench;
 mod bench_farm;
+mod bench_features;
+mod bench_rays;
+mod bench_scaling;
 mod client;
 mod control;
 mod demo;

@@ -656,10 +656,41 @@ fn reached(c: &Connection, job: u64, frame: i32) -> u32 {
     .unwrap()
 }
 
-/// Renders whatever is queued on `workers` in turn, one at a time, each task taking `ms`
-/// per 256 pixel samples; every frame whose last tile comes in is assembled with an
-/// estimated error of `base(frame) / sqrt(spp)` (as a real frame's falls). Stops when no
-/// worker gets a task.
+/// Leases one task to `w` at `*t` and finishes it `ms` per 256 pixel samples later; when
+/// it completes its frame, the frame is assembled with the estimated error
+/// `error(frame, spp)`. `None` when `w` gets nothing.
+fn render_one(
+    c: &mut Connection,
+    w: u64,
+    t: &mut i64,
+    ms: i64,
+    error: &impl Fn(i32, u32) -> f64,
+) -> Option<Lease> {
+    let l = lease(c, w, *t, TIMING).unwrap()?;
+    let pixel_samples = i64::from(l.tile.width * l.tile.height * (l.samples.end - l.samples.start));
+    *t += ms * pixel_samples / 256;
+    if let Accepted::New {
+        job,
+        frame,
+        frame_complete: true,
+        ..
+    } = accept(c, w, l.token, 1, 1, None, *t, TIMING).unwrap()
+    {
+        let spp = reached(c, job, frame);
+        let summary = SamplingSummary {
+            mean_samples: f64::from(spp),
+            min_samples: spp,
+            max_samples: spp,
+            mean_noise: Some(error(frame, spp)),
+        };
+        mark_assembled(c, job, frame, *t, &summary, TIMING).unwrap();
+    }
+    Some(l)
+}
+
+/// Renders whatever is queued on `workers` in turn (see [`render_one`]), each frame's
+/// error falling as `base(frame) / sqrt(spp)`, as a real frame's does, until no worker
+/// gets a task.
 fn render_budget(
     c: &mut Connection,
     workers: &[u64],
@@ -667,35 +698,16 @@ fn render_budget(
     ms: i64,
     base: impl Fn(i32) -> f64,
 ) {
+    let error = |frame, spp: u32| base(frame) / f64::from(spp).sqrt();
     let mut idle = 0;
     for &w in workers.iter().cycle() {
-        let Some(l) = lease(c, w, *t, TIMING).unwrap() else {
+        if render_one(c, w, t, ms, &error).is_some() {
+            idle = 0;
+        } else {
             idle += 1;
             if idle == workers.len() {
                 return;
             }
-            continue;
-        };
-        idle = 0;
-        let pixel_samples =
-            i64::from(l.tile.width * l.tile.height * (l.samples.end - l.samples.start));
-        *t += ms * pixel_samples / 256;
-        let accepted = accept(c, w, l.token, 1, 1, None, *t, TIMING).unwrap();
-        if let Accepted::New {
-            job,
-            frame,
-            frame_complete: true,
-            ..
-        } = accepted
-        {
-            let spp = reached(c, job, frame);
-            let summary = SamplingSummary {
-                mean_samples: f64::from(spp),
-                min_samples: spp,
-                max_samples: spp,
-                mean_noise: Some(base(frame) / f64::from(spp).sqrt()),
-            };
-            mark_assembled(c, job, frame, *t, &summary, TIMING).unwrap();
         }
     }
 }
@@ -713,27 +725,12 @@ fn a_time_budget_renders_every_frame_then_refines_the_noisiest_inside_the_deadli
     assert!(plan.stage.starts_with("first pass"), "{}", plan.stage);
     let w = worker(&mut c, "w", 0);
     // The first pass: 12 tiles of 8×8 at 4 spp, frame by frame; nothing else is planned
-    // while any of it is queued.
+    // while any of it is queued. Frame 2 is the noisiest.
     let mut t = 0;
+    let error = |frame, _| if frame == 2 { 0.3 } else { 0.1 };
     for _ in 0..12 {
-        let l = lease(&mut c, w, t, TIMING).unwrap().unwrap();
+        let l = render_one(&mut c, w, &mut t, 100, &error).unwrap();
         assert_eq!(l.samples, SampleSpan { start: 0, end: 4 });
-        t += 100;
-        if let Accepted::New {
-            frame,
-            frame_complete: true,
-            ..
-        } = accept(&mut c, w, l.token, 1, 1, None, t, TIMING).unwrap()
-        {
-            let summary = SamplingSummary {
-                mean_samples: 4.0,
-                min_samples: 4,
-                max_samples: 4,
-                // Frame 2 is the noisiest.
-                mean_noise: Some(if frame == 2 { 0.3 } else { 0.1 }),
-            };
-            mark_assembled(&mut c, j, frame, t, &summary, TIMING).unwrap();
-        }
     }
     let status = job_status(&c, j, t).unwrap();
     assert_eq!((status.frames_done, status.finished_ms), (3, None));
@@ -785,18 +782,9 @@ fn a_time_budgets_passes_are_leased_in_plan_order() {
     let j = budget_job(&mut c, 3, 16, 60.0, 0);
     let w = worker(&mut c, "w", 0);
     let mut t = 0;
-    let noise = [0.2, 0.1, 0.3];
+    let error = |frame, _| [0.2, 0.1, 0.3][frame as usize - 1];
     for _ in 0..3 {
-        let l = lease(&mut c, w, t, TIMING).unwrap().unwrap();
-        t += 100;
-        accept(&mut c, w, l.token, 1, 1, None, t, TIMING).unwrap();
-        let summary = SamplingSummary {
-            mean_samples: 4.0,
-            min_samples: 4,
-            max_samples: 4,
-            mean_noise: Some(noise[l.frame as usize - 1]),
-        };
-        mark_assembled(&mut c, j, l.frame, t, &summary, TIMING).unwrap();
+        render_one(&mut c, w, &mut t, 100, &error).unwrap();
     }
     // One tile a frame, two queued tasks for the one worker: frames 3 and 1, in that order.
     let frames: Vec<i32> = (0..2)
@@ -837,23 +825,9 @@ fn a_worker_joining_or_leaving_changes_the_plan_not_the_deadline() {
     let a = worker(&mut c, "a", 0);
     let mut t = 0;
     // Worker a renders the first pass alone.
+    let error = |frame, _| 0.1 * f64::from(frame);
     while job_status(&c, j, t).unwrap().budget.unwrap().passes_added == 0 {
-        let l = lease(&mut c, a, t, TIMING).unwrap().unwrap();
-        t += 100;
-        if let Accepted::New {
-            frame,
-            frame_complete: true,
-            ..
-        } = accept(&mut c, a, l.token, 1, 1, None, t, TIMING).unwrap()
-        {
-            let summary = SamplingSummary {
-                mean_samples: 4.0,
-                min_samples: 4,
-                max_samples: 4,
-                mean_noise: Some(0.1 * f64::from(frame)),
-            };
-            mark_assembled(&mut c, j, frame, t, &summary, TIMING).unwrap();
-        }
+        render_one(&mut c, a, &mut t, 100, &error).unwrap();
     }
     let alone = job_status(&c, j, t).unwrap().budget.unwrap();
     assert_eq!(alone.workers, 1);

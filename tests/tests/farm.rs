@@ -25,14 +25,20 @@ fn flat(layers: &Layers) -> (Vec<f32>, Vec<f32>) {
     (beauty, albedo)
 }
 
-#[test]
-fn two_workers_render_every_frame_as_tessera_render_does() {
+/// A server, two one-thread workers, and the animated demo scene's GLB path.
+fn two_worker_farm() -> (Farm, String) {
     let mut farm = Farm::new();
     farm.start_server(60);
     farm.start_worker("w1", 1);
     farm.start_worker("w2", 1);
-    let scene = farm.demo_scene();
-    let scene = scene.to_str().unwrap();
+    let scene = farm.demo_scene().to_str().unwrap().to_string();
+    (farm, scene)
+}
+
+#[test]
+fn two_workers_render_every_frame_as_tessera_render_does() {
+    let (farm, scene) = two_worker_farm();
+    let scene = scene.as_str();
 
     // One sample pass: tiles only, so every frame must be bit-identical.
     let mut args = vec![scene, "--frames", FRAMES, "--tile", "16", "--passes", "1"];
@@ -227,50 +233,6 @@ fn tessera_demo_runs_a_farm_and_leaves_frames_and_nothing_running() {
 }
 
 #[test]
-fn bench_farm_loses_nothing_and_does_nothing_twice() {
-    let dir = tempfile::tempdir().unwrap();
-    let json = dir.path().join("bench.json");
-    let out = tessera_ok(
-        &[
-            "bench",
-            "farm",
-            "--workers",
-            "20",
-            "--tasks",
-            "400",
-            "--timeout-seconds",
-            "120",
-            "--json",
-            json.to_str().unwrap(),
-        ],
-        dir.path(),
-    );
-    assert!(out.contains("tasks per second"), "the summary table: {out}");
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    let n = |key: &str| {
-        report[key]
-            .as_f64()
-            .unwrap_or_else(|| panic!("{key}: {report}"))
-    };
-    assert_eq!((n("tasks"), n("workers")), (400.0, 20.0), "{report}");
-    assert_eq!(n("accepted"), n("tasks"), "{report}");
-    assert_eq!((n("duplicates"), n("lost")), (0.0, 0.0), "{report}");
-    assert_eq!(n("frames_done"), n("frames"), "{report}");
-    assert!(n("tasks_per_second") > 0.0, "{report}");
-    let lease = &report["lease_latency_ms"];
-    let (p50, p99) = (
-        lease["p50"].as_f64().unwrap(),
-        lease["p99"].as_f64().unwrap(),
-    );
-    assert!(p99 >= p50 && p50 > 0.0, "{report}");
-    assert_eq!(lease["count"].as_u64(), Some(400), "{report}");
-    let peak = report["server_memory"]["peak_rss_mib"].as_f64().unwrap();
-    assert!(peak > 0.0, "{report}");
-    assert_eq!(report["passed"].as_bool(), Some(true), "{report}");
-}
-
-#[test]
 fn json_logs_name_the_request_and_the_task_on_every_line_about_them() {
     let mut farm = Farm::new();
     farm.start_server_with(60, &["--log-format", "json"]);
@@ -348,12 +310,8 @@ const BUDGET_MARGIN_MS: i64 = 2_000;
 /// on the same job reaches fewer samples.
 #[test]
 fn a_time_budget_job_ends_in_time_with_every_frame_and_more_time_buys_more_samples() {
-    let mut farm = Farm::new();
-    farm.start_server(60);
-    farm.start_worker("w1", 1);
-    farm.start_worker("w2", 1);
-    let scene = farm.demo_scene();
-    let scene = scene.to_str().unwrap();
+    let (farm, scene) = two_worker_farm();
+    let scene = scene.as_str();
     let mut reached = Vec::new();
     for budget in ["8", "20"] {
         // An spp cap the farm cannot reach in the budget: the clock decides.

@@ -1,0 +1,245 @@
+//! The farm's cost in `tessera bench`: the same frames of the animated demo rendered by a
+//! server and `tessera worker` processes on this machine, against rendered directly in one
+//! process with as many threads. One worker with every thread gives the farm's overhead;
+//! 1, 2 and 4 single-thread workers against one process of 1, 2 and 4 threads give its
+//! scaling. The farm's time runs from the job's creation to its end (the server's clock:
+//! scene download, leases, uploads and frame assembly included); the direct one from the
+//! first frame's preparation to the last frame's last sample.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use proto::{FrameRange, JobSpec};
+use serde::Serialize;
+
+use tracer::film::{SampleRange, TileRect};
+use tracer::motion::Shutter;
+use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
+
+use crate::client::Client;
+use crate::demo::{LocalServer, Workers};
+
+/// How long workers get to register, and a job to finish, before the bench gives up.
+const WAIT: Duration = Duration::from_secs(600);
+/// The tile of the farm's job.
+const TILE: u32 = 32;
+
+/// What is rendered, both ways.
+#[derive(Clone, Copy, Serialize)]
+pub struct Work {
+    /// Frames 1 to this.
+    pub frames: i32,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Samples per pixel.
+    pub spp: u32,
+}
+
+/// One farm against the direct render with the same threads.
+#[derive(Serialize)]
+pub struct FarmRun {
+    /// Worker processes.
+    pub workers: u32,
+    /// Threads each.
+    pub threads_each: u32,
+    /// Seconds from the job's creation to its end.
+    pub farm_seconds: f64,
+    /// Seconds rendering the same frames in one process of `workers × threads_each`
+    /// threads.
+    pub direct_seconds: f64,
+}
+
+impl FarmRun {
+    /// The farm's throughput as a fraction of the direct render's.
+    pub fn ratio(&self) -> f64 {
+        self.direct_seconds / self.farm_seconds
+    }
+}
+
+/// The farm's figures.
+#[derive(Serialize)]
+pub struct FarmCosts {
+    /// The work.
+    pub work: Work,
+    /// One worker with every thread, then 1, 2 and 4 single-thread workers.
+    pub runs: Vec<FarmRun>,
+}
+
+const SHUTTER: Shutter = Shutter {
+    open: -0.25,
+    close: 0.25,
+};
+
+/// `work` rendered in this process with `threads` threads, as `tessera render` does.
+fn direct_seconds(work: Work, threads: u32) -> anyhow::Result<f64> {
+    let scene = Arc::new(tracer::demo::animated_demo_scene());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads as usize)
+        .build()?;
+    let start = Instant::now();
+    pool.install(|| -> anyhow::Result<()> {
+        for frame in 1..=work.frames {
+            let options = FrameOptions {
+                frame,
+                shutter: SHUTTER,
+                width: work.width,
+                height: work.height,
+                ..Default::default()
+            };
+            let prepared = prepare_frame(scene.clone(), &options)?;
+            let rect = TileRect::new(0, 0, work.width, work.height);
+            let samples = SampleRange::new(0, work.spp);
+            let tile = render_region(
+                &prepared,
+                &RenderSettings::default(),
+                rect,
+                samples,
+                TILE,
+                &|_| {},
+            );
+            std::hint::black_box(tile.resolve());
+        }
+        Ok(())
+    })?;
+    Ok(start.elapsed().as_secs_f64())
+}
+
+fn spec(digest: &str, work: Work) -> JobSpec {
+    let mut spec = JobSpec::new(digest);
+    spec.frames = Some(FrameRange {
+        start: 1,
+        end: work.frames,
+        step: 1,
+    });
+    (spec.width, spec.height, spec.spp) = (work.width, work.height, work.spp);
+    spec.shutter = [SHUTTER.open, SHUTTER.close];
+    spec.tile_size = Some(TILE);
+    spec.name = Some("bench scaling".into());
+    spec
+}
+
+/// Waits until `check` says yes, polling; fails after [`WAIT`] saying `what`.
+async fn wait_for(
+    what: &str,
+    mut check: impl AsyncFnMut() -> anyhow::Result<bool>,
+) -> anyhow::Result<()> {
+    let until = Instant::now() + WAIT;
+    while !check().await? {
+        if Instant::now() > until {
+            bail!("{what} within {} s", WAIT.as_secs());
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    Ok(())
+}
+
+/// `work` on a farm of `workers` worker processes of `threads` threads each: seconds from
+/// the job's creation to its end.
+async fn farm_seconds(
+    client: &Client,
+    url: &str,
+    digest: &str,
+    dir: &Path,
+    workers: u32,
+    threads: u32,
+    work: Work,
+) -> anyhow::Result<f64> {
+    let logs = dir.join(format!("logs-{workers}x{threads}"));
+    std::fs::create_dir_all(&logs)?;
+    let mut procs = Workers::spawn(url, workers, threads, &dir.join("cache"), &logs)?;
+    wait_for("the workers did not register", async || {
+        let list = client.workers().await?;
+        Ok(list.workers.iter().filter(|w| w.online).count() >= workers as usize)
+    })
+    .await?;
+    let job = client.create_job(&spec(digest, work)).await?;
+    let mut last = job.clone();
+    wait_for("the job did not finish", async || {
+        last = client.job(job.id).await?;
+        Ok(last.finished_ms.is_some())
+    })
+    .await?;
+    procs.stop(Duration::from_secs(5));
+    if last.frames_done != work.frames as u64 {
+        bail!(
+            "the bench job ended with {} of {} frames",
+            last.frames_done,
+            work.frames
+        );
+    }
+    let end = last.finished_ms.unwrap_or(last.created_ms);
+    Ok((end - last.created_ms) as f64 / 1000.0)
+}
+
+/// The farm's overhead with one worker of `threads` threads, and its scaling over 1, 2 and
+/// 4 single-thread workers, each against a direct render with the same threads.
+pub fn farm_costs(work: Work, threads: u32) -> anyhow::Result<FarmCosts> {
+    let (dir, _) = crate::bench_farm::data_folder(None)?;
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    let result = runtime.block_on(async {
+        let server = LocalServer::start(&dir.join("data")).await?;
+        let client = Client::new(&server.url, None)?;
+        let glb = tracer::export::scene_to_glb(&tracer::demo::animated_demo_scene())
+            .map_err(|e| anyhow::anyhow!("exporting the demo scene to GLB: {e}"))?;
+        let scene = client.upload_scene(glb).await?;
+        let mut direct: HashMap<u32, f64> = HashMap::new();
+        let mut runs = Vec::new();
+        for (workers, threads_each) in [(1, threads), (1, 1), (2, 1), (4, 1)] {
+            eprintln!("farm: {workers} worker(s) of {threads_each} thread(s) ...");
+            let farm_seconds = farm_seconds(
+                &client,
+                &server.url,
+                &scene.digest,
+                &dir,
+                workers,
+                threads_each,
+                work,
+            )
+            .await?;
+            let total = workers * threads_each;
+            let direct_seconds = match direct.get(&total) {
+                Some(&s) => s,
+                None => {
+                    let s =
+                        tokio::task::spawn_blocking(move || direct_seconds(work, total)).await??;
+                    direct.insert(total, s);
+                    s
+                }
+            };
+            runs.push(FarmRun {
+                workers,
+                threads_each,
+                farm_seconds,
+                direct_seconds,
+            });
+        }
+        server.shutdown().await?;
+        Ok(FarmCosts { work, runs })
+    });
+    runtime.shutdown_timeout(Duration::from_secs(1));
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+/// The markdown table of the runs.
+pub fn table(costs: &FarmCosts) -> String {
+    let mut out = "| workers x threads | farm (s) | direct, same threads (s) | farm / direct \
+                   throughput |\n|---|---:|---:|---:|\n"
+        .to_string();
+    for r in &costs.runs {
+        out += &format!(
+            "| {} x {} | {:.2} | {:.2} | {:.3} |\n",
+            r.workers,
+            r.threads_each,
+            r.farm_seconds,
+            r.direct_seconds,
+            r.ratio()
+        );
+    }
+    out
+}

@@ -1,0 +1,95 @@
+//! The benchmarks' own checks: `tessera bench farm` and `tessera bench --quick` run as a
+//! user runs them and report every figure. A binary of its own, so that their load does not
+//! share the machine with the farm tests' timed jobs (the time budget's).
+
+use tests::tessera_ok;
+
+#[test]
+fn bench_farm_loses_nothing_and_does_nothing_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("bench.json");
+    let out = tessera_ok(
+        &[
+            "bench",
+            "farm",
+            "--workers",
+            "20",
+            "--tasks",
+            "400",
+            "--timeout-seconds",
+            "120",
+            "--json",
+            json.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert!(out.contains("tasks per second"), "the summary table: {out}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let n = |key: &str| {
+        report[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{key}: {report}"))
+    };
+    assert_eq!((n("tasks"), n("workers")), (400.0, 20.0), "{report}");
+    assert_eq!(n("accepted"), n("tasks"), "{report}");
+    assert_eq!((n("duplicates"), n("lost")), (0.0, 0.0), "{report}");
+    assert_eq!(n("frames_done"), n("frames"), "{report}");
+    assert!(n("tasks_per_second") > 0.0, "{report}");
+    let lease = &report["lease_latency_ms"];
+    let (p50, p99) = (
+        lease["p50"].as_f64().unwrap(),
+        lease["p99"].as_f64().unwrap(),
+    );
+    assert!(p99 >= p50 && p50 > 0.0, "{report}");
+    assert_eq!(lease["count"].as_u64(), Some(400), "{report}");
+    let peak = report["server_memory"]["peak_rss_mib"].as_f64().unwrap();
+    assert!(peak > 0.0, "{report}");
+    assert_eq!(report["passed"].as_bool(), Some(true), "{report}");
+}
+
+/// `tessera bench --quick` writes a report with every section: the reference scenes'
+/// sweeps and presets, the Cornell box's efficiency, the million-triangle mesh, what each
+/// feature costs and the farm against a direct render (real worker processes).
+#[test]
+fn bench_quick_writes_a_report_with_every_section() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "bench",
+        "--quick",
+        "--size",
+        "16x16",
+        "--reference-spp",
+        "32",
+        "--out",
+        "report",
+    ];
+    let markdown = tessera_ok(&args, dir.path());
+    let written = std::fs::read_to_string(dir.path().join("report/report.md")).unwrap();
+    assert_eq!(markdown, written);
+    for heading in [
+        "### Cornell box, 256x256",
+        "### A generated mesh of 1002528 triangles",
+        "### The farm against a direct render",
+        "### What each feature costs",
+        "### cornell (16x16)",
+        "### glossy-glass (16x16)",
+        "### motion-blur (16x16)",
+    ] {
+        assert!(markdown.contains(heading), "{heading}:\n{markdown}");
+    }
+    let json = std::fs::read_to_string(dir.path().join("report/report.json")).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(report["scenes"].as_array().unwrap().len(), 3);
+    assert_eq!(report["features"].as_array().unwrap().len(), 4);
+    let runs = report["farm"]["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 4);
+    for run in runs {
+        let farm = run["farm_seconds"].as_f64().unwrap();
+        let direct = run["direct_seconds"].as_f64().unwrap();
+        assert!(farm > 0.0 && direct > 0.0, "{run}");
+    }
+    assert!(report["cornell"]["mse_times_seconds"].as_f64().unwrap() > 0.0);
+    let motion = &report["scenes"][2]["motion_sweep"];
+    assert_eq!(motion.as_array().unwrap().len(), 6, "{motion}");
+}
