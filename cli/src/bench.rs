@@ -534,9 +534,9 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
                 }
             } else {
                 Work {
-                    frames: 8,
-                    width: 128,
-                    height: 96,
+                    frames: 4,
+                    width: 256,
+                    height: 192,
                     spp: 32,
                 }
             };
@@ -613,8 +613,8 @@ pub fn markdown(r: &Report) -> String {
     if let Some(f) = &r.farm {
         out += &format!(
             "\n### The farm against a direct render\n\nThe animated demo's frames 1-{} at \
-             {}x{}, {} spp, motion blur, tiles of 32: a server and worker processes on this \
-             machine (from the job's creation to its end) against `tessera render` of the \
+             {}x{}, {} spp, motion blur, in the server's default tiles: a server and worker \
+             processes on this machine (from the job's creation to its end) against `tessera render` of the \
              same frames in one process with as many threads:\n\n{}",
             f.work.frames,
             f.work.width,

@@ -24,8 +24,9 @@ use crate::demo::{LocalServer, Workers};
 
 /// How long workers get to register, and a job to finish, before the bench gives up.
 const WAIT: Duration = Duration::from_secs(600);
-/// The tile of the farm's job.
-const TILE: u32 = 32;
+/// The direct render's tiles, which only share the frame among its threads (the farm's
+/// job takes the server's default tiles, a few seconds of work each, as users' jobs do).
+const DIRECT_TILE: u32 = 32;
 
 /// What is rendered, both ways.
 #[derive(Clone, Copy, Serialize)]
@@ -99,7 +100,7 @@ fn direct_seconds(work: Work, threads: u32) -> anyhow::Result<f64> {
                 &RenderSettings::default(),
                 rect,
                 samples,
-                TILE,
+                DIRECT_TILE,
                 &|_| {},
             );
             std::hint::black_box(tile.resolve());
@@ -118,7 +119,6 @@ fn spec(digest: &str, work: Work) -> JobSpec {
     });
     (spec.width, spec.height, spec.spp) = (work.width, work.height, work.spp);
     spec.shutter = [SHUTTER.open, SHUTTER.close];
-    spec.tile_size = Some(TILE);
     spec.name = Some("bench scaling".into());
     spec
 }

@@ -34,7 +34,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Render one frame of a glTF scene (or the built-in demo) to a multi-layer EXR.
     Render(render::RenderArgs),
-    /// Measure the tracer: rays per second, and time and error against samples per pixel
+    /// Measure the tracer and the farm: a report (markdown and JSON) of rays per second, error
+    /// against time, the presets, what each feature costs and the farm against a direct render
     /// (`bench farm`: load-test the farm server).
     Bench(bench::BenchArgs),
     /// Run the farm server: REST API, scheduler, tile assembly, dashboard.

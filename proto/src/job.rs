@@ -365,7 +365,7 @@ pub struct JobStatus {
 }
 
 /// Where a time-budget job's plan stands. The server plans again whenever a frame is
-/// assembled: it measures each live worker's speed on the job, predicts when the work
+/// assembled and every few seconds: it measures each live worker's speed on the job, predicts when the work
 /// queued and leased ends, and adds a sample pass to the frame with the highest estimated
 /// error while the prediction stays inside the deadline.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -779,7 +779,7 @@ fn a_time_budget_renders_every_frame_then_refines_the_noisiest_inside_the_deadli
 #[test]
 fn a_time_budgets_passes_are_leased_in_plan_order() {
     let mut c = db();
-    let j = budget_job(&mut c, 3, 16, 60.0, 0);
+    budget_job(&mut c, 3, 16, 60.0, 0);
     let w = worker(&mut c, "w", 0);
     let mut t = 0;
     let error = |frame, _| [0.2, 0.1, 0.3][frame as usize - 1];
