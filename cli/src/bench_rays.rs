@@ -12,6 +12,7 @@ use serde::Serialize;
 use tracer::bvh::MeshBvh;
 use tracer::geometry::Ray;
 use tracer::render::PreparedFrame;
+use tracer::shapes::bumpy_grid;
 
 /// Rays per second of one kind.
 #[derive(Clone, Serialize)]
@@ -133,27 +134,11 @@ pub fn scene_rates(frame: &PreparedFrame) -> anyhow::Result<Vec<RayRate>> {
     ])
 }
 
-/// A bumpy grid of `n`×`n` quads over the unit square.
-fn grid(n: usize) -> Vec<[Vec3; 3]> {
-    let p = |i: usize, j: usize| {
-        let (x, z) = (i as f32 / n as f32, j as f32 / n as f32);
-        Vec3::new(x, 0.05 * (13.0 * x).sin() * (11.0 * z).cos(), z)
-    };
-    let mut tris = Vec::with_capacity(2 * n * n);
-    for i in 0..n {
-        for j in 0..n {
-            tris.push([p(i, j), p(i + 1, j), p(i + 1, j + 1)]);
-            tris.push([p(i, j), p(i + 1, j + 1), p(i, j + 1)]);
-        }
-    }
-    tris
-}
-
 /// A generated mesh of `2 n²` triangles (n = 708: just over a million): build time, bytes
 /// per triangle, and rays through it: coherent ones from a point above, incoherent ones
 /// between random points of its bounding box, and any-hit rays between those.
 pub fn big_mesh(n: usize) -> anyhow::Result<BigMesh> {
-    let tris = grid(n);
+    let tris = bumpy_grid(n);
     let build = || {
         let start = Instant::now();
         let bvh = MeshBvh::build(&tris);

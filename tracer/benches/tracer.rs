@@ -11,22 +11,7 @@ use tracer::bvh::MeshBvh;
 use tracer::film::{SampleRange, TileRect};
 use tracer::geometry::Ray;
 use tracer::render::{prepare_frame, render_tile, FrameOptions, PreparedFrame, RenderSettings};
-
-/// A bumpy grid of `n`×`n` quads: a mesh whose size we control.
-fn grid(n: usize) -> Vec<[Vec3; 3]> {
-    let p = |i: usize, j: usize| {
-        let (x, z) = (i as f32 / n as f32, j as f32 / n as f32);
-        Vec3::new(x, 0.05 * (13.0 * x).sin() * (11.0 * z).cos(), z)
-    };
-    let mut tris = Vec::with_capacity(2 * n * n);
-    for i in 0..n {
-        for j in 0..n {
-            tris.push([p(i, j), p(i + 1, j), p(i + 1, j + 1)]);
-            tris.push([p(i, j), p(i + 1, j + 1), p(i, j + 1)]);
-        }
-    }
-    tris
-}
+use tracer::shapes::bumpy_grid;
 
 fn demo_frame(size: u32) -> PreparedFrame {
     let options = FrameOptions {
@@ -41,7 +26,7 @@ fn bvh_build(c: &mut Criterion) {
     let mut g = c.benchmark_group("bvh_build");
     g.sample_size(10);
     for n in [64, 256] {
-        let tris = grid(n);
+        let tris = bumpy_grid(n);
         g.throughput(Throughput::Elements(tris.len() as u64));
         g.bench_with_input(BenchmarkId::from_parameter(tris.len()), &tris, |b, t| {
             b.iter(|| MeshBvh::build(t))
@@ -65,7 +50,7 @@ fn grid_rays(count: usize) -> Vec<Ray> {
 }
 
 fn bvh_rays(c: &mut Criterion) {
-    let tris = grid(256);
+    let tris = bumpy_grid(256);
     let rays = grid_rays(64 * 64);
     let bvh = MeshBvh::build(&tris);
     // The same grid deforming over the shutter: a wave that rises and moves sideways.

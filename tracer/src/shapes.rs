@@ -81,3 +81,20 @@ pub fn uv_sphere(material: u32, rings: u32, segments: u32) -> Primitive {
     }
     prim
 }
+
+/// A bumpy grid of `n`×`n` quads over the unit square (2 n² triangles): a mesh of any size,
+/// for benchmarks of the BVH.
+pub fn bumpy_grid(n: usize) -> Vec<[Vec3; 3]> {
+    let p = |i: usize, j: usize| {
+        let (x, z) = (i as f32 / n as f32, j as f32 / n as f32);
+        Vec3::new(x, 0.05 * (13.0 * x).sin() * (11.0 * z).cos(), z)
+    };
+    let mut tris = Vec::with_capacity(2 * n * n);
+    for i in 0..n {
+        for j in 0..n {
+            tris.push([p(i, j), p(i + 1, j), p(i + 1, j + 1)]);
+            tris.push([p(i, j), p(i + 1, j + 1), p(i, j + 1)]);
+        }
+    }
+    tris
+}
