@@ -243,6 +243,10 @@ pub fn replan(
         "waiting for a worker's speed".to_string()
     } else {
         let mut stage = String::from("refining: the noisiest frames get more samples");
+        let mut tasks: u64 =
+            tx.query_row("SELECT count(*) FROM tasks WHERE job_id = ?1", [job], |r| {
+                r.get(0)
+            })?;
         while open.queued < QUEUE_PER_WORKER * u64::from(speed.live.max(1)) {
             let Some((frame, reached, pass)) = noisiest_frame(tx, job, spec.spp)? else {
                 stage = if open.samples > 0.0 {
@@ -253,10 +257,6 @@ pub fn replan(
                 break;
             };
             let tiles = tiles(tx, job, frame)?;
-            let tasks: u64 =
-                tx.query_row("SELECT count(*) FROM tasks WHERE job_id = ?1", [job], |r| {
-                    r.get(0)
-                })?;
             if tasks + tiles.len() as u64 > max_tasks {
                 stage = format!("stopped: the job holds {tasks} tasks, this server's limit");
                 break;
@@ -297,6 +297,7 @@ pub fn replan(
             open.samples += frame_pixels * f64::from(k);
             open.largest = open.largest.max(largest_tile * f64::from(k));
             open.queued += tiles.len() as u64;
+            tasks += tiles.len() as u64;
         }
         // The farm slowed (a worker left): passes nobody started that would end after
         // the deadline go, newest first.
