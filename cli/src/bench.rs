@@ -1,7 +1,7 @@
 //! `tessera bench`: what the tracer costs and what each setting buys, on the reference
 //! scenes (or any one scene). Every figure goes into a report: markdown (the form of
 //! BENCHMARKS.md) on stdout and in `DIR/report.md`, and the same as JSON in
-//! `DIR/report.json`.
+//! `DIR/report.json`, with a figure of error against time per scene in `DIR/plots/`.
 //!
 //! Errors are measured against a reference of the same scene rendered with many more
 //! samples, another seed and the deepest preset's bounces, so no setting is measured
@@ -25,6 +25,7 @@ use tracer::scene::Scene;
 
 use crate::args::parse_size;
 use crate::bench_features::{self, FeatureCost};
+use crate::bench_plots;
 use crate::bench_rays::{self, BigMesh, RayRate};
 use crate::bench_scaling::{self, FarmCosts, Work};
 use crate::render::load_scene;
@@ -65,6 +66,10 @@ const BIG_MESH_SIDE: usize = 708;
 const TARGET_RMSE: f64 = 0.05;
 /// The bounces of the sweeps (the tracer's default).
 const SWEEP_DEPTH: u32 = 8;
+/// The Russian-roulette sweep's "never": from a bounce past [`SWEEP_DEPTH`].
+pub(crate) const RR_NEVER: u32 = SWEEP_DEPTH + 1;
+/// The head of the Russian-roulette table's first column.
+const RR_HEAD: &str = "RR from bounce";
 /// Seed of everything measured; the references use another.
 const SEED: u32 = 1;
 const REFERENCE_SEED: u32 = 0;
@@ -133,6 +138,9 @@ pub struct SceneReport {
     pub fixed_spp: u32,
     /// Bounces against time and error, at `fixed_spp`.
     pub depth_sweep: Vec<Point>,
+    /// The first bounce at which Russian roulette may end a path against time and error,
+    /// at `fixed_spp` and the sweep's depth; [`RR_NEVER`] never plays it.
+    pub rr_sweep: Vec<Point>,
     /// Motion steps against blur error, where the scene moves.
     pub motion_sweep: Vec<Point>,
     /// The quality presets.
@@ -142,7 +150,7 @@ pub struct SceneReport {
 /// One setting: its time and its error.
 #[derive(Clone, Copy, Serialize)]
 pub struct Point {
-    /// The setting (spp, max depth or motion steps).
+    /// The setting (spp, max depth, Russian roulette's first bounce or motion steps).
     pub value: u32,
     /// Wall seconds.
     pub seconds: f64,
@@ -313,7 +321,7 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
     let settings = RenderSettings {
         max_depth: SWEEP_DEPTH,
         seed: SEED,
-        noise: None,
+        ..RenderSettings::DEFAULT
     };
     // As deep as the deepest preset, so that no preset is measured against a reference
     // that lacks light it gathers.
@@ -330,7 +338,7 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
         RenderSettings {
             max_depth: reference_depth,
             seed: REFERENCE_SEED,
-            noise: None,
+            ..RenderSettings::DEFAULT
         },
         reference_spp,
     );
@@ -365,6 +373,22 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
                 fixed_spp,
             );
             point(max_depth, &image, secs, &reference)
+        })
+        .collect();
+
+    // Russian roulette from the first bounce on, to never (from past the sweep's depth).
+    let rr_sweep = [1, 2, 3, 5, RR_NEVER]
+        .into_iter()
+        .map(|from| {
+            let (image, _, secs) = render(
+                &frame,
+                RenderSettings {
+                    russian_roulette: (from <= SWEEP_DEPTH).then_some(from),
+                    ..settings
+                },
+                fixed_spp,
+            );
+            point(from, &image, secs, &reference)
         })
         .collect();
 
@@ -404,6 +428,7 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
                     threshold: p.noise_threshold as f32,
                     min_samples: p.min_spp,
                 }),
+                ..RenderSettings::DEFAULT
             };
             let (image, _, secs) = render(&frame, preset, p.spp);
             let reached = image.sampling();
@@ -435,6 +460,7 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
         spp_sweep,
         fixed_spp,
         depth_sweep,
+        rr_sweep,
         motion_sweep,
         presets,
     })
@@ -453,7 +479,7 @@ fn cornell_efficiency(quick: bool) -> anyhow::Result<CornellEfficiency> {
     let settings = RenderSettings {
         max_depth: 8,
         seed: SEED,
-        noise: None,
+        ..RenderSettings::DEFAULT
     };
     eprintln!("cornell 256x256: reference at {reference_spp} spp ...");
     let (reference, _, _) = render(
@@ -559,7 +585,14 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     };
     let markdown = markdown(&report);
     print!("{markdown}");
-    write_report(&args.out, &report, &markdown)
+    write_report(&args.out, &report, &markdown)?;
+    let plots = bench_plots::write(&args.out, &report.scenes)?;
+    eprintln!(
+        "{} plots written to {}",
+        plots.len(),
+        args.out.join("plots").display()
+    );
+    Ok(())
 }
 
 fn write_report(dir: &Path, report: &Report, markdown: &str) -> anyhow::Result<()> {
@@ -649,7 +682,16 @@ pub fn markdown(r: &Report) -> String {
             opt(s.seconds_to_target, 3),
             bench_rays::table(&s.rays),
         );
+        out += &format!(
+            "\n![{}: error against time for each sweep]({})\n",
+            s.name,
+            bench_plots::plot_path(&s.name)
+        );
         let table = |out: &mut String, title: &str, head: &str, points: &[Point]| {
+            let value = |v: u32| match head {
+                RR_HEAD if v == RR_NEVER => "never".to_string(),
+                _ => v.to_string(),
+            };
             if points.is_empty() {
                 return;
             }
@@ -660,7 +702,7 @@ pub fn markdown(r: &Report) -> String {
             for p in points {
                 *out += &format!(
                     "| {} | {:.3} | {:.5} | {:.5} | {:.5} |\n",
-                    p.value,
+                    value(p.value),
                     p.seconds,
                     p.rmse,
                     p.rel_mse,
@@ -682,6 +724,17 @@ pub fn markdown(r: &Report) -> String {
             ),
             "max depth",
             &s.depth_sweep,
+        );
+        table(
+            &mut out,
+            &format!(
+                "Russian roulette ({} spp, depth {SWEEP_DEPTH}; the tracer's default plays it \
+                 from bounce 3): a path ends early with probability 1 - throughput, so it \
+                 trades noise for time, and RMSE x sqrt(time) tells which wins:",
+                s.fixed_spp
+            ),
+            RR_HEAD,
+            &s.rr_sweep,
         );
         table(
             &mut out,
@@ -745,6 +798,7 @@ mod tests {
         let s = measure_scene(subject, 64, true).unwrap();
         assert_eq!(s.spp_sweep.len(), 4);
         assert_eq!(s.depth_sweep.len(), 6);
+        assert_eq!(s.rr_sweep.len(), 5);
         assert_eq!(s.motion_sweep.len(), 6);
         assert_eq!(s.presets.len(), 3);
         let first = s.spp_sweep[0].rmse;
@@ -764,8 +818,29 @@ mod tests {
         let text = markdown(&report);
         assert!(text.contains("### motion-blur (8x8)"), "{text}");
         assert!(text.contains("| final | 1024 | 12 | 0.01 |"), "{text}");
+        assert!(text.contains("| never | "), "{text}");
         let json: serde_json::Value = serde_json::to_value(&report).unwrap();
         assert_eq!(json["scenes"][0]["spp_sweep"][3]["value"], 64);
+        assert!(text
+            .contains("![motion-blur: error against time for each sweep](plots/motion-blur.png)"));
+
+        // Its figure: four panels of labelled points and lines on white.
+        let dir = tempfile::tempdir().unwrap();
+        let written = bench_plots::write(dir.path(), &report.scenes).unwrap();
+        assert_eq!(written, vec![dir.path().join("plots/motion-blur.png")]);
+        let png = image::open(&written[0]).unwrap().to_rgb8();
+        assert_eq!(png.dimensions(), (bench_plots::WIDTH, bench_plots::HEIGHT));
+        let count = |f: &dyn Fn(&image::Rgb<u8>) -> bool| png.pixels().filter(|p| f(p)).count();
+        let white = count(&|p| p.0 == [255, 255, 255]);
+        let blue = count(&|p| p.0[2] > 200 && p.0[0] < 80 && p.0[1] < 80);
+        let red = count(&|p| p.0[0] > 200 && p.0[1] < 80 && p.0[2] < 80);
+        let dark = count(&|p| p.0.iter().all(|&c| c < 100));
+        let area = (bench_plots::WIDTH * bench_plots::HEIGHT) as usize;
+        assert!(white > area / 2, "{white} white pixels");
+        // The four sweeps' lines and markers, the presets' markers, axes and text.
+        assert!(blue > 1000, "{blue} blue pixels");
+        assert!(red > 50, "{red} red pixels");
+        assert!(dark > 5000, "{dark} dark pixels");
     }
 
     #[test]

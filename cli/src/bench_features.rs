@@ -1,16 +1,19 @@
 //! What each scene feature costs in `tessera bench`: camera paths per second of the same
-//! demo scene without a feature and with it. A scene should pay only for what it uses, so
-//! an animated scene with the shutter closed should cost what the still one does.
+//! demo scene without a feature and with it, and the time to prepare its frame. A scene
+//! should pay only for what it uses, so an animated scene with the shutter closed should
+//! cost what the still one does.
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use serde::Serialize;
 
+use glam::DMat4;
 use tracer::film::{SampleRange, TileRect};
 use tracer::motion::Shutter;
 use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
-use tracer::scene::Scene;
+
+use tracer::scene::{JointSet, Node, Scene, Skin};
 use tracer::texture::{Texture, TextureRef};
 
 /// One feature's price.
@@ -22,6 +25,10 @@ pub struct FeatureCost {
     pub without: f64,
     /// Camera paths per second with it.
     pub with: f64,
+    /// Seconds to prepare the frame (pose, deform, build the BVHs) without it.
+    pub prepare_without: f64,
+    /// Seconds to prepare the frame with it.
+    pub prepare_with: f64,
 }
 
 impl FeatureCost {
@@ -34,10 +41,13 @@ impl FeatureCost {
 /// Each measurement renders for at least this long, so that short renders time well.
 const MIN_SECONDS: f64 = 0.5;
 
-/// Camera paths per second rendering `scene` framed by `options` at `spp` and depth 8,
-/// after one warm-up render (the first render of a process builds the BSDF tables).
-fn paths_per_second(scene: Scene, options: &FrameOptions, spp: u32) -> anyhow::Result<f64> {
+/// Seconds to prepare `scene`'s frame and camera paths per second rendering it at `spp`
+/// and depth 8, after one warm-up render (the first render of a process builds the BSDF
+/// tables).
+fn measure(scene: Scene, options: &FrameOptions, spp: u32) -> anyhow::Result<(f64, f64)> {
+    let start = Instant::now();
     let frame = prepare_frame(Arc::new(scene), options)?;
+    let prepare = start.elapsed().as_secs_f64();
     let rect = TileRect::new(0, 0, frame.width, frame.height);
     let render = |spp| {
         render_region(
@@ -56,7 +66,7 @@ fn paths_per_second(scene: Scene, options: &FrameOptions, spp: u32) -> anyhow::R
         renders += 1;
     }
     let paths = rect.area() as f64 * f64::from(spp) * f64::from(renders);
-    Ok(paths / start.elapsed().as_secs_f64())
+    Ok((prepare, paths / start.elapsed().as_secs_f64()))
 }
 
 /// The demo with its glass sphere opaque (a dielectric that does not transmit).
@@ -104,8 +114,46 @@ fn with_textures() -> Scene {
     scene
 }
 
-/// The price of motion blur, of an animation with the shutter closed, of transmission and
-/// of textures, on `size` images at `spp`.
+/// The demo with its metal sphere skinned to one joint that stands where the sphere's node
+/// does: the same image, but the sphere is posed by skinning, into a mesh (and BVH) of the
+/// frame's own.
+fn with_skinning() -> Scene {
+    let mut scene = tracer::demo::demo_scene();
+    let node = scene
+        .nodes
+        .iter()
+        .position(|n| n.name.as_deref() == Some("metal sphere"))
+        .expect("the demo has a metal sphere");
+    let mesh = scene.nodes[node].mesh.expect("the sphere's node draws it") as usize;
+    for prim in &mut scene.meshes[mesh].primitives {
+        let n = prim.positions.len();
+        prim.joint_sets = vec![JointSet {
+            joints: vec![[0; 4]; n],
+            weights: vec![[1.0, 0.0, 0.0, 0.0]; n],
+        }];
+    }
+    let joint = Node {
+        name: Some("metal sphere joint".into()),
+        local: scene.nodes[node].local,
+        trs: scene.nodes[node].trs,
+        ..Default::default()
+    };
+    scene.nodes.push(joint);
+    let joint = scene.nodes.len() as u32 - 1;
+    scene.roots.push(joint);
+    scene.nodes[node].skin = Some(scene.skins.len() as u32);
+    scene.skins.push(Skin {
+        name: Some("metal sphere skin".into()),
+        joints: vec![joint],
+        inverse_bind: vec![DMat4::IDENTITY],
+    });
+    scene.features.skinning = true;
+    scene
+}
+
+/// The price of an animation with the shutter closed, of the motion path on a still
+/// image, of motion blur, of skinning, of transmission and of textures, on `size` images
+/// at `spp`.
 pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCost>> {
     let still = FrameOptions {
         width: size.0,
@@ -120,13 +168,27 @@ pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCo
         },
         ..still.clone()
     };
+    // Open for 2e-4 frames: the objects move less than 0.1 mm (the image is the still
+    // one), but every ray carries a time and meets interpolated placements.
+    let barely_open = FrameOptions {
+        shutter: Shutter {
+            open: -1e-4,
+            close: 1e-4,
+        },
+        motion_steps: Some(2),
+        ..still.clone()
+    };
     let demo = tracer::demo::demo_scene;
     let animated = tracer::demo::animated_demo_scene;
     let cost = |feature: &str, without: (Scene, &FrameOptions), with: (Scene, &FrameOptions)| {
+        let (prepare_without, without) = measure(without.0, without.1, spp)?;
+        let (prepare_with, with) = measure(with.0, with.1, spp)?;
         Ok::<_, anyhow::Error>(FeatureCost {
             feature: feature.into(),
-            without: paths_per_second(without.0, without.1, spp)?,
-            with: paths_per_second(with.0, with.1, spp)?,
+            without,
+            with,
+            prepare_without,
+            prepare_with,
         })
     };
     Ok(vec![
@@ -136,9 +198,20 @@ pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCo
             (animated(), &still),
         )?,
         cost(
+            "the motion path on a still image (animated demo, shutter closed vs open for \
+             2e-4 frames in 2 steps: nothing moves 0.1 mm)",
+            (animated(), &still),
+            (animated(), &barely_open),
+        )?,
+        cost(
             "motion blur (animated demo, shutter closed vs -0.25..0.25)",
             (animated(), &still),
             (animated(), &open),
+        )?,
+        cost(
+            "skinning (demo vs its metal sphere skinned to one joint)",
+            (demo(), &still),
+            (with_skinning(), &still),
         )?,
         cost(
             "transmission (demo with the glass sphere opaque vs glass)",
@@ -155,16 +228,19 @@ pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCo
 
 /// The markdown table of `costs`.
 pub fn table(costs: &[FeatureCost]) -> String {
-    let mut out = "| feature | without (M paths/s) | with (M paths/s) | cost |\n\
-                   |---|---:|---:|---:|\n"
+    let mut out = "| feature | without (M paths/s) | with (M paths/s) | cost per path | \
+                   prepare without (ms) | prepare with (ms) |\n\
+                   |---|---:|---:|---:|---:|---:|\n"
         .to_string();
     for c in costs {
         out += &format!(
-            "| {} | {:.3} | {:.3} | {:+.0}% |\n",
+            "| {} | {:.3} | {:.3} | {:+.0}% | {:.1} | {:.1} |\n",
             c.feature,
             c.without / 1e6,
             c.with / 1e6,
-            c.cost() * 100.0
+            c.cost() * 100.0,
+            c.prepare_without * 1e3,
+            c.prepare_with * 1e3
         );
     }
     out
@@ -179,6 +255,9 @@ mod tests {
         let opaque = without_transmission();
         assert!(!opaque.features.transmission);
         assert!(opaque.materials.iter().all(|m| m.transmission == 0.0));
+        let skinned = with_skinning();
+        assert!(skinned.features.skinning);
+        assert_eq!(skinned.skins.len(), 1);
         let textured = with_textures();
         assert!(textured.features.textures);
         assert_eq!(textured.textures.len(), 1);
@@ -188,10 +267,45 @@ mod tests {
         );
     }
 
+    /// The skinned sphere stands where the plain one does, posed into a mesh of the
+    /// frame's own: the first hits agree.
+    #[test]
+    fn the_skinned_sphere_stands_where_the_plain_one_does() {
+        let options = FrameOptions {
+            width: 24,
+            height: 24,
+            ..Default::default()
+        };
+        let first_hits = |scene: Scene| {
+            let frame = prepare_frame(Arc::new(scene), &options).unwrap();
+            let settings = RenderSettings {
+                max_depth: 0,
+                ..RenderSettings::DEFAULT
+            };
+            let rect = TileRect::new(0, 0, 24, 24);
+            let image = render_region(&frame, &settings, rect, SampleRange::new(0, 4), 8, &|_| {});
+            (frame.deformed.len(), image.resolve().normal)
+        };
+        let (plain_deformed, plain) = first_hits(tracer::demo::demo_scene());
+        let (skinned_deformed, skinned) = first_hits(with_skinning());
+        assert_eq!((plain_deformed, skinned_deformed), (0, 1));
+        let sphere = plain.iter().filter(|n| n.length() > 0.5).count();
+        let differ = plain
+            .iter()
+            .zip(&skinned)
+            .filter(|(a, b)| (**a - **b).length() > 1e-3)
+            .count();
+        assert!(sphere > 400, "{sphere} pixels hit something");
+        assert!(
+            differ <= plain.len() / 100,
+            "{differ} of 576 first hits differ"
+        );
+    }
+
     #[test]
     fn every_feature_is_priced() {
         let costs = feature_costs((8, 8), 1).unwrap();
-        assert_eq!(costs.len(), 4);
+        assert_eq!(costs.len(), 6);
         assert!(costs.iter().all(|c| c.without > 0.0 && c.with > 0.0));
         assert!(table(&costs).contains("| motion blur"));
     }

@@ -4,6 +4,7 @@ mod args;
 mod bench;
 mod bench_farm;
 mod bench_features;
+mod bench_plots;
 mod bench_rays;
 mod bench_scaling;
 mod client;

@@ -177,6 +177,7 @@ fn sampling(args: &RenderArgs) -> anyhow::Result<(u32, RenderSettings)> {
         noise,
         max_depth,
         seed: args.seed,
+        ..RenderSettings::DEFAULT
     };
     Ok((spp, settings))
 }

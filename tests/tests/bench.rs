@@ -50,7 +50,8 @@ fn bench_farm_loses_nothing_and_does_nothing_twice() {
 
 /// `tessera bench --quick` writes a report with every section: the reference scenes'
 /// sweeps and presets, the Cornell box's efficiency, the million-triangle mesh, what each
-/// feature costs and the farm against a direct render (real worker processes).
+/// feature costs and the farm against a direct render (real worker processes), and a
+/// figure of error against time per scene.
 #[test]
 fn bench_quick_writes_a_report_with_every_section() {
     let dir = tempfile::tempdir().unwrap();
@@ -81,7 +82,7 @@ fn bench_quick_writes_a_report_with_every_section() {
     let json = std::fs::read_to_string(dir.path().join("report/report.json")).unwrap();
     let report: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(report["scenes"].as_array().unwrap().len(), 3);
-    assert_eq!(report["features"].as_array().unwrap().len(), 4);
+    assert_eq!(report["features"].as_array().unwrap().len(), 6);
     let runs = report["farm"]["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 4);
     for run in runs {
@@ -92,4 +93,17 @@ fn bench_quick_writes_a_report_with_every_section() {
     assert!(report["cornell"]["mse_times_seconds"].as_f64().unwrap() > 0.0);
     let motion = &report["scenes"][2]["motion_sweep"];
     assert_eq!(motion.as_array().unwrap().len(), 6, "{motion}");
+    let roulette = &report["scenes"][0]["rr_sweep"];
+    assert_eq!(roulette.as_array().unwrap().len(), 5, "{roulette}");
+    // A figure per scene, linked from the report.
+    for scene in ["cornell", "glossy-glass", "motion-blur"] {
+        let plot = format!("plots/{scene}.png");
+        assert!(
+            markdown.contains(&format!("]({plot})")),
+            "{plot}:\n{markdown}"
+        );
+        let (width, height) = image::image_dimensions(dir.path().join("report").join(&plot))
+            .unwrap_or_else(|e| panic!("{plot}: {e}"));
+        assert!(width >= 800 && height >= 600, "{plot}: {width}x{height}");
+    }
 }

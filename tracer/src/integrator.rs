@@ -13,8 +13,6 @@ use crate::light::Emitter;
 use crate::render::{PreparedFrame, RenderSettings};
 use crate::sampler::PixelSampler;
 
-/// Bounces before Russian roulette may end a path.
-const RR_START_DEPTH: u32 = 3;
 /// Sampler dimensions used by the camera before the first bounce: pixel position, then
 /// the shutter time (drawn only when something moves, so a still frame skips it).
 const CAMERA_DIMENSIONS: u32 = 3;
@@ -414,7 +412,10 @@ fn trace_path(
 
         // Russian roulette once the path has a few bounces.
         let weight = s.throughput.max_element() * s.eta_scale;
-        if s.depth >= RR_START_DEPTH && weight < 1.0 {
+        let roulette = settings
+            .russian_roulette
+            .is_some_and(|from| s.depth >= from);
+        if roulette && weight < 1.0 {
             if sampler.next_1d() >= weight {
                 return;
             }

@@ -199,6 +199,7 @@ fn render(frame: &PreparedFrame, spp: u32) -> Layers {
         noise: None,
         max_depth: 0,
         seed: 0,
+        ..RenderSettings::DEFAULT
     };
     let rect = TileRect::new(0, 0, WIDTH, HEIGHT);
     render_region(
@@ -393,6 +394,7 @@ fn an_animated_light_moves_with_its_node() {
             noise: None,
             max_depth: 1,
             seed: 0,
+            ..RenderSettings::DEFAULT
         };
         let rect = TileRect::new(0, 0, WIDTH, HEIGHT);
         let lit = render_region(

@@ -106,6 +106,7 @@ fn white_furnace_conserves_energy() {
             noise: None,
             max_depth: 64,
             seed: 0,
+            ..RenderSettings::DEFAULT
         };
         let layers = render(&f, &settings, 64).resolve();
         let (sphere, background) = furnace_means(&layers);
@@ -176,6 +177,7 @@ fn direct_floor_radiance(scene: Scene) -> f64 {
         noise: None,
         max_depth: 1,
         seed: 0,
+        ..RenderSettings::DEFAULT
     };
     mean_radiance(&render(&frame(scene, 8, 8), &settings, 4).resolve())
 }
@@ -341,6 +343,7 @@ fn an_importance_sampled_environment_map_lights_a_furnace_like_a_constant_one() 
                 noise: None,
                 max_depth: 8,
                 seed,
+                ..RenderSettings::DEFAULT
             },
             spp,
         )
@@ -495,4 +498,29 @@ fn adaptive_sampling_is_bit_identical_under_any_tile_split() {
         let split = render_region(&f, &settings, rect, samples, tile_size, &|_| {});
         assert!(whole == split, "tiles of {tile_size} differ");
     }
+}
+
+/// Russian roulette is unbiased: the Cornell box with it from the first bounce and without
+/// it has the same mean radiance (within noise), and the roulette traces fewer rays.
+#[test]
+fn russian_roulette_saves_rays_without_changing_the_mean() {
+    let frame = frame(tracer::demo::cornell_box(), 16, 16);
+    let at = |russian_roulette| {
+        let settings = RenderSettings {
+            russian_roulette,
+            ..RenderSettings::DEFAULT
+        };
+        let tile = render(&frame, &settings, 256);
+        (mean_radiance(&tile.resolve()), tile.rays)
+    };
+    let (never, never_rays) = at(None);
+    let (first, first_rays) = at(Some(1));
+    assert!(
+        (first - never).abs() < 0.02 * never,
+        "mean {first} with roulette from bounce 1, {never} without"
+    );
+    assert!(
+        (first_rays as f64) < 0.8 * never_rays as f64,
+        "{first_rays} rays with roulette, {never_rays} without"
+    );
 }

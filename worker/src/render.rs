@@ -53,6 +53,7 @@ pub fn settings(lease: &Lease) -> RenderSettings {
         }),
         max_depth: lease.max_depth,
         seed: lease.seed,
+        ..RenderSettings::DEFAULT
     }
 }
 
@@ -193,7 +194,8 @@ mod tests {
                     min_samples: 6
                 }),
                 max_depth: 5,
-                seed: 9
+                seed: 9,
+                ..RenderSettings::DEFAULT
             }
         );
         assert_eq!(tile_rect(&l), TileRect::new(16, 32, 16, 16));

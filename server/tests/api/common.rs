@@ -362,6 +362,7 @@ pub fn settings(lease: &Lease) -> RenderSettings {
         }),
         max_depth: lease.max_depth,
         seed: lease.seed,
+        ..RenderSettings::DEFAULT
     }
 }
 

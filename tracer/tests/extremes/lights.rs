@@ -28,6 +28,7 @@ const DIRECT: RenderSettings = RenderSettings {
     noise: None,
     max_depth: 1,
     seed: 0,
+    ..RenderSettings::DEFAULT
 };
 
 /// A white Lambertian material of albedo [`RHO`] (no specular layer), visible from both

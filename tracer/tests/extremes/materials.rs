@@ -39,6 +39,7 @@ fn render_counted(frame: &PreparedFrame, max_depth: u32, spp: u32) -> (Layers, T
             noise: None,
             max_depth,
             seed: 0,
+            ..RenderSettings::DEFAULT
         },
         spp,
     );

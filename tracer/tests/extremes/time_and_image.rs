@@ -36,6 +36,7 @@ const SHORT: RenderSettings = RenderSettings {
     noise: None,
     max_depth: 2,
     seed: 0,
+    ..RenderSettings::DEFAULT
 };
 
 /// The animated demo (keys from 0 to 2 s) prepared at `frame` of `fps` with `shutter`.
@@ -279,6 +280,7 @@ const DIRECT: RenderSettings = RenderSettings {
     noise: None,
     max_depth: 1,
     seed: 0,
+    ..RenderSettings::DEFAULT
 };
 
 /// A white Lambertian floor y = 0 (|x|, |z| <= `half`) seen by `camera` (placed by

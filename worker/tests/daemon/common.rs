@@ -360,6 +360,7 @@ pub fn direct_frame(glb: &[u8], spec: &JobSpec, frame: i32) -> Layers {
         noise: None,
         max_depth: spec.max_depth,
         seed: spec.seed,
+        ..RenderSettings::DEFAULT
     };
     render_tile(
         &prepared,
