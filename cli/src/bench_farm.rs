@@ -4,8 +4,12 @@
 //! answer each lease at once with a black tile of the lease's rectangle, encoded as the
 //! real worker encodes its tiles (so the server checks, stores and assembles it as usual).
 //! Nothing is rendered: what is measured is the server's own cost per task.
+//! `--tile-size` and `--noise` make the tiles the size and content of rendered ones (random
+//! radiance does not compress, as a noisy render's does not), to measure the server's
+//! upload and assembly throughput in MB/s instead.
 //!
-//! It reports tasks per second, lease and upload latencies, the server's memory (its
+//! It reports tasks per second, lease and upload latencies, upload and assembly throughput
+//! (the server's own assembly times, from its `/metrics`), the server's memory (its
 //! process's peak and final resident set, from `/proc`), and checks the one thing a farm
 //! must never do: lose a task or accept one twice. The figures are printed as a short
 //! table and, with `--json`, written as a [`Report`].
@@ -23,13 +27,14 @@ use proto::{JobSpec, JobState, JobStatus, WorkerRegistration};
 use serde::Serialize;
 use tokio::sync::watch;
 use tokio::task::JoinSet;
-use tracer::film::TileBuffer;
+use tracer::film::{SampleValue, TileBuffer, TileRect};
 use worker::api::{Api, ApiError, LeaseAnswer, UploadAnswer};
 
+use crate::bench_rays::Rng;
 use crate::client::Client;
 use crate::demo::{terminate, tessera_command};
 
-/// The smallest tile the server accepts: the least pixel work per task.
+/// The smallest tile the server accepts, the default: the least pixel work per task.
 const TILE: u32 = server::limits::MIN_TILE_SIZE;
 /// Most tiles the bench puts in one frame (frames are assembled when their last tile is
 /// in, so the tiles per frame set how often the server assembles).
@@ -78,15 +83,24 @@ pub struct FarmBenchArgs {
     /// dashboard does: the server then publishes every job, frame and worker change.
     #[arg(long)]
     pub events: bool,
+    /// Tile side in pixels [default: the smallest the server takes, 8].
+    #[arg(long, default_value_t = TILE,
+          value_parser = clap::value_parser!(u32).range(TILE as i64..=server::limits::MAX_TILE_SIZE as i64))]
+    pub tile_size: u32,
+    /// Fill the tiles with random radiance, albedo and normals, as a rendered tile's noise
+    /// (black tiles compress to almost nothing): for upload and assembly MB/s.
+    #[arg(long)]
+    pub noise: bool,
 }
 
-/// How the job is cut: `frames` frames of `tiles_x` × `tiles_y` tiles of 8×8 pixels, one
-/// sample pass each.
+/// How the job is cut: `frames` frames of `tiles_x` × `tiles_y` tiles of `tile` pixels a
+/// side, one sample pass each.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub struct Shape {
     pub frames: u64,
     pub tiles_x: u32,
     pub tiles_y: u32,
+    pub tile: u32,
 }
 
 impl Shape {
@@ -96,15 +110,15 @@ impl Shape {
 
     /// The frame size in pixels.
     pub fn size(&self) -> (u32, u32) {
-        (self.tiles_x * TILE, self.tiles_y * TILE)
+        (self.tiles_x * self.tile, self.tiles_y * self.tile)
     }
 }
 
 /// The job shape for `tasks` tasks: the most tiles per frame (up to
 /// [`MAX_TILES_PER_FRAME`]) that divide `tasks` exactly within the server's frame limit,
 /// laid out as square as their divisors allow; when no exact split exists (a large prime),
-/// the nearest count the limits allow.
-pub fn job_shape(tasks: u64) -> Shape {
+/// the nearest count the limits allow. Tiles are `tile` pixels a side.
+pub fn job_shape(tasks: u64, tile: u32) -> Shape {
     let max_frames = server::limits::MAX_FRAMES;
     let tasks = tasks.max(1);
     let exact = (1..=MAX_TILES_PER_FRAME.min(tasks))
@@ -125,6 +139,7 @@ pub fn job_shape(tasks: u64) -> Shape {
         frames,
         tiles_x: (tiles / rows) as u32,
         tiles_y: rows as u32,
+        tile,
     }
 }
 
@@ -216,6 +231,8 @@ pub struct Report {
     pub upload_bytes: u64,
     /// Accepted tile bytes per wall second, MB/s (10^6 bytes).
     pub upload_mb_per_second: f64,
+    /// The server's frame assembly, from its `/metrics` after the load.
+    pub assembly: Option<Assembly>,
     /// Whether an event stream was open during the load (`--events`).
     pub events_listener: bool,
     /// Server-sent events received on it.
@@ -232,6 +249,42 @@ pub struct Report {
     pub timed_out: bool,
     /// Whether nothing was lost, nothing done twice, nothing refused and the job ended in time.
     pub passed: bool,
+}
+
+/// The server's frame assembly over the run: read every tile of a frame, merge, write the
+/// frame's EXR and PNG, mark it in the database.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Assembly {
+    pub frames: u64,
+    /// Seconds spent assembling, all frames together.
+    pub seconds: f64,
+    /// Tile bytes read back.
+    pub tile_bytes: u64,
+    /// Tile MB (10^6 bytes) assembled per second of assembly.
+    pub mb_per_second: f64,
+    /// Mean milliseconds per frame.
+    pub mean_ms: f64,
+}
+
+impl Assembly {
+    /// The figures from the server's Prometheus text; `None` if it has none (no frame
+    /// assembled yet, or a server without them).
+    fn from_metrics(text: &str) -> Option<Assembly> {
+        let value = |name: &str| {
+            text.lines()
+                .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.parse::<f64>().ok())
+        };
+        let frames = value("tessera_frames_assembled_total")? as u64;
+        let seconds = value("tessera_frame_assembly_seconds_sum")?;
+        let tile_bytes = value("tessera_frame_assembly_tile_bytes_total")? as u64;
+        Some(Assembly {
+            frames,
+            seconds,
+            tile_bytes,
+            mb_per_second: tile_bytes as f64 / 1e6 / seconds.max(1e-9),
+            mean_ms: seconds * 1e3 / frames.max(1) as f64,
+        })
+    }
 }
 
 /// What one simulated worker saw.
@@ -268,10 +321,14 @@ fn millis(d: Duration) -> f64 {
 async fn simulated_worker(
     api: Api,
     id: u64,
+    noise: bool,
     mut stop: watch::Receiver<bool>,
     accepted: Arc<AtomicU64>,
 ) -> Tally {
     let mut tally = Tally::default();
+    // A tile's EXR depends only on its place (its pixels are seeded by it), so each place
+    // is encoded once: the bench's own encoding would otherwise take the server's cores.
+    let mut encoded: HashMap<TileRect, worker::render::RenderedTile> = HashMap::new();
     loop {
         if *stop.borrow() {
             break;
@@ -301,17 +358,24 @@ async fn simulated_worker(
         let task = lease.token.task_id;
         tally.leased.push(task);
         // The upload is not cut short by `stop`: a tile half sent would look like a loss.
-        let empty = TileBuffer::new(worker::render::tile_rect(&lease));
-        let tile = match worker::render::encode_tile(&lease, &empty, 0) {
-            Ok(tile) => tile,
-            Err(e) => {
-                tally.error(format!("encoding the tile of task {task}: {e}"));
-                continue;
-            }
+        let rect = worker::render::tile_rect(&lease);
+        if !encoded.contains_key(&rect) {
+            match worker::render::encode_tile(&lease, &tile_pixels(rect, noise), 0) {
+                Ok(tile) => encoded.insert(rect, tile),
+                Err(e) => {
+                    tally.error(format!("encoding the tile of task {task}: {e}"));
+                    continue;
+                }
+            };
+        }
+        let tile = &encoded[&rect];
+        let meta = proto::ResultMetadata {
+            attempt: lease.token.attempt,
+            ..tile.meta.clone()
         };
         for attempt in 1..=UPLOAD_TRIES {
             let sent = Instant::now();
-            match api.upload(id, task, &tile.meta, tile.exr.clone()).await {
+            match api.upload(id, task, &meta, tile.exr.clone()).await {
                 Ok(UploadAnswer::Stored(ack)) => {
                     tally.upload_ms.push(millis(sent.elapsed()));
                     tally.acks.push((task, ack.accepted));
@@ -339,6 +403,29 @@ async fn simulated_worker(
         }
     }
     tally
+}
+
+/// A simulated worker's tile at `rect`: black, or one sample per pixel of random values
+/// seeded by the place.
+fn tile_pixels(rect: TileRect, noise: bool) -> TileBuffer {
+    let mut tile = TileBuffer::new(rect);
+    if !noise {
+        return tile;
+    }
+    let mut rng = Rng(u64::from(rect.x) << 32 | u64::from(rect.y));
+    let mut v3 = || glam::Vec3::new(rng.next(), rng.next(), rng.next());
+    for i in 0..rect.area() {
+        let sample = SampleValue {
+            radiance: v3() * 4.0,
+            alpha: 1.0,
+            albedo: v3(),
+            normal: (v3() - 0.5).normalize_or_zero(),
+            depth: Some(1.0 + v3().x * 10.0),
+            rays: 1,
+        };
+        tile.add(i, 0, &sample);
+    }
+    tile
 }
 
 /// The `tessera server` child process. Dropping it stops it.
@@ -486,7 +573,7 @@ fn bench_spec(digest: &str, shape: Shape) -> JobSpec {
     (spec.width, spec.height) = (width, height);
     spec.spp = 1;
     spec.max_depth = 1;
-    spec.tile_size = Some(TILE);
+    spec.tile_size = Some(shape.tile);
     spec.sample_passes = 1;
     spec
 }
@@ -523,18 +610,19 @@ pub(crate) fn data_folder(given: Option<&PathBuf>) -> anyhow::Result<(PathBuf, b
 }
 
 pub fn run(args: FarmBenchArgs) -> anyhow::Result<()> {
-    let shape = job_shape(args.tasks);
+    let shape = job_shape(args.tasks, args.tile_size);
     let (dir, temporary) = data_folder(args.data.as_ref())?;
     let data = dir.join("data");
     let log = dir.join("server.log");
     let mut server = ServerProcess::start(&data, &log, shape.tasks())?;
-    let (w, h) = shape.size();
+    let ((w, h), t) = (shape.size(), shape.tile);
     println!(
-        "tessera bench farm: {} empty tasks ({} frames × {} tiles of {TILE}x{TILE}, frames \
+        "tessera bench farm: {} empty tasks ({} frames × {} {} tiles of {t}x{t}, frames \
          {w}x{h}), {} simulated workers; server pid {} on {}",
         shape.tasks(),
         shape.frames,
         shape.tiles_x * shape.tiles_y,
+        if args.noise { "noise" } else { "black" },
         args.workers,
         server.pid(),
         server.url
@@ -638,7 +726,13 @@ async fn load(
         .then(|| tokio::spawn(listen_to_events(format!("{api_base}/events"), stop.clone())));
     let mut running = JoinSet::new();
     for (api, id) in workers {
-        running.spawn(simulated_worker(api, id, stop.clone(), accepted.clone()));
+        running.spawn(simulated_worker(
+            api,
+            id,
+            args.noise,
+            stop.clone(),
+            accepted.clone(),
+        ));
     }
 
     // Follow the job until it ends, the timeout, Ctrl-C or the server's death.
@@ -725,6 +819,13 @@ async fn load(
         timed_out,
     );
     report.events_received = events_received;
+    let metrics = reqwest::get(format!("{}/metrics", server.url))
+        .await
+        .and_then(|a| a.error_for_status());
+    report.assembly = match metrics {
+        Ok(answer) => Assembly::from_metrics(&answer.text().await.unwrap_or_default()),
+        Err(_) => None,
+    };
     report.last_tile_seconds = last_tile_seconds;
     let spent = |a: Option<f64>, b: Option<f64>| Some(b? - a?);
     report.server_cpu_seconds = spent(cpu_at_start.1, cpu_at_end.1);
@@ -828,6 +929,7 @@ fn report(
         events_received: 0,
         upload_bytes: bytes,
         upload_mb_per_second: bytes as f64 / 1e6 / seconds,
+        assembly: None,
         job_state: format!("{:?}", status.state).to_lowercase(),
         frames_done: status.frames_done,
         server_memory,
@@ -867,6 +969,16 @@ fn print_table(r: &Report) {
         r.upload_bytes as f64 / 1e6,
         r.upload_mb_per_second
     );
+    if let Some(a) = &r.assembly {
+        println!(
+            "| frame assembly | {} frames from {:.2} MB of tiles in {:.2} s: {:.1} MB/s, {:.1} ms per frame |",
+            a.frames,
+            a.tile_bytes as f64 / 1e6,
+            a.seconds,
+            a.mb_per_second,
+            a.mean_ms
+        );
+    }
     println!(
         "| server memory idle / peak / end | {} / {} / {} |",
         mib(m.idle_rss_mib),
@@ -908,21 +1020,52 @@ mod tests {
     use super::*;
 
     #[test]
+    fn assembly_figures_come_from_the_servers_metrics() {
+        let text = "tessera_frames_assembled_total 4\n\
+                    tessera_frame_assembly_seconds{quantile=\"0.5\"} 0.2\n\
+                    tessera_frame_assembly_seconds_sum 0.8\n\
+                    tessera_frame_assembly_seconds_count 4\n\
+                    tessera_frame_assembly_tile_bytes_total 16000000\n";
+        let a = Assembly::from_metrics(text).unwrap();
+        assert_eq!((a.frames, a.tile_bytes), (4, 16_000_000));
+        assert!((a.mb_per_second - 20.0).abs() < 1e-9 && (a.mean_ms - 200.0).abs() < 1e-9);
+        assert_eq!(Assembly::from_metrics("tessera_leases_total 3\n"), None);
+    }
+
+    /// Noise tiles carry every layer, differ from place to place and are the same for the
+    /// same place (so one encoding serves every frame).
+    #[test]
+    fn noise_tiles_are_seeded_by_their_place() {
+        let (a, b) = (TileRect::new(0, 0, 8, 8), TileRect::new(8, 0, 8, 8));
+        let tile = tile_pixels(a, true).resolve();
+        assert!(
+            tile.beauty.iter().all(|p| p.w == 1.0),
+            "every pixel covered"
+        );
+        assert!(tile.albedo.iter().all(|a| a.max_element() > 0.0));
+        assert!(tile.normal.iter().all(|n| (n.length() - 1.0).abs() < 1e-3));
+        assert_eq!(tile_pixels(a, true), tile_pixels(a, true));
+        assert_ne!(tile_pixels(a, true).beauty, tile_pixels(b, true).beauty);
+        assert_eq!(tile_pixels(a, false), TileBuffer::new(a));
+    }
+
+    #[test]
     fn the_job_shape_gives_the_task_count_exactly_when_it_can() {
-        let s = job_shape(20_000);
+        let s = job_shape(20_000, TILE);
         assert_eq!((s.frames, s.tiles_x, s.tiles_y), (200, 10, 10));
         assert_eq!(s.size(), (80, 80));
-        assert_eq!(job_shape(400).tasks(), 400);
-        assert_eq!(job_shape(1).tasks(), 1);
+        assert_eq!(job_shape(400, 64).size(), (640, 640));
+        assert_eq!(job_shape(400, TILE).tasks(), 400);
+        assert_eq!(job_shape(1, TILE).tasks(), 1);
         // A prime below the frame limit: one tile per frame.
-        assert_eq!(job_shape(997).tasks(), 997);
+        assert_eq!(job_shape(997, TILE).tasks(), 997);
         for n in [2, 12, 128, 1000, 65_536, 99_991, 1_000_000] {
-            let s = job_shape(n);
+            let s = job_shape(n, TILE);
             assert_eq!(s.tasks(), n, "{s:?}");
             assert!(s.frames <= server::limits::MAX_FRAMES);
         }
         // A prime above it: the nearest count the limits allow.
-        let s = job_shape(999_983);
+        let s = job_shape(999_983, TILE);
         assert!(s.tasks().abs_diff(999_983) <= MAX_TILES_PER_FRAME, "{s:?}");
     }
 

@@ -41,10 +41,11 @@ pub struct BigMesh {
 }
 
 /// A fixed pseudo-random sequence (SplitMix64), so every run shoots the same rays.
-struct Rng(u64);
+pub(crate) struct Rng(pub u64);
 
 impl Rng {
-    fn next(&mut self) -> f32 {
+    /// The next number, uniform in [0, 1).
+    pub fn next(&mut self) -> f32 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);

@@ -3,6 +3,8 @@
 //! task done (one transaction), then assemble the frame or write a progressive preview.
 //! A check task's tile is first compared with the tiles it repeats (see [`verify`]).
 
+use std::time::Instant;
+
 use proto::{ResultMetadata, TaskToken};
 use tracer::film::Layers;
 
@@ -153,6 +155,12 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     if assembled {
         return Ok(());
     }
+    let started = Instant::now();
+    let tile_bytes: u64 = tasks
+        .iter()
+        .filter_map(|t| std::fs::metadata(app.store.tile(job, t.id)).ok())
+        .map(|m| m.len())
+        .sum();
     let built = assembly::build_frame(&app.store, &spec, job, frame, &tasks)?;
     if spec.time_budget.is_some() {
         assembly::write_merged(&app.store, job, frame, &spec, &built)?;
@@ -166,6 +174,8 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     let (now, timing) = (now_ms(), app.timing());
     app.db
         .with(|c| scheduler::mark_assembled(c, job, frame, now, &facts.reached, timing))?;
+    app.metrics
+        .frame_assembled(started.elapsed().as_secs_f64(), tile_bytes);
     let checks = app
         .db
         .with(|c| scheduler::done_checks_of_frame(c, job, frame))?;

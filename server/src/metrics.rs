@@ -69,6 +69,16 @@ impl Metrics {
         });
     }
 
+    /// A frame was assembled in `seconds` from tiles of `tile_bytes` in all (read, merged,
+    /// written as EXR and PNG, marked in the database).
+    pub fn frame_assembled(&self, seconds: f64, tile_bytes: u64) {
+        self.record(|| {
+            metrics::counter!("tessera_frames_assembled_total").increment(1);
+            metrics::counter!("tessera_frame_assembly_tile_bytes_total").increment(tile_bytes);
+            metrics::histogram!("tessera_frame_assembly_seconds").record(seconds);
+        });
+    }
+
     /// Leases that expired.
     pub fn leases_expired(&self, n: u64) {
         self.record(|| metrics::counter!("tessera_leases_expired_total").increment(n));

@@ -46,6 +46,46 @@ fn bench_farm_loses_nothing_and_does_nothing_twice() {
     let peak = report["server_memory"]["peak_rss_mib"].as_f64().unwrap();
     assert!(peak > 0.0, "{report}");
     assert_eq!(report["passed"].as_bool(), Some(true), "{report}");
+    // The server's own assembly times, one per frame.
+    let assembly = &report["assembly"];
+    assert_eq!(assembly["frames"], report["frames_done"], "{report}");
+    assert!(assembly["seconds"].as_f64().unwrap() > 0.0, "{report}");
+    assert!(out.contains("| frame assembly |"), "{out}");
+}
+
+/// With tiles the size and noise of rendered ones, the uploads and the assembly carry
+/// megabytes: random radiance does not compress away.
+#[test]
+fn bench_farm_measures_upload_and_assembly_with_noisy_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("bench.json");
+    let args = [
+        "bench",
+        "farm",
+        "--workers",
+        "2",
+        "--tasks",
+        "40",
+        "--tile-size",
+        "32",
+        "--noise",
+        "--json",
+        json.to_str().unwrap(),
+    ];
+    tessera_ok(&args, dir.path());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(report["passed"].as_bool(), Some(true), "{report}");
+    // 40 tiles of 32x32 pixels: at least the beauty's four f32 channels survive
+    // compression, about 16 KiB a tile.
+    let uploaded = report["upload_bytes"].as_u64().unwrap();
+    assert!(uploaded > 40 * 32 * 32 * 4 * 4, "{report}");
+    let assembly = &report["assembly"];
+    assert_eq!(assembly["tile_bytes"].as_u64(), Some(uploaded), "{report}");
+    assert!(
+        assembly["mb_per_second"].as_f64().unwrap() > 0.0,
+        "{report}"
+    );
 }
 
 /// `tessera bench --quick` writes a report with every section: the reference scenes'

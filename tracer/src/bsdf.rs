@@ -172,6 +172,9 @@ pub struct Bsdf {
     glass_s: f32,
     /// Whether the refractive interface is smooth (delta reflection and refraction).
     glass_smooth: bool,
+    /// Whether any microfacet lobe is present (metal, specular layer, rough interface): a
+    /// Lambertian surface (specular 0) skips their tables and evaluation.
+    microfacet: bool,
     /// Conductor-table position for α (meaningful when not smooth).
     cond: tables::ConductorCoord,
     /// Dielectric-table positions for (α, η), outside and inside (meaningful when the
@@ -263,6 +266,10 @@ impl Bsdf {
         let glass_tint = spec * spec_color.min(Vec3::ONE);
         let glass_smooth = smooth || (eta - 1.0).abs() < ETA_SMOOTH;
         let table_alpha = alpha.max(ALPHA_MIN);
+        let w_plastic = (1.0 - metallic) * (1.0 - transmission);
+        let w_glass = (1.0 - metallic) * transmission;
+        let microfacet = !smooth
+            && (metallic > 0.0 || w_plastic * spec > 0.0 || (w_glass > 0.0 && !glass_smooth));
         Self {
             params,
             base,
@@ -270,13 +277,14 @@ impl Bsdf {
             smooth,
             eta,
             w_metal: metallic,
-            w_plastic: (1.0 - metallic) * (1.0 - transmission),
-            w_glass: (1.0 - metallic) * transmission,
+            w_plastic,
+            w_glass,
             spec,
             f0_spec,
             glass_tint,
             glass_s: glass_tint.max_element(),
             glass_smooth,
+            microfacet,
             cond: tables::ConductorTable::coord(table_alpha),
             diel: [
                 tables::DielectricTable::coord(table_alpha, eta, false),
@@ -390,7 +398,8 @@ impl Bsdf {
 
         // Metal and specular layer: Turquin factor and albedo estimates.
         let (metal_comp, spec_comp, e_metal, e_spec_max, e_spec_mean) =
-            if self.w_metal == 0.0 && self.w_plastic == 0.0 {
+            if self.w_metal == 0.0 && self.w_plastic * self.spec == 0.0 {
+                // No GGX reflection lobe: nothing to compensate, and no energy taken.
                 (Vec3::ONE, Vec3::ONE, 0.0, 0.0, 0.0)
             } else if self.smooth {
                 (
@@ -483,7 +492,7 @@ impl Bsdf {
         if mu_i > 0.0 {
             let mut f = self.w_plastic * at.diffuse_w * FRAC_1_PI * self.base;
             // (`smooth` implies `glass_smooth`: all microfacet lobes are delta together.)
-            if !self.smooth {
+            if self.microfacet {
                 let wm = (wo + wi).normalize_or(Vec3::Z);
                 let cos_om = wo.dot(wm).clamp(0.0, 1.0);
                 let lobe = microfacet::d(wm, self.alpha) * microfacet::g2(mu_o, mu_i, self.alpha)
@@ -581,7 +590,7 @@ impl Bsdf {
         let glass_rough = p_glass > 0.0 && !self.glass_smooth;
         if wi.z > 0.0 {
             let mut pdf = p_diff * wi.z * FRAC_1_PI;
-            if !self.smooth {
+            if self.microfacet {
                 // Reflections reach `wi` directly, or folded from below the horizon.
                 let mut refl = 0.0;
                 let mut glass_refl = 0.0;

@@ -162,6 +162,21 @@ async fn single_pass_frames_equal_the_direct_render_bit_for_bit() {
         metrics.contains("tessera_lease_latency_seconds"),
         "{metrics}"
     );
+    assert!(
+        metrics.contains("tessera_frames_assembled_total 2\n"),
+        "{metrics}"
+    );
+    assert!(
+        metrics.contains("tessera_frame_assembly_seconds_count 2\n"),
+        "{metrics}"
+    );
+    let tile_bytes: u64 = metrics
+        .lines()
+        .find_map(|l| l.strip_prefix("tessera_frame_assembly_tile_bytes_total "))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{metrics}"));
+    // Twelve tiles of 8x8 pixels (and every layer) were read back.
+    assert!(tile_bytes > 12 * 64 * 4, "{tile_bytes}");
     let health = c.get(format!("{}/healthz", s.base)).send().await.unwrap();
     assert_eq!(health.status(), StatusCode::OK);
     // Every answer carries its request's id: a fresh UUID, or the caller's own.
