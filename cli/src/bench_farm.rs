@@ -14,6 +14,7 @@
 //! must never do: lose a task or accept one twice. The figures are printed as a short
 //! table and, with `--json`, written as a [`Report`].
 
+use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Child;
@@ -359,16 +360,18 @@ async fn simulated_worker(
         tally.leased.push(task);
         // The upload is not cut short by `stop`: a tile half sent would look like a loss.
         let rect = worker::render::tile_rect(&lease);
-        if !encoded.contains_key(&rect) {
-            match worker::render::encode_tile(&lease, &tile_pixels(rect, noise), 0) {
-                Ok(tile) => encoded.insert(rect, tile),
-                Err(e) => {
-                    tally.error(format!("encoding the tile of task {task}: {e}"));
-                    continue;
+        let tile = match encoded.entry(rect) {
+            Entry::Occupied(known) => known.into_mut(),
+            Entry::Vacant(new) => {
+                match worker::render::encode_tile(&lease, &tile_pixels(rect, noise), 0) {
+                    Ok(tile) => new.insert(tile),
+                    Err(e) => {
+                        tally.error(format!("encoding the tile of task {task}: {e}"));
+                        continue;
+                    }
                 }
-            };
-        }
-        let tile = &encoded[&rect];
+            }
+        };
         let meta = proto::ResultMetadata {
             attempt: lease.token.attempt,
             ..tile.meta.clone()
