@@ -547,7 +547,7 @@ fn memory_of(pid: u32) -> (Option<f64>, Option<f64>) {
 
 /// User plus system CPU seconds of a process (`self` or a pid) from `/proc/<pid>/stat`.
 #[cfg(unix)]
-fn cpu_seconds(pid: &str) -> Option<f64> {
+pub(crate) fn cpu_seconds(pid: &str) -> Option<f64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // Fields after the command name (which may hold spaces) in parentheses: state is the
     // 3rd field, utime and stime the 14th and 15th.
@@ -559,7 +559,7 @@ fn cpu_seconds(pid: &str) -> Option<f64> {
 }
 
 #[cfg(not(unix))]
-fn cpu_seconds(_pid: &str) -> Option<f64> {
+pub(crate) fn cpu_seconds(_pid: &str) -> Option<f64> {
     None
 }
 

@@ -234,7 +234,7 @@ pub fn table(costs: &[FeatureCost]) -> String {
         .to_string();
     for c in costs {
         out += &format!(
-            "| {} | {:.3} | {:.3} | {:+.0}% | {:.1} | {:.1} |\n",
+            "| {} | {:.3} | {:.3} | {:+.0}% | {:.2} | {:.2} |\n",
             c.feature,
             c.without / 1e6,
             c.with / 1e6,

@@ -4,9 +4,12 @@
 //! 1, 2 and 4 single-thread workers against one process of 1, 2 and 4 threads give its
 //! scaling. The farm's time runs from the job's creation to its end (the server's clock:
 //! scene download, leases, uploads and frame assembly included); the direct one from the
-//! first frame's preparation to the last frame's last sample.
+//! first frame's preparation to the last frame's last sample. Each farm run is followed at
+//! once by its direct render, so that both see the same machine (a shared VM's speed
+//! drifts over minutes). CPU seconds compare them too: the workers' and the server's (in
+//! this process) against the direct render's, which a neighbour's load changes less than
+//! wall time.
 
-use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -19,11 +22,15 @@ use tracer::film::{SampleRange, TileRect};
 use tracer::motion::Shutter;
 use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
 
+use crate::bench_farm::cpu_seconds;
 use crate::client::Client;
 use crate::demo::{LocalServer, Workers};
 
 /// How long workers get to register, and a job to finish, before the bench gives up.
 const WAIT: Duration = Duration::from_secs(600);
+/// How often the bench asks: the job's times come from the server's clock, so polling
+/// faster would only load the server it measures.
+const POLL: Duration = Duration::from_millis(250);
 /// The direct render's tiles, which only share the frame among its threads (the farm's
 /// job takes the server's default tiles, a few seconds of work each, as users' jobs do).
 const DIRECT_TILE: u32 = 32;
@@ -53,12 +60,26 @@ pub struct FarmRun {
     /// Seconds rendering the same frames in one process of `workers × threads_each`
     /// threads.
     pub direct_seconds: f64,
+    /// CPU seconds of this process (the server, and the bench's polling) during the
+    /// farm's run, where the platform tells.
+    pub server_cpu_seconds: Option<f64>,
+    /// CPU seconds of the worker processes during the farm's run.
+    pub worker_cpu_seconds: Option<f64>,
+    /// CPU seconds of the direct render.
+    pub direct_cpu_seconds: Option<f64>,
 }
 
 impl FarmRun {
     /// The farm's throughput as a fraction of the direct render's.
     pub fn ratio(&self) -> f64 {
         self.direct_seconds / self.farm_seconds
+    }
+
+    /// The direct render's CPU seconds over the farm's (workers and server): the share of
+    /// the farm's CPU that went into rendering.
+    pub fn cpu_ratio(&self) -> Option<f64> {
+        let farm = self.worker_cpu_seconds? + self.server_cpu_seconds?;
+        Some(self.direct_cpu_seconds? / farm)
     }
 }
 
@@ -76,13 +97,14 @@ const SHUTTER: Shutter = Shutter {
     close: 0.25,
 };
 
-/// `work` rendered in this process with `threads` threads, as `tessera render` does.
-fn direct_seconds(work: Work, threads: u32) -> anyhow::Result<f64> {
+/// `work` rendered in this process with `threads` threads, as `tessera render` does: wall
+/// and CPU seconds.
+fn direct_seconds(work: Work, threads: u32) -> anyhow::Result<(f64, Option<f64>)> {
     let scene = Arc::new(tracer::demo::animated_demo_scene());
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads as usize)
         .build()?;
-    let start = Instant::now();
+    let (start, cpu) = (Instant::now(), cpu_seconds("self"));
     pool.install(|| -> anyhow::Result<()> {
         for frame in 1..=work.frames {
             let options = FrameOptions {
@@ -107,7 +129,8 @@ fn direct_seconds(work: Work, threads: u32) -> anyhow::Result<f64> {
         }
         Ok(())
     })?;
-    Ok(start.elapsed().as_secs_f64())
+    let cpu = cpu_seconds("self").zip(cpu).map(|(b, a)| b - a);
+    Ok((start.elapsed().as_secs_f64(), cpu))
 }
 
 fn spec(digest: &str, work: Work) -> JobSpec {
@@ -133,13 +156,14 @@ async fn wait_for(
         if Instant::now() > until {
             bail!("{what} within {} s", WAIT.as_secs());
         }
-        tokio::time::sleep(Duration::from_millis(20)).await;
+        tokio::time::sleep(POLL).await;
     }
     Ok(())
 }
 
 /// `work` on a farm of `workers` worker processes of `threads` threads each: seconds from
-/// the job's creation to its end.
+/// the job's creation to its end, and the CPU seconds of the server and of the workers
+/// meanwhile.
 async fn farm_seconds(
     client: &Client,
     url: &str,
@@ -148,7 +172,7 @@ async fn farm_seconds(
     workers: u32,
     threads: u32,
     work: Work,
-) -> anyhow::Result<f64> {
+) -> anyhow::Result<(f64, Option<f64>, Option<f64>)> {
     let logs = dir.join(format!("logs-{workers}x{threads}"));
     std::fs::create_dir_all(&logs)?;
     let mut procs = Workers::spawn(url, workers, threads, &dir.join("cache"), &logs)?;
@@ -157,6 +181,15 @@ async fn farm_seconds(
         Ok(list.workers.iter().filter(|w| w.online).count() >= workers as usize)
     })
     .await?;
+    let cpu = |procs: &Workers| {
+        let workers: Option<f64> = procs
+            .pids()
+            .iter()
+            .map(|pid| cpu_seconds(&pid.to_string()))
+            .sum();
+        (cpu_seconds("self"), workers)
+    };
+    let before = cpu(&procs);
     let job = client.create_job(&spec(digest, work)).await?;
     let mut last = job.clone();
     wait_for("the job did not finish", async || {
@@ -164,6 +197,7 @@ async fn farm_seconds(
         Ok(last.finished_ms.is_some())
     })
     .await?;
+    let after = cpu(&procs);
     procs.stop(Duration::from_secs(5));
     if last.frames_done != work.frames as u64 {
         bail!(
@@ -173,7 +207,12 @@ async fn farm_seconds(
         );
     }
     let end = last.finished_ms.unwrap_or(last.created_ms);
-    Ok((end - last.created_ms) as f64 / 1000.0)
+    let spent = |a: Option<f64>, b: Option<f64>| Some(b? - a?);
+    Ok((
+        (end - last.created_ms) as f64 / 1000.0,
+        spent(before.0, after.0),
+        spent(before.1, after.1),
+    ))
 }
 
 /// The farm's overhead with one worker of `threads` threads, and its scaling over 1, 2 and
@@ -187,11 +226,10 @@ pub fn farm_costs(work: Work, threads: u32) -> anyhow::Result<FarmCosts> {
         let glb = tracer::export::scene_to_glb(&tracer::demo::animated_demo_scene())
             .map_err(|e| anyhow::anyhow!("exporting the demo scene to GLB: {e}"))?;
         let scene = client.upload_scene(glb).await?;
-        let mut direct: HashMap<u32, f64> = HashMap::new();
         let mut runs = Vec::new();
         for (workers, threads_each) in [(1, threads), (1, 1), (2, 1), (4, 1)] {
             eprintln!("farm: {workers} worker(s) of {threads_each} thread(s) ...");
-            let farm_seconds = farm_seconds(
+            let (farm_seconds, server_cpu_seconds, worker_cpu_seconds) = farm_seconds(
                 &client,
                 &server.url,
                 &scene.digest,
@@ -202,20 +240,16 @@ pub fn farm_costs(work: Work, threads: u32) -> anyhow::Result<FarmCosts> {
             )
             .await?;
             let total = workers * threads_each;
-            let direct_seconds = match direct.get(&total) {
-                Some(&s) => s,
-                None => {
-                    let s =
-                        tokio::task::spawn_blocking(move || direct_seconds(work, total)).await??;
-                    direct.insert(total, s);
-                    s
-                }
-            };
+            let (direct_seconds, direct_cpu_seconds) =
+                tokio::task::spawn_blocking(move || direct_seconds(work, total)).await??;
             runs.push(FarmRun {
                 workers,
                 threads_each,
                 farm_seconds,
                 direct_seconds,
+                server_cpu_seconds,
+                worker_cpu_seconds,
+                direct_cpu_seconds,
             });
         }
         server.shutdown().await?;
@@ -229,16 +263,25 @@ pub fn farm_costs(work: Work, threads: u32) -> anyhow::Result<FarmCosts> {
 /// The markdown table of the runs.
 pub fn table(costs: &FarmCosts) -> String {
     let mut out = "| workers x threads | farm (s) | direct, same threads (s) | farm / direct \
-                   throughput |\n|---|---:|---:|---:|\n"
+                   throughput | farm CPU: workers + server (s) | direct CPU (s) | direct / \
+                   farm CPU |\n|---|---:|---:|---:|---:|---:|---:|\n"
         .to_string();
+    let opt = |v: Option<f64>, digits: usize| v.map_or("-".into(), |v| format!("{v:.digits$}"));
     for r in &costs.runs {
+        let farm_cpu = match (r.worker_cpu_seconds, r.server_cpu_seconds) {
+            (Some(w), Some(s)) => format!("{w:.1} + {s:.1}"),
+            _ => "-".into(),
+        };
         out += &format!(
-            "| {} x {} | {:.2} | {:.2} | {:.3} |\n",
+            "| {} x {} | {:.2} | {:.2} | {:.3} | {} | {} | {} |\n",
             r.workers,
             r.threads_each,
             r.farm_seconds,
             r.direct_seconds,
-            r.ratio()
+            r.ratio(),
+            farm_cpu,
+            opt(r.direct_cpu_seconds, 1),
+            opt(r.cpu_ratio(), 3),
         );
     }
     out

@@ -139,6 +139,11 @@ impl Workers {
         Ok(workers)
     }
 
+    /// The process ids of the workers.
+    pub(crate) fn pids(&self) -> Vec<u32> {
+        self.procs.iter().map(|p| p.child.id()).collect()
+    }
+
     /// Workers that have exited since the last call, reaped.
     fn newly_exited(&mut self) -> Vec<&WorkerProcess> {
         let mut fresh = Vec::new();
