@@ -75,8 +75,9 @@ impl FarmRun {
         self.direct_seconds / self.farm_seconds
     }
 
-    /// The direct render's CPU seconds over the farm's (workers and server): the share of
-    /// the farm's CPU that went into rendering.
+    /// The direct render's CPU seconds over the farm's (workers and server): below 1 by
+    /// what the farm spends beyond rendering. It can exceed 1: idle rayon threads of the
+    /// direct render spin briefly before they sleep.
     pub fn cpu_ratio(&self) -> Option<f64> {
         let farm = self.worker_cpu_seconds? + self.server_cpu_seconds?;
         Some(self.direct_cpu_seconds? / farm)
