@@ -132,7 +132,10 @@ fn bench_quick_writes_a_report_with_every_section() {
         // Both ways burn CPU rendering the same frames (this test runs on Linux, where
         // /proc tells).
         let cpu = |key: &str| run[key].as_f64().unwrap_or_else(|| panic!("{key}: {run}"));
-        assert!(cpu("worker_cpu_seconds") > 0.0 && cpu("direct_cpu_seconds") > 0.0, "{run}");
+        assert!(
+            cpu("worker_cpu_seconds") > 0.0 && cpu("direct_cpu_seconds") > 0.0,
+            "{run}"
+        );
     }
     assert!(report["cornell"]["mse_times_seconds"].as_f64().unwrap() > 0.0);
     let motion = &report["scenes"][2]["motion_sweep"];
