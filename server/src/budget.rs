@@ -14,6 +14,7 @@ use proto::{BudgetPlan, JobSpec};
 use rusqlite::{params, OptionalExtension, Transaction};
 use tracer::film::{SampleRange, TileRect};
 
+use crate::db::Cached;
 use crate::error::Result;
 use crate::limits::MAX_SAMPLE_PASSES;
 use crate::scheduler::insert_task;
@@ -48,7 +49,7 @@ struct Speed {
 /// upload (so preparing frames and uploads count).
 fn measure(tx: &Transaction, job: u64, live_since: i64) -> Result<Speed> {
     let workers: Vec<u64> = {
-        let mut stmt = tx.prepare(
+        let mut stmt = tx.prepare_cached(
             "SELECT w.id FROM workers w
              WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL AND w.quarantined_ms IS NULL
                AND NOT EXISTS (SELECT 1 FROM job_blocks b
@@ -62,7 +63,7 @@ fn measure(tx: &Transaction, job: u64, live_since: i64) -> Result<Speed> {
         live: workers.len() as u32,
         ..Speed::default()
     };
-    let mut stmt = tx.prepare(
+    let mut stmt = tx.prepare_cached(
         "SELECT sum(w * h * (sample_end - sample_start)), sum(max(done_ms - leased_ms, 1))
          FROM (SELECT w, h, sample_start, sample_end, done_ms, leased_ms FROM tasks
                WHERE job_id = ?1 AND worker_id = ?2 AND state = 'done'
@@ -100,7 +101,7 @@ struct Open {
 }
 
 fn open_work(tx: &Transaction, job: u64) -> Result<Open> {
-    Ok(tx.query_row(
+    Ok(tx.row(
         "SELECT coalesce(sum(w * h * (sample_end - sample_start)), 0),
                 coalesce(max(w * h * (sample_end - sample_start)), 0),
                 coalesce(sum(state = 'queued'), 0),
@@ -129,7 +130,7 @@ fn seconds_to_finish(open: &Open, speed: &Speed) -> f64 {
 /// highest), then fewest samples.
 fn noisiest_frame(tx: &Transaction, job: u64, spp: u32) -> Result<Option<(i32, u32, u32)>> {
     Ok(tx
-        .query_row(
+        .row(
             "SELECT frame, reached, passes FROM (
                  SELECT f.frame, f.noise,
                         (SELECT max(t.sample_end) FROM tasks t WHERE t.job_id = f.job_id
@@ -149,7 +150,7 @@ fn noisiest_frame(tx: &Transaction, job: u64, spp: u32) -> Result<Option<(i32, u
 
 /// Frames still under the job's spp (at least 1).
 fn hungry_frames(tx: &Transaction, job: u64, spp: u32) -> Result<u32> {
-    let n: u32 = tx.query_row(
+    let n: u32 = tx.row(
         "SELECT count(*) FROM frames f WHERE f.job_id = ?1
            AND (SELECT max(t.sample_end) FROM tasks t
                 WHERE t.job_id = f.job_id AND t.frame = f.frame) < ?2",
@@ -161,7 +162,7 @@ fn hungry_frames(tx: &Transaction, job: u64, spp: u32) -> Result<u32> {
 
 /// The tiles of a frame (those of its first pass: every pass covers the same ones).
 fn tiles(tx: &Transaction, job: u64, frame: i32) -> Result<Vec<(u32, TileRect)>> {
-    let mut stmt = tx.prepare(
+    let mut stmt = tx.prepare_cached(
         "SELECT tile, x, y, w, h FROM tasks
          WHERE job_id = ?1 AND frame = ?2 AND pass = 0 AND check_of IS NULL ORDER BY tile",
     )?;
@@ -178,7 +179,7 @@ fn tiles(tx: &Transaction, job: u64, frame: i32) -> Result<Vec<(u32, TileRect)>>
 /// whether there was one.
 fn withdraw_unstarted_pass(tx: &Transaction, job: u64, frame_pixels: f64) -> Result<bool> {
     let newest: Option<(i32, u32, u32, i64)> = tx
-        .query_row(
+        .row(
             "SELECT frame, pass, count(*), max(sample_end - sample_start) FROM tasks
              WHERE job_id = ?1 AND pass > 0 AND check_of IS NULL
              GROUP BY frame, pass
@@ -191,15 +192,15 @@ fn withdraw_unstarted_pass(tx: &Transaction, job: u64, frame_pixels: f64) -> Res
     let Some((frame, pass, tasks, samples)) = newest else {
         return Ok(false);
     };
-    tx.execute(
+    tx.exec(
         "DELETE FROM tasks WHERE job_id = ?1 AND frame = ?2 AND pass = ?3",
         params![job, frame, pass],
     )?;
-    tx.execute(
+    tx.exec(
         "UPDATE frames SET tasks_total = tasks_total - ?3 WHERE job_id = ?1 AND frame = ?2",
         params![job, frame, tasks],
     )?;
-    tx.execute(
+    tx.exec(
         "UPDATE jobs SET pixel_samples = pixel_samples - ?2 WHERE id = ?1",
         params![job, (frame_pixels * samples as f64) as i64],
     )?;
@@ -220,7 +221,7 @@ pub fn replan(
     let Some(budget) = spec.time_budget else {
         return Ok(());
     };
-    let (control, created_ms): (String, i64) = tx.query_row(
+    let (control, created_ms): (String, i64) = tx.row(
         "SELECT control, created_ms FROM jobs WHERE id = ?1",
         [job],
         |r| Ok((r.get(0)?, r.get(1)?)),
@@ -244,7 +245,7 @@ pub fn replan(
     } else {
         let mut stage = String::from("refining: the noisiest frames get more samples");
         let mut tasks: u64 =
-            tx.query_row("SELECT count(*) FROM tasks WHERE job_id = ?1", [job], |r| {
+            tx.row("SELECT count(*) FROM tasks WHERE job_id = ?1", [job], |r| {
                 r.get(0)
             })?;
         while open.queued < QUEUE_PER_WORKER * u64::from(speed.live.max(1)) {
@@ -286,11 +287,11 @@ pub fn replan(
             for (tile, rect) in &tiles {
                 insert_task(tx, job, frame, *tile, pass, *rect, samples)?;
             }
-            tx.execute(
+            tx.exec(
                 "UPDATE frames SET tasks_total = tasks_total + ?3 WHERE job_id = ?1 AND frame = ?2",
                 params![job, frame, tiles.len()],
             )?;
-            tx.execute(
+            tx.exec(
                 "UPDATE jobs SET pixel_samples = pixel_samples + ?2 WHERE id = ?1",
                 params![job, (frame_pixels * f64::from(k)) as i64],
             )?;
@@ -314,7 +315,7 @@ pub fn replan(
         }
         stage
     };
-    let passes_added: u32 = tx.query_row(
+    let passes_added: u32 = tx.row(
         "SELECT count(*) FROM tasks WHERE job_id = ?1 AND pass > 0 AND tile = 0
            AND check_of IS NULL",
         [job],
@@ -332,7 +333,7 @@ pub fn replan(
         passes_added,
         stage,
     };
-    tx.execute(
+    tx.exec(
         "UPDATE jobs SET budget_plan = ?2 WHERE id = ?1",
         params![job, serde_json::to_string(&plan)?],
     )?;

@@ -9,6 +9,7 @@ use rusqlite::{params, Connection, OptionalExtension, Transaction};
 use tracer::film::{SampleRange, SamplingSummary, TileRect};
 
 use crate::budget;
+use crate::db::Cached;
 use crate::error::{Error, Result};
 use crate::spec::Plan;
 use crate::state::{transition, TaskEvent, TaskState};
@@ -87,7 +88,7 @@ pub(crate) fn task_from_row(r: &rusqlite::Row) -> rusqlite::Result<TaskRow> {
 /// The task `id`, if it exists.
 pub fn load_task(conn: &Connection, id: u64) -> Result<Option<TaskRow>> {
     Ok(conn
-        .query_row(
+        .row(
             &format!("SELECT {TASK_COLUMNS} FROM tasks WHERE id = ?1"),
             [id],
             task_from_row,
@@ -99,7 +100,7 @@ pub fn load_task(conn: &Connection, id: u64) -> Result<Option<TaskRow>> {
 /// caller updates the other columns in the same transaction.
 fn set_state(tx: &Transaction, task: &TaskRow, event: TaskEvent) -> Result<TaskState> {
     let to = transition(task.state, event)?;
-    let changed = tx.execute(
+    let changed = tx.exec(
         "UPDATE tasks SET state = ?1 WHERE id = ?2 AND state = ?3",
         params![to.as_str(), task.id, task.state.as_str()],
     )?;
@@ -120,7 +121,7 @@ pub(crate) fn log(
     kind: &str,
     detail: &str,
 ) -> Result<()> {
-    tx.execute(
+    tx.exec(
         "INSERT INTO events (at_ms, job_id, kind, detail) VALUES (?1, ?2, ?3, ?4)",
         params![now, job, kind, detail],
     )?;
@@ -132,7 +133,7 @@ pub(crate) fn log(
 pub fn update_finished(tx: &Transaction, job: u64, now: i64) -> Result<()> {
     // EXISTS, not count(*): this runs on every accepted tile, and a count of a big job's
     // queue grows with the job (measured with `tessera bench farm`).
-    let open: bool = tx.query_row(
+    let open: bool = tx.row(
         &format!(
             "SELECT EXISTS (SELECT 1 FROM tasks WHERE job_id = ?1
                               AND state IN ('queued', 'leased'))
@@ -142,19 +143,19 @@ pub fn update_finished(tx: &Transaction, job: u64, now: i64) -> Result<()> {
         |r| r.get(0),
     )?;
     if !open {
-        tx.execute(
+        tx.exec(
             "UPDATE jobs SET finished_ms = coalesce(finished_ms, ?2) WHERE id = ?1",
             params![job, now],
         )?;
     } else {
-        tx.execute("UPDATE jobs SET finished_ms = NULL WHERE id = ?1", [job])?;
+        tx.exec("UPDATE jobs SET finished_ms = NULL WHERE id = ?1", [job])?;
     }
     Ok(())
 }
 
 /// Records that `worker` called now; fails if it never registered or has left.
 fn touch_worker(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
-    let n = tx.execute(
+    let n = tx.exec(
         "UPDATE workers SET last_seen_ms = ?2 WHERE id = ?1 AND left_ms IS NULL",
         params![worker, now],
     )?;
@@ -176,7 +177,7 @@ pub(crate) fn live_since(now: i64, timing: Timing) -> i64 {
 pub fn create_job(conn: &mut Connection, plan: &Plan, now: i64) -> Result<u64> {
     let tx = conn.transaction()?;
     let spec = &plan.spec;
-    tx.execute(
+    tx.exec(
         "INSERT INTO jobs (name, scene, spec, control, priority, max_attempts, created_ms,
                            pixel_samples)
          VALUES ('', ?1, ?2, 'active', ?3, ?4, ?5, ?6)",
@@ -191,10 +192,11 @@ pub fn create_job(conn: &mut Connection, plan: &Plan, now: i64) -> Result<u64> {
     )?;
     let id = tx.last_insert_rowid() as u64;
     let name = spec.name.clone().unwrap_or_else(|| format!("job {id}"));
-    tx.execute("UPDATE jobs SET name = ?2 WHERE id = ?1", params![id, name])?;
+    tx.exec("UPDATE jobs SET name = ?2 WHERE id = ?1", params![id, name])?;
     {
-        let mut frame =
-            tx.prepare("INSERT INTO frames (job_id, frame, tasks_total) VALUES (?1, ?2, ?3)")?;
+        let mut frame = tx.prepare_cached(
+            "INSERT INTO frames (job_id, frame, tasks_total) VALUES (?1, ?2, ?3)",
+        )?;
         for &f in &plan.frames {
             frame.execute(params![id, f, plan.tasks_per_frame()])?;
         }
@@ -254,7 +256,7 @@ pub fn register_worker(
     now: i64,
 ) -> Result<u64> {
     let tx = conn.transaction()?;
-    tx.execute(
+    tx.exec(
         "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms)
          VALUES (?1, ?2, ?3, ?4, ?4)",
         params![name, threads, version, now],
@@ -287,7 +289,7 @@ fn next_task_in_job(
         "t.frame, t.pass, t.tile"
     };
     let fresh: Option<u64> = tx
-        .query_row(
+        .row(
             &format!(
                 "SELECT t.id FROM tasks t
              WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
@@ -303,7 +305,7 @@ fn next_task_in_job(
         return Ok(fresh);
     }
     Ok(tx
-        .query_row(
+        .row(
             &format!(
                 "SELECT t.id FROM tasks t
              WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
@@ -339,7 +341,7 @@ pub fn lease(
     }
     let live_since = live_since(now, timing);
     let jobs: Vec<(u64, bool)> = {
-        let mut stmt = tx.prepare(
+        let mut stmt = tx.prepare_cached(
             "SELECT j.id, j.budget_plan IS NOT NULL FROM jobs j
              WHERE j.control = 'active'
                AND EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = j.id AND t.state = 'queued')
@@ -365,12 +367,12 @@ pub fn lease(
     set_state(&tx, &task, TaskEvent::Lease)?;
     let deadline = now + timing.lease_ms;
     let attempt = task.attempt + 1;
-    tx.execute(
+    tx.exec(
         "UPDATE tasks SET attempt = ?2, worker_id = ?3, leased_ms = ?4, deadline_ms = ?5
          WHERE id = ?1",
         params![id, attempt, worker, now, deadline],
     )?;
-    tx.execute(
+    tx.exec(
         "UPDATE jobs SET first_lease_ms = coalesce(first_lease_ms, ?2) WHERE id = ?1",
         params![task.job_id, now],
     )?;
@@ -412,7 +414,7 @@ pub fn lease(
 /// The resolved spec of a job.
 pub fn job_spec(conn: &Connection, job: u64) -> Result<JobSpec> {
     let json: String = conn
-        .query_row("SELECT spec FROM jobs WHERE id = ?1", [job], |r| r.get(0))
+        .row("SELECT spec FROM jobs WHERE id = ?1", [job], |r| r.get(0))
         .optional()?
         .ok_or_else(|| Error::NotFound(format!("job {job} does not exist")))?;
     Ok(serde_json::from_str(&json)?)
@@ -433,7 +435,7 @@ pub fn check_token(conn: &Connection, worker: u64, token: TaskToken) -> Result<T
     {
         return Ok(task);
     }
-    let control: String = conn.query_row(
+    let control: String = conn.row(
         "SELECT control FROM jobs WHERE id = ?1",
         [task.job_id],
         |r| r.get(0),
@@ -469,7 +471,7 @@ pub fn heartbeat(
     };
     let result = check_token(&tx, worker, token).and_then(|task| {
         let deadline = now + timing.lease_ms;
-        tx.execute(
+        tx.exec(
             "UPDATE tasks SET deadline_ms = ?2 WHERE id = ?1",
             params![task.id, deadline],
         )?;
@@ -537,16 +539,16 @@ pub fn accept(
         return Ok(Accepted::Duplicate);
     }
     set_state(&tx, &task, TaskEvent::Complete)?;
-    tx.execute(
+    tx.exec(
         "UPDATE tasks SET done_ms = ?2, rays = ?3, render_ms = ?4, deadline_ms = NULL
          WHERE id = ?1",
         params![task.id, now, rays as i64, render_ms as i64],
     )?;
-    tx.execute(
+    tx.exec(
         "UPDATE workers SET tasks_done = tasks_done + 1 WHERE id = ?1",
         [worker],
     )?;
-    tx.execute(
+    tx.exec(
         "UPDATE frames SET tasks_done = tasks_done + 1 WHERE job_id = ?1 AND frame = ?2",
         params![task.job_id, task.frame],
     )?;
@@ -567,12 +569,12 @@ pub fn accept(
             now,
         )?,
     }
-    let frame_complete: bool = tx.query_row(
+    let frame_complete: bool = tx.row(
         "SELECT tasks_done = tasks_total FROM frames WHERE job_id = ?1 AND frame = ?2",
         params![task.job_id, task.frame],
         |r| r.get(0),
     )?;
-    let pass_left: i64 = tx.query_row(
+    let pass_left: i64 = tx.row(
         "SELECT count(*) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND pass = ?3
            AND state != 'done' AND check_of IS NULL",
         params![task.job_id, task.frame, task.pass],
@@ -601,7 +603,7 @@ fn fail_attempt(
     now: i64,
     timing: Timing,
 ) -> Result<FailureAck> {
-    let max_attempts: u32 = tx.query_row(
+    let max_attempts: u32 = tx.row(
         "SELECT max_attempts FROM jobs WHERE id = ?1",
         [task.job_id],
         |r| r.get(0),
@@ -613,11 +615,11 @@ fn fail_attempt(
         _ => TaskEvent::Fail { exhausted },
     };
     let to = set_state(tx, task, event)?;
-    tx.execute(
+    tx.exec(
         "UPDATE tasks SET failures = ?2, worker_id = NULL, deadline_ms = NULL WHERE id = ?1",
         params![task.id, failures],
     )?;
-    tx.execute(
+    tx.exec(
         "INSERT INTO task_failures (task_id, job_id, worker_id, attempt, reason, message, at_ms)
          VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
         params![
@@ -630,14 +632,14 @@ fn fail_attempt(
             now
         ],
     )?;
-    let by_worker: u32 = tx.query_row(
+    let by_worker: u32 = tx.row(
         "SELECT count(*) FROM task_failures WHERE job_id = ?1 AND worker_id = ?2",
         params![task.job_id, worker],
         |r| r.get(0),
     )?;
     let blocked = by_worker >= timing.block_after_failures;
     if blocked {
-        let added = tx.execute(
+        let added = tx.exec(
             "INSERT OR IGNORE INTO job_blocks (job_id, worker_id) VALUES (?1, ?2)",
             params![task.job_id, worker],
         )?;
@@ -694,7 +696,7 @@ pub fn fail(
 pub fn expire(conn: &mut Connection, now: i64, timing: Timing) -> Result<Vec<u64>> {
     let tx = conn.transaction()?;
     let expired: Vec<TaskRow> = {
-        let mut stmt = tx.prepare(&format!(
+        let mut stmt = tx.prepare_cached(&format!(
             "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased' AND deadline_ms < ?1"
         ))?;
         let rows = stmt.query_map([now], task_from_row)?;
@@ -725,7 +727,7 @@ pub fn expire(conn: &mut Connection, now: i64, timing: Timing) -> Result<Vec<u64
 pub fn revoke_all_leases(conn: &mut Connection, now: i64) -> Result<usize> {
     let tx = conn.transaction()?;
     let leased: Vec<TaskRow> = {
-        let mut stmt = tx.prepare(&format!(
+        let mut stmt = tx.prepare_cached(&format!(
             "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased'"
         ))?;
         let rows = stmt.query_map([], task_from_row)?;
@@ -754,7 +756,7 @@ pub fn leave(conn: &mut Connection, worker: u64, now: i64) -> Result<Vec<u64>> {
     let tx = conn.transaction()?;
     touch_worker(&tx, worker, now)?;
     let held: Vec<TaskRow> = {
-        let mut stmt = tx.prepare(&format!(
+        let mut stmt = tx.prepare_cached(&format!(
             "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased' AND worker_id = ?1"
         ))?;
         let rows = stmt.query_map([worker], task_from_row)?;
@@ -767,7 +769,7 @@ pub fn leave(conn: &mut Connection, worker: u64, now: i64) -> Result<Vec<u64>> {
             jobs.push(task.job_id);
         }
     }
-    tx.execute(
+    tx.exec(
         "UPDATE workers SET left_ms = ?2 WHERE id = ?1",
         params![worker, now],
     )?;
@@ -784,7 +786,7 @@ pub fn leave(conn: &mut Connection, worker: u64, now: i64) -> Result<Vec<u64>> {
 
 pub(crate) fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {
     set_state(tx, task, TaskEvent::Revoke)?;
-    tx.execute(
+    tx.exec(
         "UPDATE tasks SET worker_id = NULL, deadline_ms = NULL WHERE id = ?1",
         [task.id],
     )?;
@@ -793,7 +795,7 @@ pub(crate) fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {
 
 fn job_tasks(tx: &Transaction, job: u64, states: &[TaskState]) -> Result<Vec<TaskRow>> {
     let list: Vec<String> = states.iter().map(|s| format!("'{}'", s.as_str())).collect();
-    let mut stmt = tx.prepare(&format!(
+    let mut stmt = tx.prepare_cached(&format!(
         "SELECT {TASK_COLUMNS} FROM tasks WHERE job_id = ?1 AND state IN ({})",
         list.join(", ")
     ))?;
@@ -802,7 +804,7 @@ fn job_tasks(tx: &Transaction, job: u64, states: &[TaskState]) -> Result<Vec<Tas
 }
 
 fn job_control(tx: &Transaction, job: u64) -> Result<String> {
-    tx.query_row("SELECT control FROM jobs WHERE id = ?1", [job], |r| {
+    tx.row("SELECT control FROM jobs WHERE id = ?1", [job], |r| {
         r.get(0)
     })
     .optional()?
@@ -810,7 +812,7 @@ fn job_control(tx: &Transaction, job: u64) -> Result<String> {
 }
 
 fn job_finished(tx: &Transaction, job: u64) -> Result<bool> {
-    Ok(tx.query_row(
+    Ok(tx.row(
         "SELECT finished_ms IS NOT NULL FROM jobs WHERE id = ?1",
         [job],
         |r| r.get(0),
@@ -831,7 +833,7 @@ pub fn pause(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
             "job {job} has nothing left to run"
         )));
     }
-    tx.execute("UPDATE jobs SET control = 'paused' WHERE id = ?1", [job])?;
+    tx.exec("UPDATE jobs SET control = 'paused' WHERE id = ?1", [job])?;
     for task in job_tasks(&tx, job, &[TaskState::Leased])? {
         revoke(&tx, &task)?;
     }
@@ -848,7 +850,7 @@ pub fn resume(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
         "active" => return Ok(()),
         _ => {}
     }
-    tx.execute("UPDATE jobs SET control = 'active' WHERE id = ?1", [job])?;
+    tx.exec("UPDATE jobs SET control = 'active' WHERE id = ?1", [job])?;
     log(&tx, now, Some(job), "job_resumed", "")?;
     tx.commit()?;
     Ok(())
@@ -864,10 +866,10 @@ pub fn cancel(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
     if open.is_empty() && job_finished(&tx, job)? {
         return Err(Error::Conflict(format!("job {job} has already finished")));
     }
-    tx.execute("UPDATE jobs SET control = 'cancelled' WHERE id = ?1", [job])?;
+    tx.exec("UPDATE jobs SET control = 'cancelled' WHERE id = ?1", [job])?;
     for task in &open {
         set_state(&tx, task, TaskEvent::Cancel)?;
-        tx.execute(
+        tx.exec(
             "UPDATE tasks SET worker_id = NULL, deadline_ms = NULL WHERE id = ?1",
             [task.id],
         )?;
@@ -897,10 +899,10 @@ pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
     }
     for task in &failed {
         set_state(&tx, task, TaskEvent::Retry)?;
-        tx.execute("UPDATE tasks SET failures = 0 WHERE id = ?1", [task.id])?;
-        tx.execute("DELETE FROM task_failures WHERE task_id = ?1", [task.id])?;
+        tx.exec("UPDATE tasks SET failures = 0 WHERE id = ?1", [task.id])?;
+        tx.exec("DELETE FROM task_failures WHERE task_id = ?1", [task.id])?;
     }
-    tx.execute("DELETE FROM job_blocks WHERE job_id = ?1", [job])?;
+    tx.exec("DELETE FROM job_blocks WHERE job_id = ?1", [job])?;
     log(
         &tx,
         now,
@@ -917,7 +919,7 @@ pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
 pub fn delete_job(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
     let tx = conn.transaction()?;
     job_control(&tx, job)?;
-    tx.execute("DELETE FROM jobs WHERE id = ?1", [job])?;
+    tx.exec("DELETE FROM jobs WHERE id = ?1", [job])?;
     log(&tx, now, Some(job), "job_deleted", "")?;
     tx.commit()?;
     Ok(())
@@ -934,7 +936,7 @@ pub fn mark_assembled(
     timing: Timing,
 ) -> Result<()> {
     let tx = conn.transaction()?;
-    tx.execute(
+    tx.exec(
         "UPDATE frames SET assembled_ms = ?3, assembled_tasks = tasks_total, spp_mean = ?4,
                            noise = ?5
          WHERE job_id = ?1 AND frame = ?2",
@@ -965,7 +967,7 @@ fn replan(tx: &Transaction, job: u64, now: i64, timing: Timing) -> Result<()> {
 pub fn replan_budgets(conn: &mut Connection, now: i64, timing: Timing) -> Result<Vec<u64>> {
     let tx = conn.transaction()?;
     let jobs: Vec<u64> = {
-        let mut stmt = tx.prepare(
+        let mut stmt = tx.prepare_cached(
             "SELECT id FROM jobs
              WHERE budget_plan IS NOT NULL AND finished_ms IS NULL AND control = 'active'",
         )?;
@@ -982,7 +984,7 @@ pub fn replan_budgets(conn: &mut Connection, now: i64, timing: Timing) -> Result
 
 /// Whether a job has finished with no failed task (nothing of it can run again).
 pub fn finished_cleanly(conn: &Connection, job: u64) -> Result<bool> {
-    Ok(conn.query_row(
+    Ok(conn.row(
         "SELECT finished_ms IS NOT NULL
                 AND NOT EXISTS (SELECT 1 FROM tasks WHERE job_id = ?1 AND state = 'failed')
          FROM jobs WHERE id = ?1",
@@ -994,7 +996,7 @@ pub fn finished_cleanly(conn: &Connection, job: u64) -> Result<bool> {
 /// Frames whose tasks are all done but which are not assembled from all of them (a crash
 /// in between, or a full disk).
 pub fn unassembled_frames(conn: &Connection) -> Result<Vec<(u64, i32)>> {
-    let mut stmt = conn.prepare(&format!(
+    let mut stmt = conn.prepare_cached(&format!(
         "SELECT job_id, frame FROM frames WHERE {FRAME_NEEDS_ASSEMBLY}"
     ))?;
     let rows = stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?;
@@ -1003,7 +1005,7 @@ pub fn unassembled_frames(conn: &Connection) -> Result<Vec<(u64, i32)>> {
 
 /// Whether a frame is assembled from all of its tasks so far.
 pub fn is_assembled(conn: &Connection, job: u64, frame: i32) -> Result<bool> {
-    Ok(conn.query_row(
+    Ok(conn.row(
         "SELECT assembled_tasks IS tasks_total FROM frames WHERE job_id = ?1 AND frame = ?2",
         params![job, frame],
         |r| r.get(0),
@@ -1017,7 +1019,7 @@ const FRAME_NEEDS_ASSEMBLY: &str =
 
 /// The done render tasks of one frame (for assembly), by tile then pass.
 pub fn done_tasks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<TaskRow>> {
-    let mut stmt = conn.prepare(&format!(
+    let mut stmt = conn.prepare_cached(&format!(
         "SELECT {TASK_COLUMNS} FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
            AND check_of IS NULL
          ORDER BY tile, pass"
@@ -1029,7 +1031,7 @@ pub fn done_tasks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Ve
 /// Seconds the workers spent rendering one frame's tiles (its done tasks, checks left
 /// out), as they reported.
 pub fn frame_render_seconds(conn: &Connection, job: u64, frame: i32) -> Result<f64> {
-    let ms: Option<i64> = conn.query_row(
+    let ms: Option<i64> = conn.row(
         "SELECT SUM(render_ms) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
            AND check_of IS NULL",
         params![job, frame],
@@ -1040,7 +1042,7 @@ pub fn frame_render_seconds(conn: &Connection, job: u64, frame: i32) -> Result<f
 
 /// What the scene of `job` needs from the tracer (its summary's `features`).
 pub fn job_scene_features(conn: &Connection, job: u64) -> Result<Vec<String>> {
-    let json: String = conn.query_row(
+    let json: String = conn.row(
         "SELECT scenes.info FROM jobs JOIN scenes ON scenes.digest = jobs.scene
          WHERE jobs.id = ?1",
         [job],
@@ -1051,7 +1053,7 @@ pub fn job_scene_features(conn: &Connection, job: u64) -> Result<Vec<String>> {
 
 /// The ids of one frame's done check tasks (whose tiles go once the frame is assembled).
 pub fn done_checks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<u64>> {
-    let mut stmt = conn.prepare(
+    let mut stmt = conn.prepare_cached(
         "SELECT id FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
            AND check_of IS NOT NULL",
     )?;

@@ -7,12 +7,13 @@ use proto::{
 };
 use rusqlite::{params, Connection, OptionalExtension};
 
+use crate::db::Cached;
 use crate::error::{Error, Result};
 
 /// One job's status at `now`.
 pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
     let row = conn
-        .query_row(
+        .row(
             "SELECT name, spec, control, created_ms, first_lease_ms, finished_ms, pixel_samples,
                     budget_plan
              FROM jobs WHERE id = ?1",
@@ -40,7 +41,7 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
     let mut done_samples = 0i64;
     let mut last_done_ms = None::<i64>;
     {
-        let mut stmt = conn.prepare(
+        let mut stmt = conn.prepare_cached(
             // Check tasks count as tasks but not as samples: they repeat samples.
             "SELECT state, count(*),
                     coalesce(sum(CASE WHEN check_of IS NULL
@@ -71,12 +72,12 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
             }
         }
     }
-    let (frames_total, frames_done): (u64, u64) = conn.query_row(
+    let (frames_total, frames_done): (u64, u64) = conn.row(
         "SELECT count(*), coalesce(sum(assembled_ms IS NOT NULL), 0) FROM frames WHERE job_id = ?1",
         [job],
         |r| Ok((r.get(0)?, r.get(1)?)),
     )?;
-    let frames_failed: u64 = conn.query_row(
+    let frames_failed: u64 = conn.row(
         "SELECT count(DISTINCT frame) FROM tasks WHERE job_id = ?1 AND state = 'failed'",
         [job],
         |r| r.get(0),
@@ -159,7 +160,7 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
 /// Every job, newest first.
 pub fn list_jobs(conn: &Connection, now: i64) -> Result<Vec<JobStatus>> {
     let ids: Vec<u64> = {
-        let mut stmt = conn.prepare("SELECT id FROM jobs ORDER BY id DESC")?;
+        let mut stmt = conn.prepare_cached("SELECT id FROM jobs ORDER BY id DESC")?;
         let rows = stmt.query_map([], |r| r.get(0))?;
         rows.collect::<rusqlite::Result<_>>()?
     };
@@ -208,14 +209,13 @@ fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
 
 /// The frames of a job, in order.
 pub fn frames(conn: &Connection, job: u64) -> Result<FrameList> {
-    let exists: bool =
-        conn.query_row("SELECT count(*) > 0 FROM jobs WHERE id = ?1", [job], |r| {
-            r.get(0)
-        })?;
+    let exists: bool = conn.row("SELECT count(*) > 0 FROM jobs WHERE id = ?1", [job], |r| {
+        r.get(0)
+    })?;
     if !exists {
         return Err(Error::NotFound(format!("job {job} does not exist")));
     }
-    let mut stmt = conn.prepare(&format!(
+    let mut stmt = conn.prepare_cached(&format!(
         "{FRAME_QUERY} WHERE f.job_id = ?1 ORDER BY f.frame"
     ))?;
     let rows = stmt.query_map([job], frame_from_row)?;
@@ -226,7 +226,7 @@ pub fn frames(conn: &Connection, job: u64) -> Result<FrameList> {
 
 /// One frame of a job.
 pub fn frame_status(conn: &Connection, job: u64, frame: i32) -> Result<FrameStatus> {
-    conn.query_row(
+    conn.row(
         &format!("{FRAME_QUERY} WHERE f.job_id = ?1 AND f.frame = ?2"),
         params![job, frame],
         frame_from_row,
@@ -269,7 +269,7 @@ fn worker_from_row(r: &rusqlite::Row, now: i64, lease_ms: i64) -> rusqlite::Resu
 
 /// One worker.
 pub fn worker(conn: &Connection, id: u64, now: i64, lease_ms: i64) -> Result<WorkerInfo> {
-    conn.query_row(&format!("{WORKER_QUERY} WHERE w.id = ?1"), [id], |r| {
+    conn.row(&format!("{WORKER_QUERY} WHERE w.id = ?1"), [id], |r| {
         worker_from_row(r, now, lease_ms)
     })
     .optional()?
@@ -278,7 +278,7 @@ pub fn worker(conn: &Connection, id: u64, now: i64, lease_ms: i64) -> Result<Wor
 
 /// Every worker, by id.
 pub fn workers(conn: &Connection, now: i64, lease_ms: i64) -> Result<WorkerList> {
-    let mut stmt = conn.prepare(&format!("{WORKER_QUERY} ORDER BY w.id"))?;
+    let mut stmt = conn.prepare_cached(&format!("{WORKER_QUERY} ORDER BY w.id"))?;
     let rows = stmt.query_map([], |r| worker_from_row(r, now, lease_ms))?;
     Ok(WorkerList {
         workers: rows.collect::<rusqlite::Result<_>>()?,

@@ -18,6 +18,7 @@
 use rusqlite::{params, Connection, Transaction};
 use tracer::film::Layers;
 
+use crate::db::Cached;
 use crate::error::{Error, Result};
 use crate::scheduler::{load_task, log, revoke, TaskRow, TASK_COLUMNS};
 
@@ -107,7 +108,7 @@ impl Verdict {
 
 /// The finished renders of the task `original` and its checks.
 pub fn group(conn: &Connection, original: u64) -> Result<Vec<Render>> {
-    let mut stmt = conn.prepare(
+    let mut stmt = conn.prepare_cached(
         "SELECT t.id, t.worker_id, w.quarantined_ms IS NOT NULL
          FROM tasks t JOIN workers w ON w.id = t.worker_id
          WHERE (t.id = ?1 OR t.check_of = ?1) AND t.state = 'done'
@@ -125,7 +126,7 @@ pub fn group(conn: &Connection, original: u64) -> Result<Vec<Render>> {
 
 /// Queues a check of the render task `task`; its frame now waits for it.
 fn add_check(tx: &Transaction, task: &TaskRow, now: i64, why: &str) -> Result<()> {
-    tx.execute(
+    tx.exec(
         "INSERT INTO tasks (job_id, frame, tile, pass, x, y, w, h, sample_start, sample_end,
                             state, check_of)
          VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued', ?11)",
@@ -143,7 +144,7 @@ fn add_check(tx: &Transaction, task: &TaskRow, now: i64, why: &str) -> Result<()
             task.id
         ],
     )?;
-    tx.execute(
+    tx.exec(
         "UPDATE frames SET tasks_total = tasks_total + 1 WHERE job_id = ?1 AND frame = ?2",
         params![task.job_id, task.frame],
     )?;
@@ -169,7 +170,7 @@ pub fn sample(
     if task.check_of.is_some() || !sampled(task.id, fraction) {
         return Ok(());
     }
-    let other: bool = tx.query_row(
+    let other: bool = tx.row(
         "SELECT EXISTS (SELECT 1 FROM workers WHERE id != ?1 AND last_seen_ms >= ?2
                           AND left_ms IS NULL AND quarantined_ms IS NULL)",
         params![worker, live_since],
@@ -218,7 +219,7 @@ pub fn record(
                 .map(|r| r.worker)
                 .chain([worker])
             {
-                tx.execute("UPDATE workers SET suspect_ms = NULL WHERE id = ?1", [w])?;
+                tx.exec("UPDATE workers SET suspect_ms = NULL WHERE id = ?1", [w])?;
             }
             log(
                 tx,
@@ -243,7 +244,7 @@ pub fn record(
         ),
         Verdict::Disagrees => {
             for w in earlier.iter().map(|r| r.worker).chain([worker]) {
-                tx.execute(
+                tx.exec(
                     "UPDATE workers SET suspect_ms = coalesce(suspect_ms, ?2) WHERE id = ?1",
                     params![w, now],
                 )?;
@@ -275,7 +276,7 @@ const UNMERGED: &str = "(f.assembled_ms IS NULL OR t.done_ms > f.assembled_ms)";
 /// Quarantines `worker`: its leases go back to the queue, it gets no more work, and its
 /// unchecked tiles in frames not yet assembled are checked.
 fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<()> {
-    let newly = tx.execute(
+    let newly = tx.exec(
         "UPDATE workers SET quarantined_ms = ?2, quarantine_reason = ?3, suspect_ms = NULL
          WHERE id = ?1 AND quarantined_ms IS NULL",
         params![worker, now, reason],
@@ -284,7 +285,7 @@ fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<(
         return Ok(());
     }
     let select = |filter: &str| -> Result<Vec<TaskRow>> {
-        let mut stmt = tx.prepare(&format!(
+        let mut stmt = tx.prepare_cached(&format!(
             "SELECT {TASK_COLUMNS} FROM tasks t WHERE t.worker_id = ?1 AND {filter}"
         ))?;
         let rows = stmt.query_map([worker], crate::scheduler::task_from_row)?;
@@ -302,7 +303,7 @@ fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<(
     for task in &unchecked {
         add_check(tx, task, now, &format!("worker {worker} quarantined"))?;
     }
-    let assembled: i64 = tx.query_row(
+    let assembled: i64 = tx.row(
         &format!(
             "SELECT count(*) FROM tasks t JOIN frames f ON f.job_id = t.job_id AND f.frame = t.frame
              WHERE t.worker_id = ?1 AND t.state = 'done' AND NOT {UNMERGED}"
@@ -325,7 +326,7 @@ fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<(
 
 /// Whether `worker` is quarantined.
 pub fn is_quarantined(conn: &Connection, worker: u64) -> Result<bool> {
-    Ok(conn.query_row(
+    Ok(conn.row(
         "SELECT quarantined_ms IS NOT NULL FROM workers WHERE id = ?1",
         [worker],
         |r| r.get(0),
@@ -335,7 +336,7 @@ pub fn is_quarantined(conn: &Connection, worker: u64) -> Result<bool> {
 /// An operator clears a worker: it is no longer quarantined or suspect and gets work again.
 pub fn clear(conn: &mut Connection, worker: u64, now: i64) -> Result<()> {
     let tx = conn.transaction()?;
-    let n = tx.execute(
+    let n = tx.exec(
         "UPDATE workers SET quarantined_ms = NULL, quarantine_reason = NULL, suspect_ms = NULL
          WHERE id = ?1",
         [worker],
