@@ -26,6 +26,15 @@ pub struct WorkerArgs {
     /// ~/.cache/tessera/scenes, else ./tessera-cache).
     #[arg(long, env = "TESSERA_CACHE")]
     pub cache: Option<PathBuf>,
+    /// Most megabytes of scenes the cache folder keeps; the least recently used go first
+    /// (the scene in use always stays).
+    #[arg(
+        long,
+        env = "TESSERA_CACHE_LIMIT_MB",
+        default_value_t = 10_240,
+        value_parser = clap::value_parser!(u64).range(1..=1 << 40)
+    )]
+    pub cache_limit_mb: u64,
     /// A name shown on the dashboard (default: the host name).
     #[arg(long, env = "TESSERA_NAME")]
     pub name: Option<String>,
@@ -56,15 +65,17 @@ pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
         token: args.token,
         threads: threads as usize,
         cache_dir: cache,
+        cache_limit_bytes: args.cache_limit_mb << 20,
         name,
         fault: args.inject_fault,
     };
     tracing::info!(
-        "Tessera worker `{}` for {} ({} threads, scenes cached in {})",
+        "Tessera worker `{}` for {} ({} threads, scenes cached in {}, at most {} MB)",
         config.name,
         config.server,
         config.threads,
-        config.cache_dir.display()
+        config.cache_dir.display(),
+        config.cache_limit_bytes >> 20
     );
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let summary = runtime.block_on(worker::run(config, crate::signal::interrupted()))?;

@@ -3,11 +3,17 @@
 //! again), and written atomically (temp file in the same folder, fsync, rename) so that a
 //! worker killed mid-write, or two workers sharing the folder, never leave half a scene
 //! under the final name.
+//!
+//! The folder has a size limit: after each new scene, the least recently used ones (by
+//! modification time, which a read refreshes) are removed until the scenes fit, so a
+//! worker that renders job after job for months does not fill its disk. The scene just
+//! written always stays, even when it alone is over the limit.
 
 use std::fs;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::SystemTime;
 
 use sha2::{Digest, Sha256};
 
@@ -46,12 +52,26 @@ pub enum Cached {
 #[derive(Clone, Debug)]
 pub struct SceneCache {
     dir: PathBuf,
+    limit_bytes: u64,
+}
+
+/// What [`SceneCache::trim`] removed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Trimmed {
+    /// Scenes removed.
+    pub scenes: usize,
+    /// Their bytes.
+    pub bytes: u64,
 }
 
 impl SceneCache {
-    /// A cache in `dir` (created on the first write).
-    pub fn new(dir: impl Into<PathBuf>) -> Self {
-        SceneCache { dir: dir.into() }
+    /// A cache in `dir` (created on the first write) holding at most `limit_bytes` of
+    /// scenes (see [`SceneCache::trim`]).
+    pub fn new(dir: impl Into<PathBuf>, limit_bytes: u64) -> Self {
+        SceneCache {
+            dir: dir.into(),
+            limit_bytes,
+        }
     }
 
     /// The folder.
@@ -75,6 +95,12 @@ impl SceneCache {
         };
         let found = sha256_hex(&bytes);
         if found == digest {
+            // Recently used: the last to go when the folder is trimmed. A file that cannot
+            // be touched only risks being trimmed early.
+            let _ = fs::File::options()
+                .write(true)
+                .open(&path)
+                .and_then(|f| f.set_modified(SystemTime::now()));
             return Ok(Cached::Hit(bytes));
         }
         match fs::remove_file(&path) {
@@ -106,6 +132,53 @@ impl SceneCache {
         }
         written.map(|()| path)
     }
+
+    /// Removes the least recently used scenes until the folder's scenes fit in the limit,
+    /// never `keep` (the scene in use). Only `<digest>.glb` files count: another worker's
+    /// temp file mid-write is left alone, and so is anything else in the folder. A scene
+    /// that another worker sharing the folder removed first is skipped.
+    pub fn trim(&self, keep: &str) -> io::Result<Trimmed> {
+        let mut scenes = Vec::new();
+        let mut total = 0u64;
+        for entry in fs::read_dir(&self.dir)? {
+            let entry = entry?;
+            let name = entry.file_name();
+            let Some(digest) = name.to_str().and_then(|n| n.strip_suffix(".glb")) else {
+                continue;
+            };
+            if !is_digest(digest) {
+                continue;
+            }
+            let meta = match entry.metadata() {
+                Ok(m) if m.is_file() => m,
+                Ok(_) => continue,
+                Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+                Err(e) => return Err(e),
+            };
+            total += meta.len();
+            if digest != keep {
+                let used = meta.modified().unwrap_or(SystemTime::UNIX_EPOCH);
+                scenes.push((used, meta.len(), entry.path()));
+            }
+        }
+        scenes.sort();
+        let mut trimmed = Trimmed::default();
+        for (_, len, path) in scenes {
+            if total <= self.limit_bytes {
+                break;
+            }
+            match fs::remove_file(&path) {
+                Ok(()) => {
+                    trimmed.scenes += 1;
+                    trimmed.bytes += len;
+                }
+                Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e),
+            }
+            total -= len;
+        }
+        Ok(trimmed)
+    }
 }
 
 #[cfg(test)]
@@ -131,7 +204,7 @@ mod tests {
     #[test]
     fn a_written_scene_reads_back_and_a_corrupt_one_is_removed() {
         let dir = tempfile::tempdir().unwrap();
-        let cache = SceneCache::new(dir.path().join("scenes"));
+        let cache = SceneCache::new(dir.path().join("scenes"), u64::MAX);
         let bytes = b"glTF pretend".to_vec();
         let digest = sha256_hex(&bytes);
         assert!(matches!(cache.read(&digest).unwrap(), Cached::Miss));
@@ -145,5 +218,52 @@ mod tests {
             Cached::Corrupt { .. }
         ));
         assert!(!path.exists());
+    }
+
+    #[test]
+    fn trimming_removes_the_least_recently_used_scenes_down_to_the_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        // Four scenes of 1000 bytes; the limit holds two and a half.
+        let cache = SceneCache::new(dir.path(), 2500);
+        let scenes: Vec<(String, Vec<u8>)> = (0..4u8)
+            .map(|i| {
+                let bytes = vec![i; 1000];
+                (sha256_hex(&bytes), bytes)
+            })
+            .collect();
+        let hour = std::time::Duration::from_secs(3600);
+        let epoch = SystemTime::now() - 10 * hour;
+        for (i, (digest, bytes)) in scenes.iter().enumerate() {
+            let path = cache.write(digest, bytes).unwrap();
+            // Written an hour apart, oldest first.
+            let f = fs::File::options().write(true).open(path).unwrap();
+            f.set_modified(epoch + hour * i as u32).unwrap();
+        }
+        // Reading scene 0 makes it the most recently used.
+        assert!(matches!(cache.read(&scenes[0].0).unwrap(), Cached::Hit(_)));
+        // Someone else's file and a temp file mid-write are not scenes.
+        fs::write(dir.path().join("notes.txt"), [0u8; 5000]).unwrap();
+        fs::write(dir.path().join(".abc.glb.1-0.tmp"), [0u8; 5000]).unwrap();
+
+        // Scene 3 is in use: scenes 1 and 2 (the least recently used) go.
+        let trimmed = cache.trim(&scenes[3].0).unwrap();
+        assert_eq!(
+            trimmed,
+            Trimmed {
+                scenes: 2,
+                bytes: 2000
+            }
+        );
+        let present = |i: usize| cache.path(&scenes[i].0).exists();
+        assert!(present(0) && !present(1) && !present(2) && present(3));
+        assert!(dir.path().join("notes.txt").exists());
+        assert!(dir.path().join(".abc.glb.1-0.tmp").exists());
+        // Within the limit now: nothing more goes.
+        assert_eq!(cache.trim(&scenes[3].0).unwrap(), Trimmed::default());
+
+        // A limit below one scene keeps the scene in use and nothing else.
+        let tiny = SceneCache::new(dir.path(), 10);
+        assert_eq!(tiny.trim(&scenes[0].0).unwrap().scenes, 1);
+        assert!(present(0) && !present(3));
     }
 }

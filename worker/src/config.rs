@@ -15,6 +15,8 @@ pub struct WorkerConfig {
     pub threads: usize,
     /// Folder for downloaded scenes (`<digest>.glb`), created when missing.
     pub cache_dir: PathBuf,
+    /// Most bytes of scenes the folder keeps: the least recently used go first.
+    pub cache_limit_bytes: u64,
     /// A name for people: shown in `GET /workers` and the dashboard.
     pub name: String,
     /// A fault to inject, for testing how the farm copes with a bad worker; `None` for
@@ -72,6 +74,7 @@ mod tests {
             token: None,
             threads: 1,
             cache_dir: PathBuf::from("cache"),
+            cache_limit_bytes: u64::MAX,
             name: "w".into(),
             fault: None,
         }

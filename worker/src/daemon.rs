@@ -102,7 +102,7 @@ pub async fn run(
         registered: None,
         stop,
         pool: Arc::new(pool),
-        cache: SceneCache::new(&config.cache_dir),
+        cache: SceneCache::new(&config.cache_dir, config.cache_limit_bytes),
         scene: None,
         frame: None,
         warned: Vec::new(),
@@ -498,12 +498,14 @@ impl Daemon {
             }
             // A cache that cannot be written costs a download next time, nothing more.
             let written = cache.write(&d, &bytes).map_err(|e| (cache.path(&d), e));
-            Ok((bytes, written))
+            // Make room under the limit, keeping the scene about to be used.
+            let trimmed = written.is_ok().then(|| cache.trim(&d));
+            Ok((bytes, written, trimmed))
         })
         .await
         .map_err(|e| TaskError::Failed(format!("storing the scene panicked: {e}")))?
         .map_err(TaskError::Failed)?;
-        let (bytes, written) = stored;
+        let (bytes, written, trimmed) = stored;
         match written {
             Ok(path) => tracing::info!(
                 "scene {} downloaded ({} bytes in {} ms) into {}",
@@ -513,6 +515,18 @@ impl Daemon {
                 path.display()
             ),
             Err((path, e)) => tracing::warn!("caching the scene as {}: {e}", path.display()),
+        }
+        match trimmed {
+            Some(Ok(t)) if t.scenes > 0 => tracing::info!(
+                "scene cache over its limit: removed {} least recently used scenes ({} bytes)",
+                t.scenes,
+                t.bytes
+            ),
+            Some(Err(e)) => tracing::warn!(
+                "trimming the scene cache {}: {e}",
+                self.cache.dir().display()
+            ),
+            _ => {}
         }
         Ok(bytes)
     }

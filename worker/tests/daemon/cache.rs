@@ -1,5 +1,5 @@
-//! The scene cache: a scene is downloaded once per machine, and a corrupted cache file is
-//! replaced by a fresh download.
+//! The scene cache: a scene is downloaded once per machine, a corrupted cache file is
+//! replaced by a fresh download, and the folder keeps to its size limit.
 
 use crate::common::*;
 
@@ -51,4 +51,54 @@ async fn scenes_are_downloaded_once_and_a_corrupt_copy_is_replaced() {
     );
     let (glbs, other) = cache_entries(&cache);
     assert_eq!((glbs.len(), other.len()), (1, 0), "{glbs:?} {other:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_new_scene_makes_room_by_removing_the_least_recently_used() {
+    let Setup {
+        dir,
+        s,
+        c,
+        glb,
+        scene,
+    } = setup().await;
+    let cache = dir.path().join("cache");
+    std::fs::create_dir_all(&cache).unwrap();
+    // Two scenes from earlier jobs, as large as this one, used a day and an hour ago.
+    let now = std::time::SystemTime::now();
+    let old: Vec<std::path::PathBuf> = [24 * 3600, 3600]
+        .into_iter()
+        .enumerate()
+        .map(|(i, age)| {
+            let bytes = vec![i as u8; glb.len()];
+            let path = cache.join(format!("{}.glb", worker::cache::sha256_hex(&bytes)));
+            std::fs::write(&path, &bytes).unwrap();
+            let f = std::fs::File::options().write(true).open(&path).unwrap();
+            f.set_modified(now - std::time::Duration::from_secs(age))
+                .unwrap();
+            path
+        })
+        .collect();
+
+    // Room for two scenes: the new one pushes out the one used a day ago.
+    let limit = 2 * glb.len() as u64 + glb.len() as u64 / 2;
+    let job = create_job(&s, &c, &spec(&scene.digest, 1, 1, 1)).await;
+    let w = TestWorker::start_config(worker::WorkerConfig {
+        server: s.base.clone(),
+        token: None,
+        threads: 2,
+        cache_dir: cache.clone(),
+        cache_limit_bytes: limit,
+        name: "small-disk".into(),
+        fault: None,
+    });
+    wait_until_done(&s, &c, job.id).await;
+    let summary = w.shutdown().await.unwrap();
+    assert_eq!(summary.scenes_downloaded, 1);
+    assert!(!old[0].exists(), "the scene used a day ago is removed");
+    assert!(old[1].exists(), "the scene used an hour ago stays");
+    let file = cache.join(format!("{}.glb", scene.digest));
+    assert_eq!(std::fs::read(&file).unwrap(), glb);
+    let (glbs, other) = cache_entries(&cache);
+    assert_eq!((glbs.len(), other.len()), (2, 0), "{glbs:?} {other:?}");
 }

@@ -113,14 +113,19 @@ pub struct TestWorker {
 impl TestWorker {
     /// Starts `worker::run` against `server` (a base URL), caching scenes in `cache`.
     pub fn start(server: &str, cache: &Path, token: Option<&str>) -> TestWorker {
-        let config = WorkerConfig {
+        Self::start_config(WorkerConfig {
             server: server.to_string(),
             token: token.map(str::to_string),
             threads: 2,
             cache_dir: cache.to_path_buf(),
+            cache_limit_bytes: u64::MAX,
             name: "test-worker".into(),
             fault: None,
-        };
+        })
+    }
+
+    /// Starts `worker::run` with `config`.
+    pub fn start_config(config: WorkerConfig) -> TestWorker {
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(worker::run(config, async {
             let _ = rx.await;
