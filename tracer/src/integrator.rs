@@ -4,7 +4,7 @@
 
 use glam::{Vec2, Vec3, Vec4};
 
-use crate::bsdf::Bsdf;
+use crate::bsdf::{AlbedoCurve, Bsdf};
 use crate::film::SampleValue;
 use crate::geometry::{
     barycentric, hit_point_error, offset_ray_origin_bounded, plane_hit_point, Frame, Hit, Ray,
@@ -36,6 +36,8 @@ pub(crate) struct SurfacePoint {
     pub material: crate::material::MaterialSample,
     /// Whether the material emits only from its front face.
     pub single_sided: bool,
+    /// The material's albedo curve, for [`Bsdf::with_albedo_curve`].
+    pub albedo_curve: Option<&'static AlbedoCurve>,
 }
 
 /// Builds the surface point of `hit` on `ray`, with the hit instance where it is at the
@@ -141,6 +143,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
         front,
         material: sample,
         single_sided: !material.double_sided,
+        albedo_curve: frame.albedo_curves[prim.material as usize],
     }
 }
 
@@ -208,9 +211,12 @@ struct PathState {
 const SPLIT_AT: f32 = 2.0;
 /// Copies one split may make.
 const MAX_SPLIT: u32 = 8;
-/// Copies one camera sample may make in all: bounds its time in the worst case (not
-/// splitting is never wrong, only noisier).
-const MAX_BRANCHES: u32 = 1024;
+/// Copies one camera sample may make in all: bounds its time in the worst case. Not
+/// splitting is never wrong in expectation, but past the cap path weights grow without
+/// bound again, and trapped light reads low at any practical sample count: a cap of 1024
+/// darkened a white rough-glass furnace at IOR 10 and metallic 0.5 by 7%, whose worst
+/// camera sample needs 11,615 copies (and 80 of its 147,456 more than 1024).
+const MAX_BRANCHES: u32 = 1 << 16;
 
 /// What one camera sample has gathered so far, over all of its paths.
 struct SampleWalk {
@@ -323,7 +329,7 @@ fn trace_path(
             out.radiance += s.throughput * le * w;
         }
 
-        let bsdf = Bsdf::new(sp.material.surface);
+        let bsdf = Bsdf::new(sp.material.surface).with_albedo_curve(sp.albedo_curve);
         if !walk.albedo_done && !bsdf.is_delta() {
             out.albedo = bsdf.albedo();
             walk.albedo_done = true;

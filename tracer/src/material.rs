@@ -132,6 +132,20 @@ pub struct MaterialSample {
 }
 
 impl Material {
+    /// The BSDF parameters of the factors alone, as at a point where every texture and
+    /// the vertex colour are white.
+    pub fn factors(&self) -> SurfaceParams {
+        SurfaceParams {
+            base_color: self.base_color.truncate(),
+            metallic: self.metallic,
+            roughness: self.roughness,
+            ior: self.ior,
+            specular: self.specular,
+            specular_color: self.specular_color,
+            transmission: self.transmission,
+        }
+    }
+
     /// Only the coverage at a point: what alpha-masked shadow and camera rays need.
     pub fn alpha(&self, textures: &[Texture], uvs: [Vec2; 2], vertex_color: Vec4) -> f32 {
         let mut a = self.base_color.w * vertex_color.w;

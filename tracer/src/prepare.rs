@@ -13,6 +13,7 @@ use std::sync::Arc;
 use glam::{Affine3A, DMat3, DMat4, DQuat, DVec3, Vec3};
 
 use crate::animation::{self, Pose};
+use crate::bsdf::{AlbedoCurve, Bsdf};
 use crate::bvh::{Instance, SceneBvh};
 use crate::camera::{Camera, Projection, RigidStep};
 use crate::deform::{self, Deformed};
@@ -421,8 +422,10 @@ pub fn prepare_frame(
     });
     let triangles = emissive_triangles(&scene, &bvh, &deformed);
 
-    // Build the BSDF's energy tables now rather than inside the first tile's threads.
+    // Build the BSDF's energy tables and curves now rather than inside the first tile's
+    // threads.
     crate::bsdf::precompute_tables(scene.features.transmission);
+    let albedo_curves = albedo_curves(&scene);
     let mut features = scene.features;
     let environment = match (&options.environment, &scene.environment) {
         (Some(env), _) | (None, Some(env)) => env.clone(),
@@ -471,6 +474,7 @@ pub fn prepare_frame(
         lights,
         hit_filter,
         any_hit_filter,
+        albedo_curves,
         features,
         warnings,
     })
@@ -569,4 +573,20 @@ fn emissive_triangles(
         }
     }
     triangles
+}
+
+/// Per scene material, the albedo curve of its rough refractive interface, where its
+/// roughness is not textured (see `bsdf/curve.rs`); materials without one use the shared
+/// tables.
+fn albedo_curves(scene: &Scene) -> Vec<Option<&'static AlbedoCurve>> {
+    scene
+        .materials
+        .iter()
+        .map(|m| {
+            if m.metallic_roughness_texture.is_some() {
+                return None;
+            }
+            Bsdf::albedo_curve_for(m.factors())
+        })
+        .collect()
 }

@@ -201,6 +201,8 @@ pub struct PreparedFrame {
     pub(crate) hit_filter: Vec<Vec<bool>>,
     /// Whether any primitive needs the hit filter.
     pub(crate) any_hit_filter: bool,
+    /// Per scene material, its BSDF's albedo curve (rough glass only).
+    pub(crate) albedo_curves: Vec<Option<&'static crate::bsdf::AlbedoCurve>>,
     /// What the frame uses.
     pub features: Features,
     /// Remarks for the user (for example, the default environment was used).

@@ -45,10 +45,10 @@ const DQ_PHI: usize = 16;
 /// See [`DQ_PHI`].
 const DQ_Z: usize = 32;
 /// Smallest μ used when integrating a node: μ = 0 is the tangent plane itself.
-const MU_NODE_MIN: f32 = 1e-4;
+pub(super) const MU_NODE_MIN: f32 = 1e-4;
 
 /// A position on one table axis: the lower node and the weight of the upper one.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct AxisCoord {
     i: usize,
     t: f32,
@@ -86,14 +86,14 @@ fn node_alpha(j: usize, n: usize) -> f32 {
 /// (a smooth GGX surface is self-similar in μ/α); the second term follows μ/α and keeps
 /// that feature on the same nodes for every α, so that interpolation along roughness
 /// stays accurate too.
-fn mu_axis(mu: f32, alpha: f32) -> f32 {
+pub(super) fn mu_axis(mu: f32, alpha: f32) -> f32 {
     let mu = mu.clamp(0.0, 1.0);
     0.5 * (mu.sqrt() + (mu * (1.0 + alpha) / (mu + alpha)).sqrt())
 }
 
 /// The μ of node `i` of `n` on the μ axis for roughness `alpha` (inverse of [`mu_axis`],
 /// by bisection: it is monotonic).
-fn node_mu(i: usize, n: usize, alpha: f32) -> f32 {
+pub(super) fn node_mu(i: usize, n: usize, alpha: f32) -> f32 {
     let s = i as f32 / (n - 1) as f32;
     let (mut lo, mut hi) = (0.0f32, 1.0f32);
     for _ in 0..40 {
@@ -109,11 +109,11 @@ fn node_mu(i: usize, n: usize, alpha: f32) -> f32 {
 
 /// One quadrature point in the visible-normal sample space.
 #[derive(Clone, Copy)]
-struct QuadPoint {
-    cos_phi: f32,
-    sin_phi: f32,
-    uy: f32,
-    weight: f32,
+pub(super) struct QuadPoint {
+    pub(super) cos_phi: f32,
+    pub(super) sin_phi: f32,
+    pub(super) uy: f32,
+    pub(super) weight: f32,
 }
 
 /// The quadrature rule over the visible-normal sample space `u ∈ [0, 1)²`: midpoints in
@@ -121,7 +121,7 @@ struct QuadPoint {
 /// isotropic GGX), and `u.y = 1 − (1 − v)²` puts more points near the most tilted
 /// visible normals, where reflected directions approach the horizon and the integrand
 /// falls off steeply. Weights sum to 1.
-fn quad_points<const N_PHI: usize, const N_Z: usize>() -> Vec<QuadPoint> {
+pub(super) fn quad_points<const N_PHI: usize, const N_Z: usize>() -> Vec<QuadPoint> {
     let mut pts = Vec::with_capacity(N_PHI * N_Z);
     for b in 0..N_Z {
         let v = (b as f64 + 0.5) / N_Z as f64;
@@ -142,7 +142,7 @@ fn quad_points<const N_PHI: usize, const N_Z: usize>() -> Vec<QuadPoint> {
 
 /// The visible normal of quadrature point `q` for `wo` (same map as
 /// [`microfacet::sample_visible_normal`], with the trigonometry precomputed).
-fn visible_normal(wo_std: Vec3, alpha: f32, q: &QuadPoint) -> Vec3 {
+pub(super) fn visible_normal(wo_std: Vec3, alpha: f32, q: &QuadPoint) -> Vec3 {
     let z = (1.0 - q.uy) * (1.0 + wo_std.z) - wo_std.z;
     let sin_theta = (1.0 - z * z).max(0.0).sqrt();
     let h = Vec3::new(sin_theta * q.cos_phi, sin_theta * q.sin_phi, z) + wo_std;
@@ -150,25 +150,32 @@ fn visible_normal(wo_std: Vec3, alpha: f32, q: &QuadPoint) -> Vec3 {
 }
 
 /// `wo` with cosine `mu` in the xz-plane, and its stretched (α = 1) counterpart.
-fn wo_at(mu: f32, alpha: f32) -> (Vec3, Vec3) {
+pub(super) fn wo_at(mu: f32, alpha: f32) -> (Vec3, Vec3) {
     let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
     let wo_std = Vec3::new(wo.x * alpha, 0.0, wo.z).normalize_or(Vec3::Z);
     (wo, wo_std)
 }
 
+/// `G2 / G1` of the reflection of `wo` about `wm` (zero below the horizon): the
+/// estimator of `∫ f cos` with visible-normal sampling, without Fresnel.
+pub(super) fn reflection_masking(wo: Vec3, wm: Vec3, alpha: f32, lambda_o: f32) -> f32 {
+    let wi = microfacet::reflect(wo, wm);
+    if wi.z > 0.0 {
+        (1.0 + lambda_o) / (1.0 + lambda_o + microfacet::lambda(wi.z, alpha))
+    } else {
+        0.0
+    }
+}
+
 /// `[E1, Ew]` of the GGX reflection lobe at (μ, α).
-fn conductor_albedo_with(mu: f32, alpha: f32, pts: &[QuadPoint]) -> [f32; 2] {
+pub(super) fn conductor_albedo_with(mu: f32, alpha: f32, pts: &[QuadPoint]) -> [f32; 2] {
     let (wo, wo_std) = wo_at(mu, alpha);
     let lambda_o = microfacet::lambda(mu, alpha);
     let (mut e1, mut ew) = (0.0f64, 0.0f64);
     for q in pts {
         let wm = visible_normal(wo_std, alpha, q);
-        let wi = microfacet::reflect(wo, wm);
-        if wi.z <= 0.0 {
-            continue;
-        }
         // With visible-normal sampling the estimator of ∫ f cos is F · G2 / G1.
-        let w = q.weight * (1.0 + lambda_o) / (1.0 + lambda_o + microfacet::lambda(wi.z, alpha));
+        let w = q.weight * reflection_masking(wo, wm, alpha, lambda_o);
         e1 += w as f64;
         ew += (w * fresnel::schlick_weight(wo.dot(wm))) as f64;
     }
@@ -201,41 +208,50 @@ fn dielectric_albedo_with(
     for q in pts {
         let wm = visible_normal(wo_std, alpha, q);
         let cos_om = wo.dot(wm).clamp(0.0, 1.0);
-        let wr = microfacet::reflect(wo, wm);
-        let gr = if wr.z > 0.0 {
-            (1.0 + lambda_o) / (1.0 + lambda_o + microfacet::lambda(wr.z, alpha))
-        } else {
-            0.0
-        };
-        let sin2_om = 1.0 - cos_om * cos_om;
+        let gr = reflection_masking(wo, wm, alpha, lambda_o);
         for (a, &eta) in acc.iter_mut().zip(etas) {
-            let f = fresnel::dielectric(cos_om, eta);
-            // The refracted direction's z, as `microfacet::refract` computes it.
-            let sin2_t = sin2_om / (eta * eta);
-            let gt = if sin2_t < 1.0 {
-                let cos_t = (1.0 - sin2_t).sqrt();
-                let wt_z = if eta == 1.0 {
-                    -mu
-                } else {
-                    -mu / eta + (cos_om / eta - cos_t) * wm.z
-                };
-                if wt_z < 0.0 {
-                    (1.0 + lambda_o) / (1.0 + lambda_o + microfacet::lambda(-wt_z, alpha))
-                } else {
-                    0.0
-                }
-            } else {
-                0.0
-            };
-            let w = q.weight as f64;
-            a[0] += w * (f * gr) as f64;
-            a[1] += w * ((1.0 - f) * gt) as f64;
-            a[2] += w * (f * gt) as f64;
+            let terms = interface_terms(mu, alpha, lambda_o, wm, cos_om, gr, eta);
+            for (a, t) in a.iter_mut().zip(terms) {
+                *a += q.weight as f64 * t as f64;
+            }
         }
     }
     for (o, a) in out.iter_mut().zip(acc) {
         *o = a.map(|v| v as f32);
     }
+}
+
+/// The integrands `[F·Gr, (1 − F)·Gt, F·Gt]` of [`dielectric_albedo_with`] at one
+/// visible normal `wm` (with `cos_om = wo·wm` and the reflection's masking ratio `gr`),
+/// for relative index `eta`.
+pub(super) fn interface_terms(
+    mu: f32,
+    alpha: f32,
+    lambda_o: f32,
+    wm: Vec3,
+    cos_om: f32,
+    gr: f32,
+    eta: f32,
+) -> [f32; 3] {
+    let f = fresnel::dielectric(cos_om, eta);
+    // The refracted direction's z, as `microfacet::refract` computes it.
+    let sin2_t = (1.0 - cos_om * cos_om) / (eta * eta);
+    let gt = if sin2_t < 1.0 {
+        let cos_t = (1.0 - sin2_t).sqrt();
+        let wt_z = if eta == 1.0 {
+            -mu
+        } else {
+            -mu / eta + (cos_om / eta - cos_t) * wm.z
+        };
+        if wt_z < 0.0 {
+            (1.0 + lambda_o) / (1.0 + lambda_o + microfacet::lambda(-wt_z, alpha))
+        } else {
+            0.0
+        }
+    } else {
+        0.0
+    };
+    [f * gr, (1.0 - f) * gt, f * gt]
 }
 
 /// `[A, B, C]` of the rough dielectric interface at (μ, α, relative η), by the table's
@@ -253,7 +269,7 @@ pub(crate) struct ConductorTable {
 }
 
 /// A conductor-table lookup position for one α, reusable for many μ.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct ConductorCoord {
     alpha: f32,
     r: AxisCoord,
@@ -301,7 +317,7 @@ pub(crate) struct DielectricTable {
 }
 
 /// A dielectric-table lookup position for one (α, η, side), reusable for many μ.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct DielectricCoord {
     alpha: f32,
     r: AxisCoord,

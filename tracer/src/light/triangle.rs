@@ -70,11 +70,14 @@ impl TriangleLight {
         })
     }
 
-    /// Solid angle of the triangle seen from `p` (Van Oosterom & Strackee 1983).
-    fn solid_angle(&self, p: Vec3) -> f32 {
-        let a = (self.p[0] - p).normalize_or_zero();
-        let b = (self.p[1] - p).normalize_or_zero();
-        let c = (self.p[2] - p).normalize_or_zero();
+    /// Unit directions from `p` to the vertices (zero where `p` is a vertex).
+    fn directions(&self, p: Vec3) -> [Vec3; 3] {
+        self.p.map(|v| (v - p).normalize_or_zero())
+    }
+
+    /// Solid angle of the triangle seen along the vertex directions `[a, b, c]` (Van
+    /// Oosterom & Strackee 1983).
+    fn solid_angle([a, b, c]: [Vec3; 3]) -> f32 {
         let num = a.dot(b.cross(c)).abs();
         let den = 1.0 + a.dot(b) + a.dot(c) + b.dot(c);
         let omega = 2.0 * num.atan2(den);
@@ -90,14 +93,13 @@ impl TriangleLight {
         (MIN_SPHERICAL_SOLID_ANGLE..=MAX_SPHERICAL_SOLID_ANGLE).contains(&omega)
     }
 
-    /// Whether, seen from `p` with solid angle `omega`, directions are sampled on the
-    /// sphere (else by area): `omega` is resolvable and no two vertices are seen in nearly
-    /// opposite directions.
-    fn spherical_from(&self, p: Vec3, omega: f32) -> bool {
+    /// Whether, seen along the vertex directions `[a, b, c]` with solid angle `omega`,
+    /// directions are sampled on the sphere (else by area): `omega` is resolvable and no
+    /// two vertices are seen in nearly opposite directions.
+    fn spherical_from([a, b, c]: [Vec3; 3], omega: f32) -> bool {
         if !Self::spherical(omega) {
             return false;
         }
-        let [a, b, c] = self.p.map(|v| (v - p).normalize_or_zero());
         a.dot(b).min(b.dot(c)).min(c.dot(a)) > MIN_SPHERICAL_VERTEX_COSINE
     }
 
@@ -121,9 +123,10 @@ impl TriangleLight {
     /// Samples a point of the triangle as seen from `p`; `None` when no direction can be
     /// sampled (`p` in the triangle's plane, or a numerically degenerate configuration).
     pub(crate) fn sample(&self, p: Vec3, u: Vec2) -> Option<TriangleSample> {
-        let omega = self.solid_angle(p);
-        let (b1, b2, pdf) = if self.spherical_from(p, omega) {
-            let (b1, b2) = self.sample_spherical(p, u)?;
+        let dirs = self.directions(p);
+        let omega = Self::solid_angle(dirs);
+        let (b1, b2, pdf) = if Self::spherical_from(dirs, omega) {
+            let (b1, b2) = self.sample_spherical(p, dirs, omega, u)?;
             (b1, b2, 1.0 / omega)
         } else {
             let (b1, b2) = sample_uniform_triangle(u);
@@ -148,8 +151,9 @@ impl TriangleLight {
     /// Solid-angle density with which [`Self::sample`] from `p` picks the point `q` of
     /// this triangle.
     pub(crate) fn pdf(&self, p: Vec3, q: Vec3) -> f32 {
-        let omega = self.solid_angle(p);
-        if self.spherical_from(p, omega) {
+        let dirs = self.directions(p);
+        let omega = Self::solid_angle(dirs);
+        if Self::spherical_from(dirs, omega) {
             1.0 / omega
         } else {
             self.area_pdf_to_solid_angle(p, q)
@@ -160,26 +164,27 @@ impl TriangleLight {
         crate::geometry::barycentric(self.p[0], self.p[1], self.p[2], b1, b2)
     }
 
-    /// Arvo's uniform spherical-triangle sampling; returns the barycentrics (b1, b2) of the
-    /// point the sampled direction hits.
-    fn sample_spherical(&self, p: Vec3, u: Vec2) -> Option<(f32, f32)> {
-        let a = (self.p[0] - p).normalize_or_zero();
-        let b = (self.p[1] - p).normalize_or_zero();
-        let c = (self.p[2] - p).normalize_or_zero();
-        // Normals of the great-circle arcs.
+    /// Arvo's uniform spherical-triangle sampling from `p`, whose vertex directions are
+    /// `[a, b, c]` and solid angle `omega`; returns the barycentrics (b1, b2) of the point
+    /// the sampled direction hits.
+    fn sample_spherical(
+        &self,
+        p: Vec3,
+        [a, b, c]: [Vec3; 3],
+        omega: f32,
+        u: Vec2,
+    ) -> Option<(f32, f32)> {
+        // Normals of the great-circle arcs from a.
         let n_ab = a.cross(b).try_normalize()?;
-        let n_bc = b.cross(c).try_normalize()?;
         let n_ca = c.cross(a).try_normalize()?;
-        // Angles at the spherical triangle's vertices.
-        let alpha = angle_between(n_ab, -n_ca);
-        let beta = angle_between(n_bc, -n_ab);
-        let gamma = angle_between(n_ca, -n_bc);
+        // The angle at a, as its cosine and sine (pbrt-v4 takes the angles at all three
+        // vertices for the area α + β + γ − π, which is the solid angle already known).
+        let cos_alpha = -n_ab.dot(n_ca);
+        let sin_alpha = n_ab.cross(n_ca).length();
 
         // Uniformly choose the area A' of the sub-triangle (a, b, c').
-        let a_pi = alpha + beta + gamma;
-        let ap_pi = std::f32::consts::PI + u.x * (a_pi - std::f32::consts::PI);
+        let ap_pi = std::f32::consts::PI + u.x * omega;
         let (sin_ap, cos_ap) = ap_pi.sin_cos();
-        let (sin_alpha, cos_alpha) = alpha.sin_cos();
         let sin_phi = sin_ap * cos_alpha - cos_ap * sin_alpha;
         let cos_phi = cos_ap * cos_alpha + sin_ap * sin_alpha;
         let k1 = cos_phi + cos_alpha;
@@ -236,15 +241,6 @@ fn gram_schmidt(v: Vec3, w: Vec3) -> Vec3 {
     v - v.dot(w) * w
 }
 
-/// Angle between two unit vectors, accurate also for nearly (anti)parallel ones.
-fn angle_between(v1: Vec3, v2: Vec3) -> f32 {
-    if v1.dot(v2) < 0.0 {
-        std::f32::consts::PI - 2.0 * ((v1 + v2).length() / 2.0).min(1.0).asin()
-    } else {
-        2.0 * ((v2 - v1).length() / 2.0).min(1.0).asin()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -296,7 +292,7 @@ mod tests {
             Vec3::new(0.2, 1.0, -0.9),
         ]);
         let p = Vec3::new(0.1, 0.0, 0.3);
-        let omega = t.solid_angle(p);
+        let omega = TriangleLight::solid_angle(t.directions(p));
         assert!(TriangleLight::spherical(omega), "{omega}");
         let h = |w: Vec3| ((w.x + 2.0) as f64).powi(3) * ((w.y + 1.5) as f64);
         let reference = area_quadrature(&t, p, h);
@@ -327,7 +323,9 @@ mod tests {
             Vec3::new(0.1, 0.0, -100.0),
             Vec3::new(0.0, 0.1, -100.0),
         ]);
-        assert!(!TriangleLight::spherical(t.solid_angle(Vec3::ZERO)));
+        assert!(!TriangleLight::spherical(TriangleLight::solid_angle(
+            t.directions(Vec3::ZERO)
+        )));
         let s = t.sample(Vec3::ZERO, Vec2::new(0.3, 0.6)).unwrap();
         let expected = 100.0f32.powi(2) / (0.005 * s.wi.z.abs());
         assert!(
@@ -340,7 +338,7 @@ mod tests {
             Vec3::new(1e3, -1e3, -1e-3),
             Vec3::new(0.0, 1e3, -1e-3),
         ]);
-        assert!(big.solid_angle(Vec3::ZERO) > MAX_SPHERICAL_SOLID_ANGLE);
+        assert!(TriangleLight::solid_angle(big.directions(Vec3::ZERO)) > MAX_SPHERICAL_SOLID_ANGLE);
         let s = big.sample(Vec3::ZERO, Vec2::new(0.5, 0.5)).unwrap();
         assert!(s.pdf.is_finite() && s.pdf > 0.0);
     }
