@@ -13,6 +13,7 @@ use std::fs;
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Output, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use proto::{FrameStatus, JobStatus, WorkerList};
@@ -116,10 +117,35 @@ fn newest_source(workspace: &Path) -> Option<(std::time::SystemTime, PathBuf)> {
     newest
 }
 
-/// A loopback port nothing listens on right now.
+/// A loopback port nothing listens on right now, below the kernel's ephemeral range.
+///
+/// Tests leave the port unbound for a while: a worker started before its server, a server
+/// killed and started again on the same port. A port the kernel hands out for `:0` could
+/// meanwhile go to another test's server, which the worker would then talk to (CI saw
+/// that once). Ports below the ephemeral range are only ever bound by name, and a counter
+/// keeps this process's tests apart; the start depends on the process id, so test
+/// binaries run one after another do not reuse each other's ports either.
 pub fn free_port() -> u16 {
-    let l = TcpListener::bind("127.0.0.1:0").expect("binding a free port");
-    l.local_addr().unwrap().port()
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    const FIRST: u32 = 10_000;
+    let span = ephemeral_ports_start().saturating_sub(FIRST).max(1);
+    let start = std::process::id().wrapping_mul(7919) % span;
+    for _ in 0..span.min(1000) {
+        let port = FIRST + (start + NEXT.fetch_add(1, Ordering::Relaxed)) % span;
+        if TcpListener::bind(("127.0.0.1", port as u16)).is_ok() {
+            return port as u16;
+        }
+    }
+    panic!("no free loopback port between {FIRST} and {}", FIRST + span)
+}
+
+/// The first port the kernel hands out for `:0` (Linux's range, else its default).
+fn ephemeral_ports_start() -> u32 {
+    fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse().ok())
+        .unwrap_or(32768)
+        .min(u32::from(u16::MAX))
 }
 
 /// Runs `tessera args` in `dir` to completion.

@@ -376,10 +376,10 @@ pub fn direct_frame(glb: &[u8], spec: &JobSpec, frame: i32) -> Layers {
     .resolve()
 }
 
-/// A port nobody listens on (bound, then closed): connections to it are refused.
+/// A loopback address nobody listens on, one no other test's server can be handed
+/// (`tests::free_port`): connections to it are refused until the test binds it.
 pub fn free_addr() -> SocketAddr {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap()
+    SocketAddr::from(([127, 0, 0, 1], tests::free_port()))
 }
 
 /// Binds `addr` again, retrying briefly (the OS may hold it a moment).

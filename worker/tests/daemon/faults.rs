@@ -100,8 +100,9 @@ async fn a_worker_whose_server_lost_its_data_registers_again() {
     let mut config = server_config(&dir.path().join("a"));
     // Short long polls, so the killed server's last answer comes quickly.
     config.max_lease_wait = Duration::from_secs(1);
-    let first = TestServer::start(config.clone());
-    let addr: std::net::SocketAddr = first.base.trim_start_matches("http://").parse().unwrap();
+    // An address no other test's server takes while this one is down between the two.
+    let addr = free_addr();
+    let first = TestServer::start_on(bind_again(addr), config.clone());
     let w = TestWorker::start(&first.base, &dir.path().join("cache"), None);
     // Registered and polling.
     let c = client();
