@@ -2,7 +2,7 @@
 //! by the mesh and instance levels, for static boxes and for boxes that move over the
 //! shutter.
 
-use glam::{BVec3, Vec3};
+use glam::{BVec3A, Vec3, Vec3A};
 
 use super::motion::Segment;
 use crate::geometry::Ray;
@@ -35,20 +35,20 @@ const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
 /// A ray prepared for slab tests.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct BoxRay {
-    origin: Vec3,
+    origin: Vec3A,
     /// 1/dir with IEEE infinities for zero components (of the zero's sign).
-    inv_dir: Vec3,
+    inv_dir: Vec3A,
     /// Whether each direction component is negative, so the near plane is the box's max.
-    neg: BVec3,
+    neg: BVec3A,
 }
 
 impl BoxRay {
     pub fn new(ray: &Ray) -> Self {
-        let inv_dir = ray.dir.recip();
+        let inv_dir = Vec3A::from(ray.dir).recip();
         Self {
-            origin: ray.origin,
+            origin: ray.origin.into(),
             inv_dir,
-            neg: inv_dir.cmplt(Vec3::ZERO),
+            neg: inv_dir.cmplt(Vec3A::ZERO),
         }
     }
 
@@ -62,14 +62,16 @@ impl BoxRay {
     /// `[0, t_max]`.
     #[inline(always)]
     pub fn entry_box(&self, min: Vec3, max: Vec3, t_max: f32) -> Option<f32> {
-        let lo = (min - self.origin) * self.inv_dir;
-        let hi = (max - self.origin) * self.inv_dir;
-        let near = Vec3::select(self.neg, hi, lo);
-        let far = Vec3::select(self.neg, lo, hi);
+        // In SIMD lanes (Vec3A): the same IEEE operations per axis as three scalar ones.
+        let lo = (Vec3A::from(min) - self.origin) * self.inv_dir;
+        let hi = (Vec3A::from(max) - self.origin) * self.inv_dir;
+        let near = Vec3A::select(self.neg, hi, lo);
+        let far = Vec3A::select(self.neg, lo, hi);
         // 0 · inf = NaN arises when the ray lies in a slab's plane; such an axis must not
         // constrain the interval (Ize 2013). `max_or_acc`/`min_or_acc` keep the accumulator
         // when the candidate is NaN, and compile to single maxss/minss instructions, where
-        // f32::max/min need four each to implement IEEE maxNum.
+        // f32::max/min need four each to implement IEEE maxNum. (Lane-wise max/min and a
+        // horizontal reduction, with NaN lanes masked first, took 5% more instructions.)
         let t0 = max_or_acc(max_or_acc(max_or_acc(0.0, near.x), near.y), near.z);
         let far = far * FAR_SCALE;
         let t1 = min_or_acc(min_or_acc(min_or_acc(t_max, far.x), far.y), far.z);
