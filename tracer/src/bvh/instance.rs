@@ -8,7 +8,7 @@ use glam::{Affine3A, DMat4, Mat3A, Vec3};
 use super::build::{self, BuildParams, BuildPrim};
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
-use super::node::{ray_is_valid, traverse, BoxRay, Node, StaticBoxes};
+use super::node::{ray_is_valid, traverse, with_stack, BoxRay, Node, StaticBoxes};
 use crate::geometry::{Aabb, Hit, Ray};
 use crate::triangle::gamma;
 
@@ -381,40 +381,46 @@ impl SceneBvh {
         }
         let mut t_max = t_max;
         let mut best = None;
-        traverse(
-            &self.nodes,
-            &StaticBoxes,
-            &BoxRay::new(ray),
-            &mut t_max,
-            |start, count, t_max| {
-                for &instance in &self.order[start as usize..(start + count) as usize] {
-                    let inst = &self.instances[instance as usize];
-                    let bvh = mesh(inst.mesh);
-                    let object_ray = if MOTION {
-                        inst.object_ray_at_time(ray)
-                    } else {
-                        inst.object_ray(ray)
-                    };
-                    let hit = bvh.search::<ANY_HIT, MOTION>(&object_ray, *t_max, |tri, b1, b2| {
-                        accept(instance, tri, b1, b2)
-                    });
-                    if let Some((t, triangle, b1, b2)) = hit {
-                        *t_max = t;
-                        best = Some(Hit {
-                            t,
-                            instance,
-                            triangle,
-                            b1,
-                            b2,
-                        });
-                        if ANY_HIT {
-                            return true;
+        with_stack(|stack| {
+            traverse(
+                &self.nodes,
+                &StaticBoxes,
+                &BoxRay::new(ray),
+                &mut t_max,
+                stack,
+                |start, count, t_max, stack| {
+                    for &instance in &self.order[start as usize..(start + count) as usize] {
+                        let inst = &self.instances[instance as usize];
+                        let bvh = mesh(inst.mesh);
+                        let object_ray = if MOTION {
+                            inst.object_ray_at_time(ray)
+                        } else {
+                            inst.object_ray(ray)
+                        };
+                        let hit = bvh.search::<ANY_HIT, MOTION>(
+                            &object_ray,
+                            *t_max,
+                            stack,
+                            |tri, b1, b2| accept(instance, tri, b1, b2),
+                        );
+                        if let Some((t, triangle, b1, b2)) = hit {
+                            *t_max = t;
+                            best = Some(Hit {
+                                t,
+                                instance,
+                                triangle,
+                                b1,
+                                b2,
+                            });
+                            if ANY_HIT {
+                                return true;
+                            }
                         }
                     }
-                }
-                false
-            },
-        );
+                    false
+                },
+            )
+        });
         best
     }
 }

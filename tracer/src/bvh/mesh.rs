@@ -4,7 +4,9 @@ use glam::{DVec3, Vec3};
 
 use super::build::{self, BuildParams, BuildPrim};
 use super::motion::Segment;
-use super::node::{ray_is_valid, traverse, BoxRay, MotionBoxes, Node, StaticBoxes, StepBox};
+use super::node::{
+    ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StaticBoxes, StepBox,
+};
 use crate::geometry::{Aabb, Ray};
 use crate::triangle::{intersect_triangle, RayPrecomputed};
 
@@ -191,11 +193,13 @@ impl MeshBvh {
         t_max: f32,
         accept: impl FnMut(u32, f32, f32) -> bool,
     ) -> Option<(f32, u32, f32, f32)> {
-        if self.has_motion() {
-            self.search::<false, true>(ray, t_max, accept)
-        } else {
-            self.search::<false, false>(ray, t_max, accept)
-        }
+        with_stack(|stack| {
+            if self.has_motion() {
+                self.search::<false, true>(ray, t_max, stack, accept)
+            } else {
+                self.search::<false, false>(ray, t_max, stack, accept)
+            }
+        })
     }
 
     /// Whether any triangle with `0 < t < t_max` is hit and accepted by
@@ -207,11 +211,14 @@ impl MeshBvh {
         t_max: f32,
         accept: impl FnMut(u32, f32, f32) -> bool,
     ) -> bool {
-        if self.has_motion() {
-            self.search::<true, true>(ray, t_max, accept).is_some()
-        } else {
-            self.search::<true, false>(ray, t_max, accept).is_some()
-        }
+        with_stack(|stack| {
+            if self.has_motion() {
+                self.search::<true, true>(ray, t_max, stack, accept)
+            } else {
+                self.search::<true, false>(ray, t_max, stack, accept)
+            }
+        })
+        .is_some()
     }
 
     /// The closest accepted hit, or with `ANY_HIT` the first one found (traversal stops
@@ -224,6 +231,7 @@ impl MeshBvh {
         &self,
         ray: &Ray,
         t_max: f32,
+        stack: &mut Vec<Deferred>,
         mut accept: impl FnMut(u32, f32, f32) -> bool,
     ) -> Option<(f32, u32, f32, f32)> {
         if !ray_is_valid(ray, t_max) {
@@ -252,7 +260,8 @@ impl MeshBvh {
                 &boxes,
                 &box_ray,
                 &mut t_max,
-                |start, count, t_max| {
+                stack,
+                |start, count, t_max, _| {
                     let range = start as usize..(start + count) as usize;
                     for ((a, b), &id) in at_k[range.clone()]
                         .iter()
@@ -280,7 +289,8 @@ impl MeshBvh {
             &StaticBoxes,
             &box_ray,
             &mut t_max,
-            |start, count, t_max| {
+            stack,
+            |start, count, t_max, _| {
                 let range = start as usize..(start + count) as usize;
                 for (tri, &id) in self.triangles[range.clone()].iter().zip(&self.ids[range]) {
                     if let Some((t, b1, b2)) =

@@ -2,6 +2,8 @@
 //! by the mesh and instance levels, for static boxes and for boxes that move over the
 //! shutter.
 
+use std::cell::RefCell;
+
 use glam::{BVec3A, Vec3, Vec3A};
 
 use super::motion::Segment;
@@ -21,11 +23,22 @@ pub(super) struct Node {
     pub count: u32,
 }
 
-/// The traversal stack depth. The builder switches to median splits below depth
-/// [`super::build::SAH_MAX_DEPTH`] (32), and a median split halves the primitive count, so
-/// no path is longer than 32 + 32 nodes for up to 2^32 primitives; at most one sibling per
-/// level waits on the stack.
-pub(super) const STACK_SIZE: usize = 64;
+/// A deferred subtree on the traversal stack: its node, and the distance at which the ray
+/// enters its box.
+pub(super) type Deferred = (u32, f32);
+
+thread_local! {
+    /// Each thread's traversal stack, reused by every query: a fresh array per query had to
+    /// be zeroed each time, 2.5% of a render's instructions. The instance level and the
+    /// mesh levels it enters share it, each working above where its caller left it.
+    static STACK: RefCell<Vec<Deferred>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Runs a query with this thread's traversal stack. Queries do not nest (an `accept`
+/// callback must not start another), so the stack is never borrowed twice.
+pub(super) fn with_stack<R>(query: impl FnOnce(&mut Vec<Deferred>) -> R) -> R {
+    STACK.with_borrow_mut(query)
+}
 
 /// The far slab distance is scaled up by 1 + 2·gamma(3) to cover the rounding of both slab
 /// distances (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013), so a ray through a box's
@@ -160,26 +173,29 @@ impl NodeBoxes for MotionBoxes<'_> {
 /// Visits the leaves whose boxes (as `boxes` sees them) the ray enters before `t_max`,
 /// nearest child first.
 ///
-/// `leaf(start, count, t_max)` handles one leaf and may lower `t_max` (a closer hit); it
-/// returns true to stop the traversal (an any-hit query that found one).
+/// `leaf(start, count, t_max, stack)` handles one leaf and may lower `t_max` (a closer
+/// hit); it returns true to stop the traversal (an any-hit query that found one). Deferred
+/// subtrees go on `stack` above its current length, which the leaf may use in turn, and
+/// the stack is left as it was found.
 #[inline(always)]
 pub(super) fn traverse(
     nodes: &[Node],
     boxes: &impl NodeBoxes,
     ray: &BoxRay,
     t_max: &mut f32,
-    mut leaf: impl FnMut(u32, u32, &mut f32) -> bool,
+    stack: &mut Vec<Deferred>,
+    mut leaf: impl FnMut(u32, u32, &mut f32, &mut Vec<Deferred>) -> bool,
 ) {
     let Some(root) = nodes.first() else { return };
     if boxes.entry(ray, root, 0, *t_max).is_none() {
         return;
     }
-    let mut stack = [(0u32, 0.0f32); STACK_SIZE];
-    let mut sp = 0;
+    let base = stack.len();
     let mut node = root;
     loop {
         if node.count > 0 {
-            if leaf(node.start, node.count, t_max) {
+            if leaf(node.start, node.count, t_max, stack) {
+                stack.truncate(base);
                 return;
             }
         } else {
@@ -196,8 +212,7 @@ pub(super) fn traverse(
                     } else {
                         (right, l, dl)
                     };
-                    stack[sp] = (far as u32, d_far);
-                    sp += 1;
+                    stack.push((far as u32, d_far));
                     node = near;
                     continue;
                 }
@@ -214,11 +229,10 @@ pub(super) fn traverse(
         }
         // Pop the next deferred subtree that a closer hit has not ruled out.
         loop {
-            if sp == 0 {
+            if stack.len() == base {
                 return;
             }
-            sp -= 1;
-            let (idx, d) = stack[sp];
+            let Some((idx, d)) = stack.pop() else { return };
             if d <= *t_max {
                 node = &nodes[idx as usize];
                 break;
