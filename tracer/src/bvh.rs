@@ -6,18 +6,21 @@
 //! |---|---|
 //! | `build` | the binned SAH builder shared by both levels (Wald 2007) |
 //! | `node` | the 32-byte node, per-step boxes, the slab test (Ize 2013), the traversal |
+//! | `wide` | the binary tree collapsed four-wide, its slab test in SIMD lanes, its traversal |
 //! | `mesh` | [`MeshBvh`]: object-space triangles in the BVH's own order, at 1..S steps |
 //! | `instance` | [`Instance`], [`Placement`], [`SceneBvh`]: placed meshes, the BVH over them |
 //! | `motion` | the shutter-time convention; [`MotionTransform`] (lerp, slerp, lerp) |
 //!
-//! Both levels share one flat node layout in which a node's two children are adjacent and
-//! always stored after it (refitting would be one reverse pass over the nodes).
+//! Both levels are built as binary trees in one flat layout, a node's two children adjacent
+//! and stored after it, and queried as those trees collapsed four-wide: one slab test in
+//! SIMD lanes checks four children.
 //!
 //! Motion blur: time is the normalised shutter position in [0, 1], and motion is given at
 //! `S` evenly spaced steps (step `k` at `k / (S - 1)`).
 //! - A deforming mesh ([`MeshBvh::build_motion`]) keeps its vertices at every step and
-//!   every node's box at every step, beside the 32-byte nodes; a ray sees triangles and
-//!   boxes linearly interpolated between the two steps around its time.
+//!   its binary tree with every node's box at every step, beside the 32-byte nodes; a ray
+//!   at a time sees triangles and boxes linearly interpolated between the two steps around
+//!   it.
 //! - A moving instance ([`Instance::moving`]) carries a [`MotionTransform`]: translation,
 //!   rotation and stretch interpolated separately (lerp, slerp, lerp). Its bounds cover the
 //!   whole shutter, so the top level is an ordinary static BVH; rays enter the mesh through
@@ -31,6 +34,7 @@ mod instance;
 mod mesh;
 mod motion;
 mod node;
+mod wide;
 
 pub use instance::{Instance, Placement, SceneBvh};
 pub use mesh::MeshBvh;

@@ -8,7 +8,8 @@ use glam::{Affine3A, DMat4, Mat3A, Vec3};
 use super::build::{self, BuildParams, BuildPrim};
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
-use super::node::{ray_is_valid, traverse, with_stack, BoxRay, Node, StaticBoxes};
+use super::node::{ray_is_valid, with_stack};
+use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};
 use crate::triangle::gamma;
 
@@ -239,7 +240,8 @@ pub(super) fn transform_bounds(m: &Affine3A, b: &Aabb) -> Aabb {
 #[derive(Clone, Default)]
 pub struct SceneBvh {
     instances: Vec<Instance>,
-    nodes: Vec<Node>,
+    /// The four-wide tree over the instances' bounds.
+    nodes: Vec<WideNode>,
     /// Instance indices in leaf order.
     order: Vec<u32>,
     /// Whether an instance moves or a mesh it places deforms.
@@ -285,7 +287,7 @@ impl SceneBvh {
                 index: i as u32,
             })
             .collect();
-        let nodes = build::build(&mut prims, &PARAMS);
+        let nodes = collapse(&build::build(&mut prims, &PARAMS));
         let order = prims.iter().map(|p| p.index).collect();
         SceneBvh {
             instances,
@@ -309,10 +311,7 @@ impl SceneBvh {
     /// World bounds of every hittable instance (over the whole shutter); empty when there
     /// is none.
     pub fn bounds(&self) -> Aabb {
-        self.nodes.first().map_or(Aabb::EMPTY, |n| Aabb {
-            min: n.min,
-            max: n.max,
-        })
+        self.nodes.first().map_or(Aabb::EMPTY, WideNode::bounds)
     }
 
     /// Number of top-level nodes.
@@ -382,10 +381,9 @@ impl SceneBvh {
         let mut t_max = t_max;
         let mut best = None;
         with_stack(|stack| {
-            traverse(
+            traverse_wide(
                 &self.nodes,
-                &StaticBoxes,
-                &BoxRay::new(ray),
+                &WideRay::new(ray),
                 &mut t_max,
                 stack,
                 |start, count, t_max, stack| {

@@ -5,8 +5,9 @@ use glam::{DVec3, Vec3};
 use super::build::{self, BuildParams, BuildPrim};
 use super::motion::Segment;
 use super::node::{
-    ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StaticBoxes, StepBox,
+    ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
 };
+use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
 use crate::triangle::{intersect_triangle, RayPrecomputed};
 
@@ -25,14 +26,18 @@ const PARAMS: BuildParams = BuildParams {
 /// contiguous: traversal reads nodes and positions only, never an index buffer. Triangles
 /// are reported by their index in the slice given to [`MeshBvh::build`].
 ///
-/// A deforming mesh ([`MeshBvh::build_motion`]) keeps its positions at each of `S` motion
-/// steps, step-major (all triangles at step 0, then all at step 1, ...), so that step 0
-/// reads exactly like a static BVH, and each node's box at every step in a second array
-/// (`StepBox`, 24 bytes per node and step, next to the 32-byte `Node`, which then holds
-/// the union over the steps). A ray at time `t` sees each triangle and box interpolated
-/// linearly between the two bracketing steps.
+/// Static queries run on four-wide nodes (`WideNode`, the SAH tree collapsed). A deforming
+/// mesh ([`MeshBvh::build_motion`]) keeps its positions at each of `S` motion steps,
+/// step-major (all triangles at step 0, then all at step 1, ...), so that step 0 reads
+/// exactly like a static BVH; it also keeps the binary tree, whose 32-byte `Node`s hold
+/// the union over the steps, and each binary node's box at every step in a second array
+/// (`StepBox`, 24 bytes per node and step). A ray at time `t` sees each triangle and box
+/// interpolated linearly between the two bracketing steps.
 #[derive(Clone, Default)]
 pub struct MeshBvh {
+    /// The four-wide tree, for static queries (boxes over every step).
+    wide: Vec<WideNode>,
+    /// The binary tree, for queries at a time; empty for a static mesh.
     nodes: Vec<Node>,
     /// Vertex positions in leaf order; with motion, `steps` copies of that, step-major.
     triangles: Vec<[Vec3; 3]>,
@@ -49,7 +54,7 @@ impl std::fmt::Debug for MeshBvh {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MeshBvh")
             .field("triangles", &self.triangle_count())
-            .field("nodes", &self.nodes.len())
+            .field("nodes", &self.node_count())
             .field("steps", &self.steps)
             .field("bounds", &self.bounds())
             .finish()
@@ -135,12 +140,15 @@ impl MeshBvh {
             .flat_map(|s| prims.iter().map(|p| s[p.index as usize]))
             .collect();
         let ids = prims.iter().map(|p| p.index).collect();
-        let step_boxes = if steps.len() > 1 {
-            step_boxes(&nodes, &triangles, prims.len(), steps.len())
+        let wide = collapse(&nodes);
+        let (nodes, step_boxes) = if steps.len() > 1 {
+            let boxes = step_boxes(&nodes, &triangles, prims.len(), steps.len());
+            (nodes, boxes)
         } else {
-            Vec::new()
+            (Vec::new(), Vec::new())
         };
         Self {
+            wide,
             nodes,
             triangles,
             ids,
@@ -156,10 +164,7 @@ impl MeshBvh {
 
     /// Bounds of every usable triangle (over all motion steps); empty for a mesh with none.
     pub fn bounds(&self) -> Aabb {
-        self.nodes.first().map_or(Aabb::EMPTY, |n| Aabb {
-            min: n.min,
-            max: n.max,
-        })
+        self.wide.first().map_or(Aabb::EMPTY, WideNode::bounds)
     }
 
     /// Number of triangles in the hierarchy (the usable ones).
@@ -167,15 +172,16 @@ impl MeshBvh {
         self.ids.len()
     }
 
-    /// Number of nodes.
+    /// Number of nodes: four-wide ones, and binary ones for a deforming mesh.
     pub fn node_count(&self) -> usize {
-        self.nodes.len()
+        self.wide.len() + self.nodes.len()
     }
 
     /// Heap and inline bytes held: nodes, per-step boxes, reordered positions (at every
     /// step) and the index map.
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
+            + std::mem::size_of_val(self.wide.as_slice())
             + std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.step_boxes.as_slice())
             + std::mem::size_of_val(self.triangles.as_slice())
@@ -224,7 +230,7 @@ impl MeshBvh {
     /// The closest accepted hit, or with `ANY_HIT` the first one found (traversal stops
     /// there). With `MOTION`, a deforming mesh is searched at `ray.time`; without, or for a
     /// static mesh, the static loop runs (on a deforming mesh it would find the mesh at
-    /// time 0: step 0 comes first and the nodes' boxes span every step). Const parameters,
+    /// time 0: step 0 comes first and the four-wide boxes span every step). Const parameters,
     /// so each query compiles to its own loop and a static scene pays nothing for motion.
     #[inline(always)]
     pub(super) fn search<const ANY_HIT: bool, const MOTION: bool>(
@@ -238,7 +244,6 @@ impl MeshBvh {
             return None;
         }
         let pre = RayPrecomputed::new(ray);
-        let box_ray = BoxRay::new(ray);
         let mut t_max = t_max;
         let mut best = None;
         if MOTION && self.has_motion() {
@@ -258,7 +263,7 @@ impl MeshBvh {
             traverse(
                 &self.nodes,
                 &boxes,
-                &box_ray,
+                &BoxRay::new(ray),
                 &mut t_max,
                 stack,
                 |start, count, t_max, _| {
@@ -284,10 +289,9 @@ impl MeshBvh {
             );
             return best;
         }
-        traverse(
-            &self.nodes,
-            &StaticBoxes,
-            &box_ray,
+        traverse_wide(
+            &self.wide,
+            &WideRay::new(ray),
             &mut t_max,
             stack,
             |start, count, t_max, _| {

@@ -1,6 +1,6 @@
-//! The flat BVH node, the robust ray/box slab test and the ordered stack traversal shared
-//! by the mesh and instance levels, for static boxes and for boxes that move over the
-//! shutter.
+//! The flat binary BVH node, the robust ray/box slab test and the ordered stack traversal
+//! of deforming meshes, whose boxes move over the shutter (static queries run on the same
+//! trees collapsed four-wide, in `wide`), and the traversal stack both share.
 
 use std::cell::RefCell;
 
@@ -66,7 +66,8 @@ impl BoxRay {
     }
 
     /// Distance at which the ray enters `node`'s box, if it does so within `[0, t_max]`.
-    #[inline(always)]
+    /// (Static queries run four-wide; this is their reference in tests.)
+    #[cfg(test)]
     pub fn entry(&self, node: &Node, t_max: f32) -> Option<f32> {
         self.entry_box(node.min, node.max, t_max)
     }
@@ -118,18 +119,19 @@ pub(super) fn ray_is_valid(ray: &Ray, t_max: f32) -> bool {
     ray.origin.is_finite() && ray.dir.is_finite() && ray.dir != Vec3::ZERO && t_max > 0.0
 }
 
-/// Where traversal finds a node's box: in the node itself ([`StaticBoxes`]), or
-/// interpolated at the ray's time from per-step boxes ([`MotionBoxes`]). A type parameter,
-/// so that the static traversal compiles to the same loop as if it were the only one.
+/// Where traversal finds a node's box: in the node itself (`StaticBoxes`, in tests), or
+/// interpolated at the ray's time from per-step boxes ([`MotionBoxes`]).
 pub(super) trait NodeBoxes {
     /// Distance at which `ray` enters the box of `node` (number `index` in its array), if
     /// it does so within `[0, t_max]`.
     fn entry(&self, ray: &BoxRay, node: &Node, index: usize, t_max: f32) -> Option<f32>;
 }
 
-/// The node's own box.
+/// The node's own box: the reference for the four-wide traversal in tests.
+#[cfg(test)]
 pub(super) struct StaticBoxes;
 
+#[cfg(test)]
 impl NodeBoxes for StaticBoxes {
     #[inline(always)]
     fn entry(&self, ray: &BoxRay, node: &Node, _: usize, t_max: f32) -> Option<f32> {
