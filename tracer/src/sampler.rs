@@ -37,9 +37,11 @@ fn laine_karras_permutation(mut x: u32, seed: u32) -> u32 {
     x
 }
 
-/// Owen scrambling of a 32-bit fixed-point value.
-fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
-    laine_karras_permutation(x.reverse_bits(), seed).reverse_bits()
+/// Owen scrambling of the 32-bit fixed-point value whose bits, reversed, are `reversed`:
+/// Laine-Karras permutes the bit-reversed value, then the bits are put back in order.
+/// (Callers that hold a value reversed already skip one reversal of two.)
+fn scramble_reversed(reversed: u32, seed: u32) -> u32 {
+    laine_karras_permutation(reversed, seed).reverse_bits()
 }
 
 /// Direction vectors of the second Sobol dimension (the Pascal matrix mod 2): bit `i` of
@@ -56,10 +58,11 @@ const SOBOL1_DIRECTIONS: [u32; 32] = {
     v
 };
 
-/// The same matrix applied a byte at a time: entry `[k][b]` is the XOR of the direction
-/// vectors of the set bits of byte value `b` at byte position `k`. Scrambled indices use
-/// all 32 bits, so this replaces a 32-step loop with four lookups.
-const SOBOL1_BYTES: [[u32; 256]; 4] = {
+/// The same matrix applied a byte at a time, its result bit-reversed (as Owen scrambling
+/// wants it): entry `[k][b]` is the XOR of the direction vectors of the set bits of byte
+/// value `b` at byte position `k`, reversed. Scrambled indices use all 32 bits, so this
+/// replaces a 32-step loop with four lookups.
+const SOBOL1_BYTES_REVERSED: [[u32; 256]; 4] = {
     let mut t = [[0u32; 256]; 4];
     let mut k = 0;
     while k < 4 {
@@ -73,7 +76,7 @@ const SOBOL1_BYTES: [[u32; 256]; 4] = {
                 }
                 bit += 1;
             }
-            t[k][b] = x;
+            t[k][b] = x.reverse_bits();
             b += 1;
         }
         k += 1;
@@ -81,15 +84,14 @@ const SOBOL1_BYTES: [[u32; 256]; 4] = {
     t
 };
 
-/// The first two Sobol dimensions: van der Corput, and the Pascal-matrix dimension.
-fn sobol_2d(index: u32) -> (u32, u32) {
-    let x = index.reverse_bits();
+/// The second Sobol dimension (the Pascal matrix) of `index`, bit-reversed. (The first,
+/// van der Corput, is the index reversed.)
+fn sobol1_reversed(index: u32) -> u32 {
     let b = index.to_le_bytes();
-    let y = SOBOL1_BYTES[0][b[0] as usize]
-        ^ SOBOL1_BYTES[1][b[1] as usize]
-        ^ SOBOL1_BYTES[2][b[2] as usize]
-        ^ SOBOL1_BYTES[3][b[3] as usize];
-    (x, y)
+    SOBOL1_BYTES_REVERSED[0][b[0] as usize]
+        ^ SOBOL1_BYTES_REVERSED[1][b[1] as usize]
+        ^ SOBOL1_BYTES_REVERSED[2][b[2] as usize]
+        ^ SOBOL1_BYTES_REVERSED[3][b[3] as usize]
 }
 
 /// 32-bit fixed point to a float in [0, 1): keep 24 bits so the result is never 1.0.
@@ -139,19 +141,30 @@ impl PixelSampler {
 
     /// The next dimension pair as a point in [0,1)².
     pub fn next_2d(&mut self) -> Vec2 {
+        let (shuffled, seed) = self.next_shuffled();
+        let y = scramble_reversed(sobol1_reversed(shuffled), hash_combine(seed, 0x4c95_7f2d));
+        Vec2::new(to_unit(Self::first(shuffled, seed)), to_unit(y))
+    }
+
+    /// Advances to the next dimension: its seed, and the sample index shuffled for it (Owen
+    /// scrambled, so that each dimension visits the sequence in its own order).
+    fn next_shuffled(&mut self) -> (u32, u32) {
         let seed = hash_combine(self.pixel_seed, self.dimension);
         self.dimension += 1;
-        let shuffled = nested_uniform_scramble(self.index, seed);
-        let (x, y) = sobol_2d(shuffled);
-        let x = nested_uniform_scramble(x, hash_combine(seed, 0x5851_f42d));
-        let y = nested_uniform_scramble(y, hash_combine(seed, 0x4c95_7f2d));
-        Vec2::new(to_unit(x), to_unit(y))
+        (scramble_reversed(self.index.reverse_bits(), seed), seed)
+    }
+
+    /// The first coordinate of the point: van der Corput of the shuffled index, which is
+    /// that index reversed, scrambled (whose reversal undoes that one).
+    fn first(shuffled: u32, seed: u32) -> u32 {
+        scramble_reversed(shuffled, hash_combine(seed, 0x5851_f42d))
     }
 
     /// The next dimension as a number in [0,1) (the first coordinate of a 2D point, so
-    /// that 1D dimensions are stratified too).
+    /// that 1D dimensions are stratified too; the second is not computed).
     pub fn next_1d(&mut self) -> f32 {
-        self.next_2d().x
+        let (shuffled, seed) = self.next_shuffled();
+        to_unit(Self::first(shuffled, seed))
     }
 }
 
@@ -168,11 +181,26 @@ mod tests {
                     y ^= v;
                 }
             }
-            assert_eq!(sobol_2d(i).1, y, "index {i:#x}");
+            assert_eq!(sobol1_reversed(i).reverse_bits(), y, "index {i:#x}");
         }
         // The first points of the second dimension: 0, 1/2, 3/4, 1/4.
-        let firsts: Vec<u32> = (0..4).map(|i| sobol_2d(i).1 >> 30).collect();
+        let firsts: Vec<u32> = (0..4)
+            .map(|i| sobol1_reversed(i).reverse_bits() >> 30)
+            .collect();
         assert_eq!(firsts, [0, 2, 3, 1]);
+    }
+
+    #[test]
+    fn one_dimension_is_the_first_coordinate_of_two() {
+        for i in 0..256 {
+            let (mut a, mut b) = (
+                PixelSampler::new(5, 8, i, 2, 9),
+                PixelSampler::new(5, 8, i, 2, 9),
+            );
+            for _ in 0..6 {
+                assert_eq!(a.next_1d(), b.next_2d().x);
+            }
+        }
     }
 
     #[test]
