@@ -212,6 +212,56 @@ struct AtWo {
     p: [f32; 3],
 }
 
+/// A BSDF seen from one outgoing direction ([`Bsdf::at`]): what a bounce evaluates for
+/// its light sample and samples for its continuation, sharing the work that depends on
+/// `wo`.
+pub struct BsdfAt<'a> {
+    bsdf: &'a Bsdf,
+    /// `wo` in the frame where `wo.z > 0`.
+    wo: Vec3,
+    /// Whether `wo` lies below the surface (the frame is mirrored).
+    inside: bool,
+    at: AtWo,
+}
+
+impl BsdfAt<'_> {
+    /// `wi` in the frame where `wo.z > 0`; `None` for a non-finite or grazing `wi`.
+    fn incident(&self, wi: Vec3) -> Option<Vec3> {
+        if !wi.is_finite() || wi.z.abs() < COS_EPS {
+            return None;
+        }
+        Some(if self.inside { flip(wi) } else { wi })
+    }
+
+    /// f(wo, wi) without the cosine; zero for delta lobes.
+    pub fn eval(&self, wi: Vec3) -> Vec3 {
+        self.incident(wi)
+            .map_or(Vec3::ZERO, |wi| self.bsdf.eval_local(self.wo, wi, &self.at))
+    }
+
+    /// The solid-angle pdf with which [`BsdfAt::sample`] returns `wi`.
+    pub fn pdf(&self, wi: Vec3) -> f32 {
+        self.incident(wi)
+            .map_or(0.0, |wi| self.bsdf.pdf_local(self.wo, wi, &self.at))
+    }
+
+    /// `eval(wi)` and `pdf(wi)` together.
+    pub fn eval_and_pdf(&self, wi: Vec3) -> (Vec3, f32) {
+        self.incident(wi).map_or((Vec3::ZERO, 0.0), |wi| {
+            (
+                self.bsdf.eval_local(self.wo, wi, &self.at),
+                self.bsdf.pdf_local(self.wo, wi, &self.at),
+            )
+        })
+    }
+
+    /// As [`Bsdf::sample`].
+    pub fn sample(&self, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        self.bsdf
+            .sample_at(self.wo, self.inside, &self.at, u_lobe, u)
+    }
+}
+
 /// Builds the energy-compensation tables now rather than at the first rough surface a
 /// render meets (about 0.1 s for the conductor table, 0.25 s more for the dielectric one
 /// with `with_dielectric`, at opt-level 3). Optional: call it while preparing a frame so
@@ -353,27 +403,19 @@ impl Bsdf {
 
     /// f(wo, wi) without the cosine; zero for delta lobes.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
-        let Some((wo, wi, at)) = self.prepare_pair(wo, wi) else {
-            return Vec3::ZERO;
-        };
-        self.eval_local(wo, wi, &at)
+        self.at(wo).map_or(Vec3::ZERO, |at| at.eval(wi))
     }
 
     /// The solid-angle pdf with which [`Bsdf::sample`] returns `wi`; zero for delta lobes.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        let Some((wo, wi, at)) = self.prepare_pair(wo, wi) else {
-            return 0.0;
-        };
-        self.pdf_local(wo, wi, &at)
+        self.at(wo).map_or(0.0, |at| at.pdf(wi))
     }
 
     /// `eval(wo, wi)` and `pdf(wo, wi)` together, sharing the work that depends on `wo`
     /// (for light sampling with MIS, which needs both).
     pub fn eval_and_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
-        let Some((wo, wi, at)) = self.prepare_pair(wo, wi) else {
-            return (Vec3::ZERO, 0.0);
-        };
-        (self.eval_local(wo, wi, &at), self.pdf_local(wo, wi, &at))
+        self.at(wo)
+            .map_or((Vec3::ZERO, 0.0), |at| at.eval_and_pdf(wi))
     }
 
     /// Samples an incident direction from `u_lobe` (lobe choice) and `u` (direction).
@@ -381,12 +423,35 @@ impl Bsdf {
     /// internal reflection where part of the light is absorbed, or a sample that grazes
     /// the tangent plane).
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        self.at(wo)?.sample(u_lobe, u)
+    }
+
+    /// The BSDF seen from `wo`, its work that depends on `wo` alone done once for the
+    /// light sample and the continuation a bounce takes; `None` for a non-finite or
+    /// grazing `wo`, from which nothing scatters.
+    pub fn at(&self, wo: Vec3) -> Option<BsdfAt<'_>> {
         if !wo.is_finite() || wo.z.abs() < COS_EPS {
             return None;
         }
         let inside = wo.z < 0.0;
         let wo = if inside { flip(wo) } else { wo };
-        let at = self.at_wo(wo.z, inside);
+        Some(BsdfAt {
+            bsdf: self,
+            wo,
+            inside,
+            at: self.at_wo(wo.z, inside),
+        })
+    }
+
+    /// [`BsdfAt::sample`] in the frame where `wo.z > 0`.
+    fn sample_at(
+        &self,
+        wo: Vec3,
+        inside: bool,
+        at: &AtWo,
+        u_lobe: f32,
+        u: Vec2,
+    ) -> Option<BsdfSample> {
         let u_lobe = sane(u_lobe, 0.0, 1.0, 0.0);
         let u = Vec2::new(sane(u.x, 0.0, 1.0, 0.0), sane(u.y, 0.0, 1.0, 0.0));
 
@@ -394,13 +459,13 @@ impl Bsdf {
         // choice of the dielectric interface.
         let [p_ggx, p_diff, p_glass] = at.p;
         let s = if u_lobe < p_ggx {
-            self.sample_ggx(wo, u, &at)
+            self.sample_ggx(wo, u, at)
         } else if u_lobe < p_ggx + p_diff {
             let wi = microfacet::sample_cosine_hemisphere(u);
-            self.continuous_sample(wo, wi, &at)
+            self.continuous_sample(wo, wi, at)
         } else if p_glass > 0.0 {
             let uc = ((u_lobe - p_ggx - p_diff) / p_glass).clamp(0.0, 1.0);
-            self.sample_glass(wo, uc, u, &at)
+            self.sample_glass(wo, uc, u, at)
         } else {
             None
         }?;
@@ -408,20 +473,6 @@ impl Bsdf {
             wi: if inside { flip(s.wi) } else { s.wi },
             ..s
         })
-    }
-
-    /// Validates a pair and moves it into the frame where `wo.z > 0`.
-    fn prepare_pair(&self, wo: Vec3, wi: Vec3) -> Option<(Vec3, Vec3, AtWo)> {
-        if !wo.is_finite() || !wi.is_finite() || wo.z.abs() < COS_EPS || wi.z.abs() < COS_EPS {
-            return None;
-        }
-        let inside = wo.z < 0.0;
-        let (wo, wi) = if inside {
-            (flip(wo), flip(wi))
-        } else {
-            (wo, wi)
-        };
-        Some((wo, wi, self.at_wo(wo.z, inside)))
     }
 
     /// The `wo`-dependent factors: compensation, albedo scaling, lobe probabilities.

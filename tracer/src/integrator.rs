@@ -338,6 +338,7 @@ fn trace_path(
             return;
         }
         let wo_local = sp.frame.to_local(wo);
+        let scatter = bsdf.at(wo_local);
 
         // Next-event estimation.
         let u_light = sampler.next_1d();
@@ -345,7 +346,9 @@ fn trace_path(
         if !bsdf.is_delta() {
             if let Some(ls) = frame.lights.sample(sp.p, Some(sp.ng), u_light, u_point) {
                 let wi_local = sp.frame.to_local(ls.wi);
-                let (f, bsdf_pdf) = bsdf.eval_and_pdf(wo_local, wi_local);
+                let (f, bsdf_pdf) = scatter
+                    .as_ref()
+                    .map_or((Vec3::ZERO, 0.0), |s| s.eval_and_pdf(wi_local));
                 let f = f * wi_local.z.abs();
                 if ls.pdf > 0.0 && f != Vec3::ZERO && consistent_side(&sp, ls.wi, wi_local) {
                     let le = match ls.emitter {
@@ -388,7 +391,7 @@ fn trace_path(
         // Continue the path by sampling the BSDF.
         let u_lobe = sampler.next_1d();
         let u_dir = sampler.next_2d();
-        let Some(bs) = bsdf.sample(wo_local, u_lobe, u_dir) else {
+        let Some(bs) = scatter.and_then(|s| s.sample(u_lobe, u_dir)) else {
             return;
         };
         if !(bs.pdf > 0.0) {
