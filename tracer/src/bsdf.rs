@@ -378,6 +378,11 @@ impl Bsdf {
         self
     }
 
+    /// The albedo curve it carries (see [`Bsdf::with_albedo_curve`]).
+    pub fn albedo_curve(&self) -> Option<&'static AlbedoCurve> {
+        self.curve
+    }
+
     /// Whether every lobe is perfectly smooth, so that `eval` and `pdf` are zero
     /// everywhere and only `sample` can find directions (no light sampling, no MIS).
     pub fn is_delta(&self) -> bool {

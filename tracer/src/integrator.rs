@@ -4,7 +4,7 @@
 
 use glam::{Vec2, Vec3, Vec4};
 
-use crate::bsdf::{AlbedoCurve, Bsdf};
+use crate::bsdf::Bsdf;
 use crate::film::SampleValue;
 use crate::geometry::{
     barycentric, hit_point_error, offset_ray_origin_bounded, plane_hit_point, Frame, Hit, Ray,
@@ -36,8 +36,8 @@ pub(crate) struct SurfacePoint {
     pub material: crate::material::MaterialSample,
     /// Whether the material emits only from its front face.
     pub single_sided: bool,
-    /// The material's albedo curve, for [`Bsdf::with_albedo_curve`].
-    pub albedo_curve: Option<&'static AlbedoCurve>,
+    /// The material's index in the scene.
+    pub material_index: u32,
 }
 
 /// Builds the surface point of `hit` on `ray`, with the hit instance where it is at the
@@ -143,7 +143,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
         front,
         material: sample,
         single_sided: !material.double_sided,
-        albedo_curve: frame.albedo_curves[prim.material as usize],
+        material_index: prim.material,
     }
 }
 
@@ -329,7 +329,16 @@ fn trace_path(
             out.radiance += s.throughput * le * w;
         }
 
-        let bsdf = Bsdf::new(sp.material.surface).with_albedo_curve(sp.albedo_curve);
+        // The material's own BSDF where textures and vertex colour leave it as it is.
+        let material_bsdf = &frame.material_bsdfs[sp.material_index as usize];
+        let textured;
+        let bsdf = if material_bsdf.params == sp.material.surface {
+            material_bsdf
+        } else {
+            textured =
+                Bsdf::new(sp.material.surface).with_albedo_curve(material_bsdf.albedo_curve());
+            &textured
+        };
         if !walk.albedo_done && !bsdf.is_delta() {
             out.albedo = bsdf.albedo();
             walk.albedo_done = true;

@@ -132,17 +132,37 @@ pub struct MaterialSample {
 }
 
 impl Material {
-    /// The BSDF parameters of the factors alone, as at a point where every texture and
-    /// the vertex colour are white.
+    /// The BSDF parameters of the factors alone: what [`Material::sample`] gives where
+    /// every texture and the vertex colour are white.
     pub fn factors(&self) -> SurfaceParams {
+        self.surface(
+            self.base_color.truncate(),
+            self.metallic,
+            self.roughness,
+            self.specular,
+            self.specular_color,
+            self.transmission,
+        )
+    }
+
+    /// The parameters with factors (times textures) clamped to their ranges.
+    fn surface(
+        &self,
+        base_color: Vec3,
+        metallic: f32,
+        roughness: f32,
+        specular: f32,
+        specular_color: Vec3,
+        transmission: f32,
+    ) -> SurfaceParams {
         SurfaceParams {
-            base_color: self.base_color.truncate(),
-            metallic: self.metallic,
-            roughness: self.roughness,
+            base_color,
+            metallic: metallic.clamp(0.0, 1.0),
+            roughness: roughness.clamp(0.0, 1.0),
             ior: self.ior,
-            specular: self.specular,
-            specular_color: self.specular_color,
-            transmission: self.transmission,
+            specular: specular.max(0.0),
+            specular_color,
+            transmission: transmission.clamp(0.0, 1.0),
         }
     }
 
@@ -211,15 +231,14 @@ impl Material {
             n.try_normalize().unwrap_or(Vec3::Z)
         });
         MaterialSample {
-            surface: SurfaceParams {
-                base_color: base.truncate(),
-                metallic: metallic.clamp(0.0, 1.0),
-                roughness: roughness.clamp(0.0, 1.0),
-                ior: self.ior,
-                specular: specular.max(0.0),
+            surface: self.surface(
+                base.truncate(),
+                metallic,
+                roughness,
+                specular,
                 specular_color,
-                transmission: transmission.clamp(0.0, 1.0),
-            },
+                transmission,
+            ),
             alpha: base.w,
             emission,
             normal_map,

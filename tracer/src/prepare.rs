@@ -13,7 +13,7 @@ use std::sync::Arc;
 use glam::{Affine3A, DMat3, DMat4, DQuat, DVec3, Vec3};
 
 use crate::animation::{self, Pose};
-use crate::bsdf::{AlbedoCurve, Bsdf};
+use crate::bsdf::Bsdf;
 use crate::bvh::{Instance, SceneBvh};
 use crate::camera::{Camera, Projection, RigidStep};
 use crate::deform::{self, Deformed};
@@ -425,7 +425,7 @@ pub fn prepare_frame(
     // Build the BSDF's energy tables and curves now rather than inside the first tile's
     // threads.
     crate::bsdf::precompute_tables(scene.features.transmission);
-    let albedo_curves = albedo_curves(&scene);
+    let material_bsdfs = material_bsdfs(&scene);
     let mut features = scene.features;
     let environment = match (&options.environment, &scene.environment) {
         (Some(env), _) | (None, Some(env)) => env.clone(),
@@ -474,7 +474,7 @@ pub fn prepare_frame(
         lights,
         hit_filter,
         any_hit_filter,
-        albedo_curves,
+        material_bsdfs,
         features,
         warnings,
     })
@@ -575,18 +575,21 @@ fn emissive_triangles(
     triangles
 }
 
-/// Per scene material, the albedo curve of its rough refractive interface, where its
-/// roughness is not textured (see `bsdf/curve.rs`); materials without one use the shared
-/// tables.
-fn albedo_curves(scene: &Scene) -> Vec<Option<&'static AlbedoCurve>> {
+/// Per scene material, its BSDF where every texture and the vertex colour are white, so
+/// that points that see it so (most, in most scenes) need not build it again. It carries
+/// the albedo curve of a rough refractive interface where the roughness is not textured
+/// (see `bsdf/curve.rs`); materials without one use the shared tables.
+fn material_bsdfs(scene: &Scene) -> Vec<Bsdf> {
     scene
         .materials
         .iter()
         .map(|m| {
-            if m.metallic_roughness_texture.is_some() {
-                return None;
-            }
-            Bsdf::albedo_curve_for(m.factors())
+            let curve = if m.metallic_roughness_texture.is_some() {
+                None
+            } else {
+                Bsdf::albedo_curve_for(m.factors())
+            };
+            Bsdf::new(m.factors()).with_albedo_curve(curve)
         })
         .collect()
 }

@@ -201,8 +201,9 @@ pub struct PreparedFrame {
     pub(crate) hit_filter: Vec<Vec<bool>>,
     /// Whether any primitive needs the hit filter.
     pub(crate) any_hit_filter: bool,
-    /// Per scene material, its BSDF's albedo curve (rough glass only).
-    pub(crate) albedo_curves: Vec<Option<&'static crate::bsdf::AlbedoCurve>>,
+    /// Per scene material, its BSDF where every texture and the vertex colour are white
+    /// (with the albedo curve of rough glass).
+    pub(crate) material_bsdfs: Vec<crate::bsdf::Bsdf>,
     /// What the frame uses.
     pub features: Features,
     /// Remarks for the user (for example, the default environment was used).
