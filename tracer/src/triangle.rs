@@ -9,7 +9,7 @@
 //! never slip between them. Where an edge function rounds to exactly zero the test
 //! recomputes the three in double precision, so that zero only means "exactly on the edge".
 
-use glam::{DVec2, Vec3};
+use glam::{DVec2, Mat3A, Vec3, Vec3A};
 
 use crate::geometry::Ray;
 
@@ -34,6 +34,12 @@ pub struct RayPrecomputed {
     kz: usize,
     /// (Sx, Sy, Sz) of the paper.
     shear: Vec3,
+    /// The permutation and the x-y shear as one matrix, applied in SIMD lanes: row 0 is
+    /// `e_kx − Sx·e_kz`, row 1 `e_ky − Sy·e_kz`, row 2 `e_kz`. Each row has one 1, at most
+    /// one shear constant and a 0, so `M·a` rounds as `a[kx] − Sx·a[kz]` does (adding the
+    /// zero product is exact): the same numbers, without indexing by `kx` per vertex.
+    permute_shear: Mat3A,
+    origin_a: Vec3A,
 }
 
 impl RayPrecomputed {
@@ -58,6 +64,8 @@ impl RayPrecomputed {
             std::mem::swap(&mut kx, &mut ky);
         }
         let shear = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        let e = |k: usize| Vec3A::AXES[k];
+        let rows = [e(kx) - shear.x * e(kz), e(ky) - shear.y * e(kz), e(kz)];
         Self {
             origin: ray.origin,
             dir: d,
@@ -65,6 +73,8 @@ impl RayPrecomputed {
             ky,
             kz,
             shear,
+            permute_shear: Mat3A::from_cols(rows[0], rows[1], rows[2]).transpose(),
+            origin_a: ray.origin.into(),
         }
     }
 }
@@ -86,23 +96,14 @@ pub fn intersect_triangle(
     v2: Vec3,
     t_max: f32,
 ) -> Option<(f32, f32, f32)> {
-    let (kx, ky, kz) = (ray.kx, ray.ky, ray.kz);
-    let Vec3 {
-        x: sx,
-        y: sy,
-        z: sz,
-    } = ray.shear;
+    let sz = ray.shear.z;
 
-    // Vertices relative to the ray origin, then sheared so that the ray is the +Z axis.
-    let a = v0 - ray.origin;
-    let b = v1 - ray.origin;
-    let c = v2 - ray.origin;
-    let ax = a[kx] - sx * a[kz];
-    let ay = a[ky] - sy * a[kz];
-    let bx = b[kx] - sx * b[kz];
-    let by = b[ky] - sy * b[kz];
-    let cx = c[kx] - sx * c[kz];
-    let cy = c[ky] - sy * c[kz];
+    // Vertices relative to the ray origin, then permuted and sheared so that the ray is the
+    // +Z axis (z not yet scaled by Sz).
+    let [a, b, c] = [v0, v1, v2].map(|v| ray.permute_shear * (Vec3A::from(v) - ray.origin_a));
+    let (ax, ay) = (a.x, a.y);
+    let (bx, by) = (b.x, b.y);
+    let (cx, cy) = (c.x, c.y);
 
     // Scaled barycentric coordinates: the edge functions of the edges opposite each vertex.
     let mut u = cx * by - cy * bx;
@@ -135,9 +136,9 @@ pub fn intersect_triangle(
     // position from every rounding above (pbrt-v4, "Ensure that computed triangle t is
     // conservatively greater than zero"). The constants are named so that they are folded
     // at compile time.
-    let az = sz * a[kz];
-    let bz = sz * b[kz];
-    let cz = sz * c[kz];
+    let az = sz * a.z;
+    let bz = sz * b.z;
+    let cz = sz * c.z;
     let t_scaled = u * az + v * bz + w * cz;
     let inv_det = 1.0 / det;
     let t = t_scaled * inv_det;
@@ -152,7 +153,7 @@ pub fn intersect_triangle(
     // units. pbrt takes the scaled z (in t's units), which is the same only for a unit
     // direction: an instance scaled by 1e6 has object-space directions of length 1e-6,
     // and its bound would come out a million times too large (every hit refused).
-    let max_z = a[kz].abs().max(b[kz].abs()).max(c[kz].abs());
+    let max_z = a.z.abs().max(b.z.abs()).max(c.z.abs());
     let delta_x = G5 * (max_xt + max_z);
     let delta_y = G5 * (max_yt + max_z);
     let delta_e = 2.0 * (G2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
