@@ -80,7 +80,7 @@ impl TriangleLight {
     fn solid_angle([a, b, c]: [Vec3; 3]) -> f32 {
         let num = a.dot(b.cross(c)).abs();
         let den = 1.0 + a.dot(b) + a.dot(c) + b.dot(c);
-        let omega = 2.0 * num.atan2(den);
+        let omega = 2.0 * atan2_upper(num, den);
         if omega.is_finite() {
             omega
         } else {
@@ -236,6 +236,36 @@ fn sample_uniform_triangle(u: Vec2) -> (f32, f32) {
     (b1, (1.0 - b0 - b1).max(0.0))
 }
 
+/// `atan2(y, x)` for `y ≥ 0`, in [0, π] (NaN where both are 0): Cephes' `atanf` after
+/// reducing the ratio to at most tan(π/8), within a few 1e-7 relative of the exact value,
+/// in a fifth of the instructions of the C library's (it runs at every light sample).
+fn atan2_upper(y: f32, x: f32) -> f32 {
+    use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+    // tan(3π/8) and tan(π/8).
+    const TAN_3PI_8: f32 = 2.414_213_6;
+    const TAN_PI_8: f32 = 0.414_213_57;
+    let r = y / x.abs();
+    let (base, z) = if r > TAN_3PI_8 {
+        (FRAC_PI_2, -1.0 / r)
+    } else if r > TAN_PI_8 {
+        (FRAC_PI_4, (r - 1.0) / (r + 1.0))
+    } else {
+        (0.0, r)
+    };
+    let z2 = z * z;
+    let atan_z = (((8.053_744_5e-2 * z2 - 1.387_768_6e-1) * z2 + 1.997_771_1e-1) * z2
+        - 3.333_294_9e-1)
+        * z2
+        * z
+        + z;
+    let angle = base + atan_z;
+    if x < 0.0 {
+        PI - angle
+    } else {
+        angle
+    }
+}
+
 /// The component of `v` orthogonal to the unit vector `w`.
 fn gram_schmidt(v: Vec3, w: Vec3) -> Vec3 {
     v - v.dot(w) * w
@@ -246,6 +276,39 @@ mod tests {
     use super::*;
 
     use crate::test_rng::Rng;
+
+    #[test]
+    fn atan2_upper_matches_the_library_to_a_few_ulps() {
+        let mut worst = 0.0f64;
+        for i in 0..=2000 {
+            for j in -1000..=1000 {
+                let (y, x) = (i as f32 * 1e-3, j as f32 * 1.7e-3);
+                let exact = f64::from(y).atan2(f64::from(x));
+                let got = f64::from(atan2_upper(y, x));
+                if y == 0.0 && x == 0.0 {
+                    assert!(got.is_nan());
+                    continue;
+                }
+                worst = worst.max((got - exact).abs() / exact.abs().max(1e-30));
+            }
+        }
+        assert!(worst < 4e-7, "worst relative error {worst:e}");
+        // Tiny and huge ratios, and a zero x of either sign.
+        for (y, x) in [
+            (1e-30, 1.0),
+            (1.0, 1e-30),
+            (1.0, -1e-30),
+            (1.0, 0.0),
+            (1.0, -0.0),
+        ] {
+            let exact = f64::from(y).atan2(f64::from(x));
+            let got = f64::from(atan2_upper(y, x));
+            assert!(
+                (got - exact).abs() <= 4e-7 * exact,
+                "{y} {x}: {got} {exact}"
+            );
+        }
+    }
 
     fn light(p: [Vec3; 3]) -> TriangleLight {
         TriangleLight::new(&EmissiveTriangle {
