@@ -153,12 +153,33 @@ impl WideRay {
             let near = (near - self.origin[axis]) * self.inv_dir[axis];
             let far = (far - self.origin[axis]) * self.inv_dir[axis] * FAR_SCALE;
             // A NaN distance (0 · inf: the ray lies in the slab's plane) must not constrain
-            // the interval: the comparisons are false for it, so the accumulator stays.
-            t0 = Vec4::select(near.cmpgt(t0), near, t0);
-            t1 = Vec4::select(far.cmplt(t1), far, t1);
+            // the interval: the accumulator stays.
+            t0 = max_or_acc(t0, near);
+            t1 = min_or_acc(t1, far);
         }
         (t0, t0.cmple(t1).bitmask())
     }
+}
+
+/// `max(acc, x)` per lane, keeping `acc` where `x` is NaN.
+#[inline(always)]
+fn max_or_acc(acc: Vec4, x: Vec4) -> Vec4 {
+    // glam's SSE2 `max` is maxps(x, acc), which returns its second operand where the
+    // comparison fails: one instruction instead of a compare and a three-instruction
+    // select (a test pins this down). Elsewhere (NEON's max returns the NaN) the select.
+    #[cfg(target_arch = "x86_64")]
+    return x.max(acc);
+    #[cfg(not(target_arch = "x86_64"))]
+    return Vec4::select(x.cmpgt(acc), x, acc);
+}
+
+/// `min(acc, x)` per lane, keeping `acc` where `x` is NaN.
+#[inline(always)]
+fn min_or_acc(acc: Vec4, x: Vec4) -> Vec4 {
+    #[cfg(target_arch = "x86_64")]
+    return x.min(acc);
+    #[cfg(not(target_arch = "x86_64"))]
+    return Vec4::select(x.cmplt(acc), x, acc);
 }
 
 /// Visits the leaves of a four-wide hierarchy whose boxes the ray enters before `t_max`,
@@ -413,6 +434,14 @@ mod tests {
             true
         });
         assert_eq!((visits, stack.len()), (1, 1));
+    }
+
+    #[test]
+    fn nan_lanes_keep_the_accumulator() {
+        let acc = Vec4::new(1.0, 2.0, 3.0, 4.0);
+        let x = Vec4::new(f32::NAN, 5.0, f32::NAN, 0.5);
+        assert_eq!(max_or_acc(acc, x).to_array(), [1.0, 5.0, 3.0, 4.0]);
+        assert_eq!(min_or_acc(acc, x).to_array(), [1.0, 2.0, 3.0, 0.5]);
     }
 
     #[test]
