@@ -1,0 +1,50 @@
+//! The measured Cornell box at 256x256, max depth 8, seed 7, rendered through
+//! `render_tile` on all threads: camera paths per second, rays, and a hash of the image,
+//! so that a change meant to leave every pixel alone can show it did.
+//!
+//! `cargo run --release -p tracer --example cornell_profile -- [SPP]` (default 1). Under
+//! `valgrind --tool=callgrind` it gives the instruction counts in BENCHMARKS.md.
+use std::sync::Arc;
+use std::time::Instant;
+use tracer::film::{SampleRange, TileRect};
+use tracer::render::{prepare_frame, render_tile, FrameOptions, RenderSettings};
+
+fn main() {
+    let spp: u32 = std::env::args()
+        .nth(1)
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(1);
+    let options = FrameOptions {
+        width: 256,
+        height: 256,
+        ..Default::default()
+    };
+    let frame = prepare_frame(Arc::new(tracer::demo::cornell_box()), &options).unwrap();
+    let settings = RenderSettings {
+        max_depth: 8,
+        seed: 7,
+        ..RenderSettings::DEFAULT
+    };
+    let start = Instant::now();
+    let tile = render_tile(
+        &frame,
+        &settings,
+        TileRect::new(0, 0, 256, 256),
+        SampleRange::new(0, spp),
+    );
+    let s = start.elapsed().as_secs_f64();
+    let rays = tile.rays;
+    let l = tile.resolve();
+    let sum: f64 = l.beauty.iter().map(|p| f64::from(p.x + p.y + p.z)).sum();
+    let hash = l.beauty.iter().fold(0u64, |h, p| {
+        (h ^ u64::from(
+            p.x.to_bits() ^ p.y.to_bits().rotate_left(11) ^ p.z.to_bits().rotate_left(22),
+        ))
+        .wrapping_mul(0x100000001b3)
+    });
+    println!(
+        "{spp} spp: {:.3} s, {:.0} paths/s, {rays} rays, beauty sum {sum:.6} hash {hash:016x}",
+        s,
+        65536.0 * f64::from(spp) / s
+    );
+}
