@@ -39,6 +39,7 @@ pub struct RayPrecomputed {
     /// one shear constant and a 0, so `M·a` rounds as `a[kx] − Sx·a[kz]` does (adding the
     /// zero product is exact): the same numbers, without indexing by `kx` per vertex.
     permute_shear: Mat3A,
+    /// `origin` in SIMD lanes, for `permute_shear`.
     origin_a: Vec3A,
 }
 
