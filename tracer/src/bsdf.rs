@@ -193,6 +193,7 @@ pub struct Bsdf {
 }
 
 /// Everything about the BSDF that depends on `wo` alone, in the frame where `wo.z > 0`.
+#[derive(Debug, PartialEq)]
 struct AtWo {
     /// Relative index across the interface, transmitted side over `wo`'s side.
     eta_rel: f32,
@@ -482,6 +483,31 @@ impl Bsdf {
 
     /// The `wo`-dependent factors: compensation, albedo scaling, lobe probabilities.
     fn at_wo(&self, mu_o: f32, inside: bool) -> AtWo {
+        let eta_rel = if inside { 1.0 / self.eta } else { self.eta };
+        if self.is_lambertian() {
+            // The commonest surface: nothing depends on `wo`, and the general case
+            // (`at_wo_general`) comes to the same numbers (a test checks).
+            let diffuse = self.w_plastic * self.base.max_element() > 0.0;
+            return AtWo {
+                eta_rel,
+                metal_comp: Vec3::ONE,
+                spec_comp: Vec3::ONE,
+                diffuse_w: 1.0,
+                glass_ms: 0.0,
+                glass_ms_r: 0.0,
+                p: [0.0, if diffuse { 1.0 } else { 0.0 }, 0.0],
+            };
+        }
+        self.at_wo_general(mu_o, inside)
+    }
+
+    /// Whether the BSDF is a diffuse lobe alone: no metal, no specular layer, no glass.
+    fn is_lambertian(&self) -> bool {
+        self.w_metal == 0.0 && self.w_plastic * self.spec == 0.0 && self.w_glass == 0.0
+    }
+
+    /// [`Bsdf::at_wo`] for any BSDF.
+    fn at_wo_general(&self, mu_o: f32, inside: bool) -> AtWo {
         let eta_rel = if inside { 1.0 / self.eta } else { self.eta };
         let f0_max = self.f0_spec.max_element();
         let f0_mean = mean(self.f0_spec);

@@ -32,6 +32,33 @@ fn material(
     }
 }
 
+#[test]
+fn the_lambertian_shortcut_comes_to_the_general_numbers() {
+    for base in [Vec3::new(0.8, 0.5, 0.2), Vec3::ZERO, Vec3::ONE] {
+        for (roughness, ior) in [(0.0, 1.5), (0.7, 1.0), (1.0, 2.4)] {
+            let params = SurfaceParams {
+                specular: 0.0,
+                ..material(base, 0.0, roughness, ior, 0.0)
+            };
+            let bsdf = Bsdf::new(params);
+            assert!(bsdf.is_lambertian());
+            for mu in [1.0, 0.5, 0.01] {
+                for inside in [false, true] {
+                    assert_eq!(bsdf.at_wo(mu, inside), bsdf.at_wo_general(mu, inside));
+                }
+            }
+        }
+    }
+    // A specular layer, a metal or glass is not Lambertian.
+    for (specular, metallic, transmission) in [(1.0, 0.0, 0.0), (0.0, 0.5, 0.0), (0.0, 0.0, 1.0)] {
+        let params = SurfaceParams {
+            specular,
+            ..material(Vec3::ONE, metallic, 0.5, 1.5, transmission)
+        };
+        assert!(!Bsdf::new(params).is_lambertian());
+    }
+}
+
 /// The direction `deg` degrees from the normal in the xz-plane, mirrored below the
 /// surface when `below`.
 fn wo_at(deg: f32, below: bool) -> Vec3 {
