@@ -483,13 +483,12 @@ impl Bsdf {
 
     /// The `wo`-dependent factors: compensation, albedo scaling, lobe probabilities.
     fn at_wo(&self, mu_o: f32, inside: bool) -> AtWo {
-        let eta_rel = if inside { 1.0 / self.eta } else { self.eta };
         if self.is_lambertian() {
             // The commonest surface: nothing depends on `wo`, and the general case
             // (`at_wo_general`) comes to the same numbers (a test checks).
             let diffuse = self.w_plastic * self.base.max_element() > 0.0;
             return AtWo {
-                eta_rel,
+                eta_rel: if inside { 1.0 / self.eta } else { self.eta },
                 metal_comp: Vec3::ONE,
                 spec_comp: Vec3::ONE,
                 diffuse_w: 1.0,

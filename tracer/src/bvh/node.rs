@@ -43,7 +43,7 @@ pub(super) fn with_stack<R>(query: impl FnOnce(&mut Vec<Deferred>) -> R) -> R {
 /// The far slab distance is scaled up by 1 + 2·gamma(3) to cover the rounding of both slab
 /// distances (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013), so a ray through a box's
 /// face or edge is never culled, and triangles lying in that face stay watertight.
-const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
+pub(super) const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
 
 /// A ray prepared for slab tests.
 #[derive(Clone, Copy, Debug)]

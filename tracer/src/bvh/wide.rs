@@ -9,15 +9,11 @@
 
 use glam::{Vec3, Vec4};
 
-use super::node::{Deferred, Node};
+use super::node::{Deferred, Node, FAR_SCALE};
 use crate::geometry::{Aabb, Ray};
-use crate::triangle::gamma;
 
 /// Children per node.
 const WIDTH: usize = 4;
-
-/// The far distance's cover for rounding, as in the binary slab test (Ize 2013).
-const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
 
 /// Four children in 128 bytes (two cache lines): their boxes one lane per child, then what
 /// each is. A lane with `count == 0` is an interior node at index `start`; otherwise it is
