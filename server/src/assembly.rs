@@ -270,7 +270,7 @@ fn encode_layers(
             OutputLayer::Noise => ImageLayer::Noise,
         })
         .collect();
-    output::encode_exr_layers(size, layers, meta, &wanted)
+    output::encode_exr_layers(size, layers, meta, &wanted, output::ExrCompression::Zip)
         .map_err(|e| Error::Internal(format!("encoding frame: {e}")))
 }
 

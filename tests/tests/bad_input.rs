@@ -14,7 +14,7 @@ use sha2::{Digest, Sha256};
 use tests::http::{self, Answer, Request};
 use tests::{render_directly, settings, tessera, wait_until, Farm};
 use tracer::film::{Layers, TileRect};
-use tracer::output::{encode_exr_layers, ExrMetadata, ImageLayer};
+use tracer::output::{encode_exr_layers, ExrCompression, ExrMetadata, ImageLayer};
 use tracer::render::{prepare_frame, render_tile};
 
 const WORKER_TOKEN: &str = "worker-secret";
@@ -273,7 +273,7 @@ fn tile_exr(
         ExrMetadata::SPP,
         (lease.samples.end - lease.samples.start).to_string(),
     );
-    encode_exr_layers(frame_size, layers, &meta, wanted).unwrap()
+    encode_exr_layers(frame_size, layers, &meta, wanted, ExrCompression::Zip).unwrap()
 }
 
 /// The job's status straight from the API (cheaper to poll than `tessera status`).

@@ -6,7 +6,7 @@
 //! | `output/preview.rs` | the ACES filmic curve, the sRGB OETF, 8-bit RGBA previews and PNGs |
 //! | `output/atomic.rs` | writing a file atomically: temp file, fsync, rename |
 //!
-//! An EXR holds one part, scan lines with ZIP compression, every channel `f32`, named as
+//! An EXR holds one part, scan lines with ZIP compression (or none), every channel `f32`, named as
 //! compositors and the OpenEXR tools expect ([`CHANNEL_NAMES`]). The display window is the
 //! whole frame and the data window is the rectangle of the [`Layers`], so a tile or a
 //! `--region` render keeps its place in the frame. Workers upload tiles as EXR bytes; the
@@ -23,7 +23,7 @@ use crate::film::{Layers, TileRect};
 
 pub use self::exr::{
     check_finite, decode_exr, encode_exr, encode_exr_layers, read_exr, validate_tile, write_exr,
-    ExrImage, ExrMetadata, ImageLayer, CHANNEL_NAMES,
+    ExrCompression, ExrImage, ExrMetadata, ImageLayer, CHANNEL_NAMES,
 };
 pub use self::preview::{
     aces_filmic, encode_preview_png, preview_rgba8, srgb_oetf, write_preview_png,

@@ -9,8 +9,9 @@ use exr::prelude::{
 use glam::{Vec3, Vec4};
 use tracer::film::{Layers, TileRect, NO_HIT_DEPTH};
 use tracer::output::{
-    aces_filmic, check_finite, decode_exr, encode_exr, encode_preview_png, read_exr, srgb_oetf,
-    validate_tile, write_exr, write_preview_png, ExrMetadata, OutputError, CHANNEL_NAMES,
+    aces_filmic, check_finite, decode_exr, encode_exr, encode_exr_layers, encode_preview_png,
+    read_exr, srgb_oetf, validate_tile, write_exr, write_preview_png, ExrCompression, ExrMetadata,
+    ImageLayer, OutputError, CHANNEL_NAMES,
 };
 
 /// A fresh, empty folder for one test.
@@ -21,6 +22,16 @@ fn temp_dir(test: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
+}
+
+/// Every value of every layer, as bits (equality would let -0.0 pass for 0.0).
+fn bits(l: &Layers) -> Vec<u32> {
+    (l.beauty.iter().flat_map(|v| v.to_array()))
+        .chain(l.albedo.iter().flat_map(|v| v.to_array()))
+        .chain(l.normal.iter().flat_map(|v| v.to_array()))
+        .chain(l.depth.iter().copied())
+        .map(f32::to_bits)
+        .collect()
 }
 
 /// Layers whose every value differs and is hard to round: fractions, negatives, tiny and
@@ -85,15 +96,6 @@ fn exr_round_trip_is_exact() {
     let back = read_exr(&path).unwrap();
     assert_eq!(back.frame_size, (37, 21));
     assert_eq!(back.layers.rect, layers.rect);
-    // Bit-exact, not merely equal (equality would let -0.0 pass for 0.0).
-    let bits = |l: &Layers| -> Vec<u32> {
-        (l.beauty.iter().flat_map(|v| v.to_array()))
-            .chain(l.albedo.iter().flat_map(|v| v.to_array()))
-            .chain(l.normal.iter().flat_map(|v| v.to_array()))
-            .chain(l.depth.iter().copied())
-            .map(f32::to_bits)
-            .collect()
-    };
     assert_eq!(bits(&back.layers), bits(&layers));
     assert_eq!(back.layers, layers);
 
@@ -105,6 +107,36 @@ fn exr_round_trip_is_exact() {
         );
     }
     assert!(back.attribute("software").unwrap().starts_with("Tessera "));
+}
+
+#[test]
+fn uncompressed_exr_round_trips_exactly_and_says_so() {
+    let layers = sample_layers(TileRect::new(3, 2, 37, 21));
+    let encode = |c| encode_exr_layers((64, 32), &layers, &meta(), &ImageLayer::ALL, c).unwrap();
+    let (zip, raw) = (
+        encode(ExrCompression::Zip),
+        encode(ExrCompression::Uncompressed),
+    );
+    let back = decode_exr(&raw).unwrap();
+    assert_eq!((back.frame_size, back.layers.rect), ((64, 32), layers.rect));
+    assert_eq!(bits(&back.layers), bits(&layers));
+    assert_eq!(back.attribute(ExrMetadata::SPP), Some("64"));
+    // 13 f32 channels of 37x21 pixels are 40 KB raw; ZIP must have done something.
+    assert!(raw.len() > 13 * 4 * 37 * 21, "{} bytes", raw.len());
+    assert!(
+        zip.len() < raw.len() * 3 / 4,
+        "{} against {}",
+        zip.len(),
+        raw.len()
+    );
+    // What another reader sees.
+    let dir = temp_dir("uncompressed");
+    std::fs::write(dir.join("raw.exr"), &raw).unwrap();
+    let image = read_all_flat_layers_from_file(dir.join("raw.exr")).unwrap();
+    assert_eq!(
+        image.layer_data[0].encoding.compression,
+        Compression::Uncompressed
+    );
 }
 
 #[test]
