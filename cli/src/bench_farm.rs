@@ -29,6 +29,7 @@ use serde::Serialize;
 use tokio::sync::watch;
 use tokio::task::JoinSet;
 use tracer::film::{SampleValue, TileBuffer, TileRect};
+use tracer::output::ExrCompression;
 use worker::api::{Api, ApiError, LeaseAnswer, UploadAnswer};
 
 use crate::bench_rays::Rng;
@@ -363,7 +364,9 @@ async fn simulated_worker(
         let tile = match encoded.entry(rect) {
             Entry::Occupied(known) => known.into_mut(),
             Entry::Vacant(new) => {
-                match worker::render::encode_tile(&lease, &tile_pixels(rect, noise), 0) {
+                // ZIP, as workers on other machines send them.
+                let pixels = tile_pixels(rect, noise);
+                match worker::render::encode_tile(&lease, &pixels, 0, ExrCompression::Zip) {
                     Ok(tile) => new.insert(tile),
                     Err(e) => {
                         tally.error(format!("encoding the tile of task {task}: {e}"));

@@ -2,6 +2,11 @@
 //! cache, then the server), prepare the frame, render the tile on the rayon pool while a
 //! heartbeat task keeps the lease, upload, repeat.
 //!
+//! The upload runs on a task of its own: a rendered tile is encoded and sent while the
+//! next lease is taken and rendered, so the render threads do not wait for the encoding,
+//! the network or the server's frame assembly. One upload is in flight at most: the next
+//! tile's starts once the previous one's has ended.
+//!
 //! What ends a task early, and what follows:
 //!
 //! | event | render | then |
@@ -30,6 +35,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use proto::{Lease, TaskToken, WorkerRegistered, WorkerRegistration};
+use tokio::task::JoinHandle;
+use tracer::film::TileBuffer;
+use tracer::output::ExrCompression;
 use tracer::render::{prepare_frame, PreparedFrame};
 use tracer::scene::Scene;
 use tracing::Instrument;
@@ -40,7 +48,7 @@ use crate::api::{
 use crate::backoff::{jitter, seconds, Backoff, IDLE_PAUSE};
 use crate::cache::{is_digest, sha256_hex, Cached, SceneCache};
 use crate::config::{Fault, WorkerConfig};
-use crate::render::{encode_tile, frame_key, frame_options, render_lease, RenderedTile};
+use crate::render::{encode_tile, frame_key, frame_options, render_lease};
 use crate::stop::Stop;
 
 /// How long the goodbye (`leave`) may take in all before the worker exits anyway; its
@@ -91,6 +99,15 @@ pub async fn run(
         shutdown.await;
         let _ = set_stop.send(true);
     });
+    let compression = config.upload_compression.for_server(&config.server);
+    tracing::info!(
+        "tiles are uploaded {} ({:?})",
+        match compression {
+            ExrCompression::Zip => "ZIP-compressed",
+            ExrCompression::Uncompressed => "uncompressed",
+        },
+        config.upload_compression
+    );
     let mut daemon = Daemon {
         api,
         fault: config.fault,
@@ -106,6 +123,8 @@ pub async fn run(
         scene: None,
         frame: None,
         warned: Vec::new(),
+        compression,
+        delivery: None,
         summary: RunSummary::default(),
     };
     let result = daemon.main_loop().await;
@@ -127,7 +146,27 @@ struct Daemon {
     frame: Option<(Lease, Arc<PreparedFrame>)>,
     /// The frame warnings already logged for the current scene.
     warned: Vec<String>,
+    /// How tiles are compressed for upload.
+    compression: ExrCompression,
+    /// The last tile's upload, running while the next tile renders.
+    delivery: Option<JoinHandle<Delivered>>,
     summary: RunSummary,
+}
+
+/// What became of a rendered tile handed to [`Courier::deliver`]: the summary's count it
+/// adds to, and an error the main loop acts on.
+struct Delivered {
+    fate: Fate,
+    result: Result<(), ApiError>,
+}
+
+/// Which [`RunSummary`] count a task adds to.
+#[derive(Clone, Copy, Debug)]
+enum Fate {
+    Done,
+    Failed,
+    Abandoned,
+    Interrupted,
 }
 
 /// Why a task could not be rendered.
@@ -157,39 +196,22 @@ impl Daemon {
                 }
                 continue;
             };
-            let wait = Duration::from_secs(reg.max_wait_seconds);
-            let asked = Instant::now();
-            let answer = self
-                .api
-                .retry("lease", &self.stop, InFlight::Drop, || {
-                    self.api.lease(reg.worker_id, wait)
-                })
-                .await;
-            let result = match answer {
-                Ok(None) => break,
-                Ok(Some(LeaseAnswer::NoWork)) => {
-                    if asked.elapsed() < IDLE_PAUSE {
-                        self.pause(jitter(IDLE_PAUSE)).await;
-                    }
-                    Ok(())
+            // A finished upload is counted first: its error may be one to act on.
+            let result = if self.delivery.as_ref().is_some_and(JoinHandle::is_finished) {
+                self.settle().await
+            } else {
+                match self.lease_and_work(&reg).await {
+                    Some(result) => result,
+                    None => break,
                 }
-                Ok(Some(LeaseAnswer::Assigned(lease))) => {
-                    // Every line logged about this lease names it.
-                    let span = tracing::info_span!(
-                        "task",
-                        id = lease.token.task_id,
-                        job = lease.job_id,
-                        attempt = lease.token.attempt
-                    );
-                    self.work(&reg, *lease).instrument(span).await
-                }
-                Err(e) => Err(e),
             };
             match result {
                 Ok(()) => trouble.reset(),
                 Err(ApiError::UnknownWorker { message }) => {
                     tracing::warn!("server {}: {message}", self.api.server());
                     self.registered = None;
+                    // An upload under the forgotten registration fails the same way.
+                    self.settle_and_log().await;
                 }
                 Err(e @ ApiError::Unauthorized { .. }) => return Err(e.into()),
                 Err(e) => {
@@ -201,8 +223,86 @@ impl Daemon {
                 }
             }
         }
+        self.settle_and_log().await;
         self.leave().await;
         Ok(())
+    }
+
+    /// Long-polls for a lease and works on it; `None` when shutdown began meanwhile.
+    async fn lease_and_work(&mut self, reg: &WorkerRegistered) -> Option<Result<(), ApiError>> {
+        let wait = Duration::from_secs(reg.max_wait_seconds);
+        let asked = Instant::now();
+        let answer = self
+            .api
+            .retry("lease", &self.stop, InFlight::Drop, || {
+                self.api.lease(reg.worker_id, wait)
+            })
+            .await;
+        Some(match answer {
+            Ok(None) => return None,
+            Ok(Some(LeaseAnswer::NoWork)) => {
+                if asked.elapsed() < IDLE_PAUSE {
+                    self.pause(jitter(IDLE_PAUSE)).await;
+                }
+                Ok(())
+            }
+            Ok(Some(LeaseAnswer::Assigned(lease))) => {
+                // Every line logged about this lease names it.
+                let span = tracing::info_span!(
+                    "task",
+                    id = lease.token.task_id,
+                    job = lease.job_id,
+                    attempt = lease.token.attempt
+                );
+                self.work(reg, *lease).instrument(span).await
+            }
+            Err(e) => Err(e),
+        })
+    }
+
+    /// Waits for the upload in flight, if any, and counts it; returns its error.
+    async fn settle(&mut self) -> Result<(), ApiError> {
+        let Some(delivery) = self.delivery.take() else {
+            return Ok(());
+        };
+        match delivery.await {
+            Ok(Delivered { fate, result }) => {
+                self.count(fate);
+                result
+            }
+            Err(e) => {
+                tracing::error!("an upload task died: {e}");
+                self.count(Fate::Abandoned);
+                Ok(())
+            }
+        }
+    }
+
+    /// [`Daemon::settle`] where its error needs no action, only a line in the log: at
+    /// shutdown, or once the registration it was made under is gone.
+    async fn settle_and_log(&mut self) {
+        if let Err(e) = self.settle().await {
+            tracing::warn!("upload: {e}");
+        }
+    }
+
+    fn count(&mut self, fate: Fate) {
+        let s = &mut self.summary;
+        match fate {
+            Fate::Done => s.tasks_done += 1,
+            Fate::Failed => s.tasks_failed += 1,
+            Fate::Abandoned => s.tasks_abandoned += 1,
+            Fate::Interrupted => s.tasks_interrupted += 1,
+        }
+    }
+
+    /// The courier for `reg`'s uploads and failure reports.
+    fn courier(&self, reg: &WorkerRegistered) -> Courier {
+        Courier {
+            api: self.api.clone(),
+            stop: self.stop.clone(),
+            worker: reg.worker_id,
+        }
     }
 
     /// Sleeps `d`, or less if shutdown begins.
@@ -274,8 +374,8 @@ impl Daemon {
         }
     }
 
-    /// One lease: render and upload it, or report why not. Errors are the ones the main
-    /// loop acts on (unknown worker, 401, unexpected answers).
+    /// One lease: render it and hand it to an upload task, or report why not. Errors are
+    /// the ones the main loop acts on (unknown worker, 401, unexpected answers).
     async fn work(&mut self, reg: &WorkerRegistered, lease: Lease) -> Result<(), ApiError> {
         let task = lease.token.task_id;
         tracing::info!(
@@ -293,6 +393,7 @@ impl Daemon {
             lease.token.attempt
         );
         let cancel = Arc::new(AtomicBool::new(false));
+        let courier = self.courier(reg);
         let mut heartbeat = tokio::spawn(
             heartbeat_until_gone(
                 self.api.clone(),
@@ -327,7 +428,7 @@ impl Daemon {
             _ = stop.wait() => None,
         };
         heartbeat.abort();
-        let rendered = match produced {
+        let (tile, render_ms) = match produced {
             None | Some(Err(TaskError::Stopped)) => {
                 cancel.store(true, Ordering::Relaxed);
                 self.summary.tasks_interrupted += 1;
@@ -344,18 +445,26 @@ impl Daemon {
                 return Err(e);
             }
             Some(Err(TaskError::Failed(message))) => {
-                return self.report_failure(reg, &lease, &message).await;
+                self.summary.tasks_failed += 1;
+                return courier.report_failure(&lease, &message).await;
             }
         };
-        self.upload(reg, &lease, rendered).await
+        // One upload in flight at most: the previous tile's has had this render's time.
+        if let Err(e) = self.settle().await {
+            self.summary.tasks_abandoned += 1;
+            return Err(e);
+        }
+        let delivery = courier.deliver(lease, tile, render_ms, self.compression);
+        self.delivery = Some(tokio::spawn(delivery.in_current_span()));
+        Ok(())
     }
 
-    /// Scene, frame, render, EXR: `Ok` with the tile to upload.
+    /// Scene, frame, render: `Ok` with the tile and its render time in milliseconds.
     async fn produce(
         &mut self,
         lease: &Lease,
         cancel: &Arc<AtomicBool>,
-    ) -> Result<RenderedTile, TaskError> {
+    ) -> Result<(TileBuffer, u64), TaskError> {
         if self.fault == Some(Fault::FailJob(lease.job_id)) {
             return Err(TaskError::Failed(format!(
                 "injected fault: every task of job {} fails",
@@ -371,15 +480,14 @@ impl Daemon {
                 // One pixel's red a thousandth too bright, after averaging.
                 tile.beauty[0].x += 1e-3 * tile.samples[0].max(1) as f32;
             }
-            Some(encode_tile(&job, &tile, ms))
+            Some((tile, ms))
         })
         .await;
         match rendered {
-            Ok(Some(Ok(tile))) => Ok(tile),
+            Ok(Some(tile)) => Ok(tile),
             // Cancelled: only shutdown or a lost lease set the flag, and both end the
             // select in `work` first; this is the same outcome.
             Ok(None) => Err(TaskError::Stopped),
-            Ok(Some(Err(e))) => Err(TaskError::Failed(format!("encoding the tile: {e}"))),
             Err(e) => Err(TaskError::Failed(format!("the render panicked: {e}"))),
         }
     }
@@ -530,26 +638,50 @@ impl Daemon {
         }
         Ok(bytes)
     }
+}
 
-    async fn upload(
-        &mut self,
-        reg: &WorkerRegistered,
-        lease: &Lease,
-        tile: RenderedTile,
-    ) -> Result<(), ApiError> {
+/// Uploads tiles and reports failures for one registration; cheap to clone into the task
+/// that uploads a tile while the next renders.
+struct Courier {
+    api: Api,
+    stop: Stop,
+    worker: u64,
+}
+
+impl Courier {
+    /// Encodes `tile` and uploads it; a tile that cannot be encoded, or that the server
+    /// refuses, is reported as a failure.
+    async fn deliver(
+        self,
+        lease: Lease,
+        tile: TileBuffer,
+        render_ms: u64,
+        compression: ExrCompression,
+    ) -> Delivered {
+        let job = lease.clone();
+        let encoded = tokio::task::spawn_blocking(move || {
+            encode_tile(&job, &tile, render_ms, compression).map_err(|e| e.to_string())
+        })
+        .await
+        .unwrap_or_else(|e| Err(format!("panicked: {e}")));
+        let (exr, meta) = match encoded {
+            Ok(t) => (t.exr, t.meta),
+            Err(e) => {
+                return self
+                    .failed(&lease, &format!("encoding the tile: {e}"))
+                    .await
+            }
+        };
         let task = lease.token.task_id;
-        let meta = tile.meta.clone();
         // Uploads are idempotent: a repeat after a lost answer is stored once.
         let answer = self
             .api
             .retry("upload", &self.stop, InFlight::Finish, || {
-                self.api
-                    .upload(reg.worker_id, task, &meta, tile.exr.clone())
+                self.api.upload(self.worker, task, &meta, exr.clone())
             })
             .await;
-        match answer {
+        let (fate, result) = match answer {
             Ok(Some(UploadAnswer::Stored(ack))) => {
-                self.summary.tasks_done += 1;
                 tracing::info!(
                     "tile uploaded: job {} frame {} tile ({}, {}) samples {}..{} rendered in \
                      {} ms, {} rays{}{}",
@@ -572,46 +704,44 @@ impl Daemon {
                         ""
                     }
                 );
-                Ok(())
+                (Fate::Done, Ok(()))
             }
             Ok(Some(UploadAnswer::LeaseGone(why))) => {
-                self.summary.tasks_abandoned += 1;
                 tracing::warn!("tile of task {task} dropped: lease gone ({why})");
-                Ok(())
+                (Fate::Abandoned, Ok(()))
             }
             Ok(Some(UploadAnswer::Refused(why))) => {
                 let message = format!("the server refused the tile: {why}");
-                self.report_failure(reg, lease, &message).await
+                return self.failed(&lease, &message).await;
             }
             Ok(None) => {
-                self.summary.tasks_interrupted += 1;
                 tracing::info!("shutdown: upload of task {task} abandoned");
-                Ok(())
+                (Fate::Interrupted, Ok(()))
             }
-            Err(e) => {
-                self.summary.tasks_abandoned += 1;
-                Err(e)
-            }
+            Err(e) => (Fate::Abandoned, Err(e)),
+        };
+        Delivered { fate, result }
+    }
+
+    /// [`Courier::report_failure`] as a delivery's end.
+    async fn failed(&self, lease: &Lease, message: &str) -> Delivered {
+        Delivered {
+            fate: Fate::Failed,
+            result: self.report_failure(lease, message).await,
         }
     }
 
-    async fn report_failure(
-        &mut self,
-        reg: &WorkerRegistered,
-        lease: &Lease,
-        message: &str,
-    ) -> Result<(), ApiError> {
+    async fn report_failure(&self, lease: &Lease, message: &str) -> Result<(), ApiError> {
         let task = lease.token.task_id;
         tracing::warn!(
             "task {task} (job {} frame {}) failed: {message}",
             lease.job_id,
             lease.frame
         );
-        self.summary.tasks_failed += 1;
         let answer = self
             .api
             .retry("failure report", &self.stop, InFlight::Finish, || {
-                self.api.failure(reg.worker_id, lease.token, message)
+                self.api.failure(self.worker, lease.token, message)
             })
             .await?;
         match answer {

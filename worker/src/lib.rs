@@ -5,7 +5,7 @@
 //!
 //! | module | what it holds |
 //! |---|---|
-//! | [`config`] | [`WorkerConfig`]: server URL, token, threads, cache folder, name |
+//! | [`config`] | [`WorkerConfig`]: server URL, token, threads, cache folder, name, upload compression |
 //! | [`api`] | the worker routes as typed calls (one outcome enum per call) and the retry loop |
 //! | [`backoff`] | exponential backoff with jitter, and the wait constants |
 //! | [`cache`] | scenes on disk as `<digest>.glb`: verified on read, written atomically |
@@ -24,5 +24,5 @@ mod daemon;
 pub mod render;
 mod stop;
 
-pub use config::{Fault, WorkerConfig};
+pub use config::{Fault, UploadCompression, WorkerConfig};
 pub use daemon::{run, RunSummary};

@@ -8,7 +8,7 @@ use proto::{CameraSpec, Lease, Rect, ResultMetadata, SampleSpan, TaskToken};
 use tracer::animation::AnimationChoice;
 use tracer::film::{SampleRange, TileBuffer, TileRect};
 use tracer::motion::Shutter;
-use tracer::output::{encode_exr, ExrMetadata, OutputError};
+use tracer::output::{encode_exr_layers, ExrCompression, ExrMetadata, ImageLayer, OutputError};
 use tracer::render::{
     render_tile_cancellable, CameraChoice, FrameOptions, NoiseTarget, PreparedFrame, RenderSettings,
 };
@@ -128,10 +128,17 @@ pub fn encode_tile(
     lease: &Lease,
     tile: &TileBuffer,
     render_ms: u64,
+    compression: ExrCompression,
 ) -> Result<RenderedTile, OutputError> {
     let samples = lease.samples.end - lease.samples.start;
     let meta = ExrMetadata::new().with(ExrMetadata::SPP, samples.to_string());
-    let exr = encode_exr((lease.width, lease.height), &tile.resolve(), &meta)?;
+    let exr = encode_exr_layers(
+        (lease.width, lease.height),
+        &tile.resolve(),
+        &meta,
+        &ImageLayer::ALL,
+        compression,
+    )?;
     let meta = ResultMetadata {
         attempt: lease.token.attempt,
         sha256: sha256_hex(&exr),

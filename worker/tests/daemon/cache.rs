@@ -84,13 +84,8 @@ async fn a_new_scene_makes_room_by_removing_the_least_recently_used() {
     let limit = 2 * glb.len() as u64 + glb.len() as u64 / 2;
     let job = create_job(&s, &c, &spec(&scene.digest, 1, 1, 1)).await;
     let w = TestWorker::start_config(worker::WorkerConfig {
-        server: s.base.clone(),
-        token: None,
-        threads: 2,
-        cache_dir: cache.clone(),
         cache_limit_bytes: limit,
-        name: "small-disk".into(),
-        fault: None,
+        ..worker_config(&s.base, &cache)
     });
     wait_until_done(&s, &c, job.id).await;
     let summary = w.shutdown().await.unwrap();

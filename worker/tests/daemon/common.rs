@@ -13,7 +13,7 @@ use tracer::animation::AnimationChoice;
 use tracer::film::{Layers, SampleRange, TileRect};
 use tracer::motion::Shutter;
 use tracer::render::{prepare_frame, render_tile, CameraChoice, FrameOptions, RenderSettings};
-use worker::{RunSummary, WorkerConfig};
+use worker::{RunSummary, UploadCompression, WorkerConfig};
 
 /// Logs of the worker and server when a test runs with `--nocapture` (RUST_LOG to tune).
 pub fn init_logs() {
@@ -104,6 +104,21 @@ pub fn server_config(dir: &Path) -> server::Config {
     server::Config::new(dir.join("data"))
 }
 
+/// A worker of 2 threads for `server` (a base URL), caching scenes in `cache`, with
+/// every other setting at its default.
+pub fn worker_config(server: &str, cache: &Path) -> WorkerConfig {
+    WorkerConfig {
+        server: server.to_string(),
+        token: None,
+        threads: 2,
+        cache_dir: cache.to_path_buf(),
+        cache_limit_bytes: u64::MAX,
+        name: "test-worker".into(),
+        upload_compression: UploadCompression::Auto,
+        fault: None,
+    }
+}
+
 /// A worker daemon running on the test's runtime.
 pub struct TestWorker {
     stop: Option<tokio::sync::oneshot::Sender<()>>,
@@ -114,13 +129,8 @@ impl TestWorker {
     /// Starts `worker::run` against `server` (a base URL), caching scenes in `cache`.
     pub fn start(server: &str, cache: &Path, token: Option<&str>) -> TestWorker {
         Self::start_config(WorkerConfig {
-            server: server.to_string(),
             token: token.map(str::to_string),
-            threads: 2,
-            cache_dir: cache.to_path_buf(),
-            cache_limit_bytes: u64::MAX,
-            name: "test-worker".into(),
-            fault: None,
+            ..worker_config(server, cache)
         })
     }
 

@@ -1,9 +1,11 @@
-//! Jobs rendered by the worker daemon equal a direct render of the whole frame, and a
-//! worker started before its server waits for it.
+//! Jobs rendered by the worker daemon equal a direct render of the whole frame, whether
+//! it uploads tiles uncompressed or ZIPped, and a worker started before its server waits
+//! for it.
 
 use std::time::Duration;
 
 use proto::JobState;
+use worker::{UploadCompression, WorkerConfig};
 
 use crate::common::*;
 
@@ -94,7 +96,12 @@ async fn a_worker_started_before_its_server_waits_and_then_works() {
     // bound but not yet accepting would not do: the kernel completes the handshake and
     // the request just waits, so the retry path would go untested.)
     let addr = free_addr();
-    let w = TestWorker::start(&format!("http://{addr}"), &dir.path().join("cache"), None);
+    // This worker ZIPs its tiles, as for a server on another machine (the others send
+    // them uncompressed to the loopback server): the frame is the same bits.
+    let w = TestWorker::start_config(WorkerConfig {
+        upload_compression: UploadCompression::Zip,
+        ..worker_config(&format!("http://{addr}"), &dir.path().join("cache"))
+    });
     tokio::time::sleep(Duration::from_millis(1200)).await;
     let s = TestServer::start_on(bind_again(addr), server_config(dir.path()));
     let c = client();

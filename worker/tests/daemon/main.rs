@@ -5,3 +5,4 @@ mod cache;
 mod common;
 mod farm;
 mod faults;
+mod pipeline;
