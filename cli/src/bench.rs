@@ -58,6 +58,9 @@ pub enum BenchCommand {
     /// Load-test the farm server: simulated workers long-poll for empty tasks; tasks per
     /// second, lease latency and server memory, and nothing lost or done twice.
     Farm(crate::bench_farm::FarmBenchArgs),
+    /// The farm against a direct render of the same frames on this machine: one worker
+    /// with every thread, then 1, 2 and 4 single-thread workers (the report's farm table).
+    Overhead(bench_scaling::OverheadArgs),
 }
 
 /// The generated mesh is a grid of this many quads a side: 1,002,528 triangles.
@@ -551,22 +554,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             eprintln!("feature costs ...");
             let spp = if args.quick { 8 } else { 32 };
             let features = bench_features::feature_costs(size, spp)?;
-            let work = if args.quick {
-                Work {
-                    frames: 4,
-                    width: 64,
-                    height: 48,
-                    spp: 16,
-                }
-            } else {
-                Work {
-                    frames: 4,
-                    width: 256,
-                    height: 192,
-                    spp: 32,
-                }
-            };
-            let farm = bench_scaling::farm_costs(work, rayon::current_num_threads() as u32)?;
+            // The full report takes the fastest of two runs of each: a shared machine's
+            // speed drifts by more than the farm's overhead.
+            let farm = bench_scaling::farm_costs(
+                Work::for_report(args.quick),
+                rayon::current_num_threads() as u32,
+                if args.quick { 1 } else { 2 },
+            )?;
             (Some(cornell), Some(mesh), features, Some(farm))
         }
         Some(_) => (None, None, Vec::new(), None),
@@ -648,11 +642,13 @@ pub fn markdown(r: &Report) -> String {
             "\n### The farm against a direct render\n\nThe animated demo's frames 1-{} at \
              {}x{}, {} spp, motion blur, in the server's default tiles: a server and worker \
              processes on this machine (from the job's creation to its end) against `tessera render` of the \
-             same frames in one process with as many threads:\n\n{}",
+             same frames in one process with as many threads; the fastest of {} run(s) of each, \
+             taken in turn:\n\n{}",
             f.work.frames,
             f.work.width,
             f.work.height,
             f.work.spp,
+            f.repeats,
             bench_scaling::table(f)
         );
     }

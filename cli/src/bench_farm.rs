@@ -1104,13 +1104,15 @@ mod tests {
             panic!("farm parsed as a scene")
         };
         assert_eq!((f.workers, f.tasks, f.timeout_seconds), (20, 400, 600));
-        let f = match parse(&["bench", "farm"]).unwrap().command {
-            Some(BenchCommand::Farm(f)) => f,
-            None => panic!("no subcommand"),
+        let Some(BenchCommand::Farm(f)) = parse(&["bench", "farm"]).unwrap().command else {
+            panic!("no farm subcommand")
         };
         assert_eq!((f.workers, f.tasks, f.events), (200, 20_000, false));
         assert!(parse(&["bench", "farm", "--workers", "0"]).is_err());
         assert!(parse(&["bench", "farm", "--quick"]).is_err());
+        let b = parse(&["bench", "overhead", "--quick", "--runs", "2"]).unwrap();
+        assert!(matches!(b.command, Some(BenchCommand::Overhead(_))));
+        assert!(parse(&["bench", "overhead", "--runs", "0"]).is_err());
     }
 
     #[test]

@@ -67,6 +67,7 @@ fn main() -> anyhow::Result<()> {
         Command::Render(args) => render::run(args),
         Command::Bench(args) => match args.command {
             Some(bench::BenchCommand::Farm(farm)) => bench_farm::run(farm),
+            Some(bench::BenchCommand::Overhead(o)) => bench_scaling::run(o),
             None => bench::run(args),
         },
         Command::Server(args) => server::run(args, layers),

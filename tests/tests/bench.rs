@@ -123,6 +123,11 @@ fn bench_quick_writes_a_report_with_every_section() {
     let report: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(report["scenes"].as_array().unwrap().len(), 3);
     assert_eq!(report["features"].as_array().unwrap().len(), 6);
+    assert_eq!(
+        report["farm"]["repeats"].as_u64(),
+        Some(1),
+        "quick: one run"
+    );
     let runs = report["farm"]["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 4);
     for run in runs {
