@@ -641,9 +641,10 @@ pub fn markdown(r: &Report) -> String {
         out += &format!(
             "\n### The farm against a direct render\n\nThe animated demo's frames 1-{} at \
              {}x{}, {} spp, motion blur, in the server's default tiles: a server and worker \
-             processes on this machine (from the job's creation to its end) against `tessera render` of the \
-             same frames in one process with as many threads; the fastest of {} run(s) of each, \
-             taken in turn:\n\n{}",
+             processes on this machine (from the job's creation to its end) against `tessera \
+             render` of the same scene file and frames with as many threads (from its start to \
+             its exit); both load the scene and write each frame's EXR and PNG. The fastest of \
+             {} run(s) of each, taken in turn:\n\n{}",
             f.work.frames,
             f.work.width,
             f.work.height,

@@ -566,6 +566,27 @@ pub(crate) fn cpu_seconds(_pid: &str) -> Option<f64> {
     None
 }
 
+/// CPU seconds (user and system) of every child process that has ended and been waited
+/// for: the difference across one child's run is that child's.
+#[cfg(unix)]
+pub(crate) fn children_cpu_seconds() -> Option<f64> {
+    let mut usage = std::mem::MaybeUninit::<libc::rusage>::zeroed();
+    // SAFETY: getrusage writes the struct it is given and nothing else.
+    let usage = unsafe {
+        if libc::getrusage(libc::RUSAGE_CHILDREN, usage.as_mut_ptr()) != 0 {
+            return None;
+        }
+        usage.assume_init()
+    };
+    let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    Some(seconds(usage.ru_utime) + seconds(usage.ru_stime))
+}
+
+#[cfg(not(unix))]
+pub(crate) fn children_cpu_seconds() -> Option<f64> {
+    None
+}
+
 /// The job the bench submits: the still demo scene, 1 sample, 8×8 tiles.
 fn bench_spec(digest: &str, shape: Shape) -> JobSpec {
     let (width, height) = shape.size();

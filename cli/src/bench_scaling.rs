@@ -1,39 +1,31 @@
 //! The farm's cost in `tessera bench`: the same frames of the animated demo rendered by a
-//! server and `tessera worker` processes on this machine, against rendered directly in one
-//! process with as many threads. One worker with every thread gives the farm's overhead;
-//! 1, 2 and 4 single-thread workers against one process of 1, 2 and 4 threads give its
-//! scaling. The farm's time runs from the job's creation to its end (the server's clock:
-//! scene download, leases, uploads and frame assembly included); the direct one from the
-//! first frame's preparation to the last frame's last sample. Each farm run is followed at
-//! once by its direct render, so that both see the same machine (a shared VM's speed
-//! drifts over minutes). CPU seconds compare them too: the workers' and the server's (in
-//! this process) against the direct render's, which a neighbour's load changes less than
-//! wall time.
+//! server and `tessera worker` processes on this machine, against `tessera render` of the
+//! same scene file with as many threads. One worker with every thread gives the farm's
+//! overhead; 1, 2 and 4 single-thread workers against `tessera render` with 1, 2 and 4
+//! threads give its scaling. Both ways load the scene, render, and write each frame's EXR
+//! and PNG. The farm's time runs from the job's creation to its end (the server's clock:
+//! scene download, leases, uploads and frame assembly included; the workers are already
+//! running, as on a farm); the direct one from starting `tessera render` to its exit. Each
+//! farm run is followed at once by its direct render, so that both see the same machine
+//! (a shared VM's speed drifts over minutes). CPU seconds compare them too: the workers'
+//! and the server's (in this process) against the direct render's.
 
 use std::path::Path;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use proto::{FrameRange, JobSpec};
 use serde::Serialize;
 
-use tracer::film::{SampleRange, TileRect};
-use tracer::motion::Shutter;
-use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
-
-use crate::bench_farm::cpu_seconds;
+use crate::bench_farm::{children_cpu_seconds, cpu_seconds};
 use crate::client::Client;
-use crate::demo::{LocalServer, Workers};
+use crate::demo::{tessera_command, LocalServer, Workers};
 
 /// How long workers get to register, and a job to finish, before the bench gives up.
 const WAIT: Duration = Duration::from_secs(600);
 /// How often the bench asks: the job's times come from the server's clock, so polling
 /// faster would only load the server it measures.
 const POLL: Duration = Duration::from_millis(250);
-/// The direct render's tiles, which only share the frame among its threads (the farm's
-/// job takes the server's default tiles, a few seconds of work each, as users' jobs do).
-const DIRECT_TILE: u32 = 32;
 
 /// What is rendered, both ways.
 #[derive(Clone, Copy, Serialize)]
@@ -158,45 +150,40 @@ pub struct FarmCosts {
     pub runs: Vec<FarmRun>,
 }
 
-const SHUTTER: Shutter = Shutter {
-    open: -0.25,
-    close: 0.25,
-};
+/// The shutter of both renders, in frames: motion blur on.
+const SHUTTER: [f64; 2] = [-0.25, 0.25];
 
-/// `work` rendered in this process with `threads` threads, as `tessera render` does: wall
-/// and CPU seconds.
-fn direct_seconds(work: Work, threads: u32) -> anyhow::Result<(f64, Option<f64>)> {
-    let scene = Arc::new(tracer::demo::animated_demo_scene());
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads as usize)
-        .build()?;
-    let (start, cpu) = (Instant::now(), cpu_seconds("self"));
-    pool.install(|| -> anyhow::Result<()> {
-        for frame in 1..=work.frames {
-            let options = FrameOptions {
-                frame,
-                shutter: SHUTTER,
-                width: work.width,
-                height: work.height,
-                ..Default::default()
-            };
-            let prepared = prepare_frame(scene.clone(), &options)?;
-            let rect = TileRect::new(0, 0, work.width, work.height);
-            let samples = SampleRange::new(0, work.spp);
-            let tile = render_region(
-                &prepared,
-                &RenderSettings::default(),
-                rect,
-                samples,
-                DIRECT_TILE,
-                &|_| {},
-            );
-            std::hint::black_box(tile.resolve());
-        }
-        Ok(())
-    })?;
-    let cpu = cpu_seconds("self").zip(cpu).map(|(b, a)| b - a);
-    Ok((start.elapsed().as_secs_f64(), cpu))
+/// `work` rendered by `tessera render` of `scene` (a GLB) with `threads` threads, as a user
+/// runs it: loading the scene, and writing each frame's EXR and PNG into `out`, as the
+/// server does when it assembles a frame. Wall and CPU seconds of the process.
+fn direct_seconds(
+    scene: &Path,
+    out: &Path,
+    work: Work,
+    threads: u32,
+) -> anyhow::Result<(f64, Option<f64>)> {
+    let log = out.with_extension("log");
+    let mut cmd = tessera_command(&log)?;
+    cmd.arg("render")
+        .arg(scene)
+        .args(["--frames", &format!("1-{}", work.frames)])
+        .args(["--size", &format!("{}x{}", work.width, work.height)])
+        .args(["--spp", &work.spp.to_string()])
+        .args(["--shutter", &format!("{},{}", SHUTTER[0], SHUTTER[1])])
+        .args(["--threads", &threads.to_string()])
+        .arg("--out")
+        .arg(out);
+    let (start, cpu) = (Instant::now(), children_cpu_seconds());
+    let status = cmd.status().context("running tessera render")?;
+    let seconds = start.elapsed().as_secs_f64();
+    if !status.success() {
+        bail!(
+            "tessera render failed ({status}); its output is in {}",
+            log.display()
+        );
+    }
+    let cpu = children_cpu_seconds().zip(cpu).map(|(b, a)| b - a);
+    Ok((seconds, cpu))
 }
 
 fn spec(digest: &str, work: Work) -> JobSpec {
@@ -207,7 +194,7 @@ fn spec(digest: &str, work: Work) -> JobSpec {
         step: 1,
     });
     (spec.width, spec.height, spec.spp) = (work.width, work.height, work.spp);
-    spec.shutter = [SHUTTER.open, SHUTTER.close];
+    spec.shutter = SHUTTER;
     spec.name = Some("bench scaling".into());
     spec
 }
@@ -292,6 +279,8 @@ pub fn farm_costs(work: Work, threads: u32, repeats: u32) -> anyhow::Result<Farm
         let client = Client::new(&server.url, None)?;
         let glb = tracer::export::scene_to_glb(&tracer::demo::animated_demo_scene())
             .map_err(|e| anyhow::anyhow!("exporting the demo scene to GLB: {e}"))?;
+        let glb_path = dir.join("demo.glb");
+        std::fs::write(&glb_path, &glb)?;
         let scene = client.upload_scene(glb).await?;
         let mut runs = Vec::new();
         for (workers, threads_each) in [(1, threads), (1, 1), (2, 1), (4, 1)] {
@@ -311,9 +300,11 @@ pub fn farm_costs(work: Work, threads: u32, repeats: u32) -> anyhow::Result<Farm
                     work,
                 )
                 .await?;
+                let (scene, out) = (glb_path.clone(), dir.join("direct"));
                 let total = workers * threads_each;
                 let (direct_seconds, direct_cpu_seconds) =
-                    tokio::task::spawn_blocking(move || direct_seconds(work, total)).await??;
+                    tokio::task::spawn_blocking(move || direct_seconds(&scene, &out, work, total))
+                        .await??;
                 let this = FarmRun {
                     workers,
                     threads_each,
