@@ -179,6 +179,15 @@ enum TaskError {
     Stopped,
 }
 
+/// Aborts a task when dropped.
+struct AbortOnDrop(tokio::task::AbortHandle);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
+}
+
 /// Why the heartbeat task ended (it runs until aborted otherwise).
 enum HeartbeatEnd {
     LeaseGone(String),
@@ -403,6 +412,9 @@ impl Daemon {
             )
             .in_current_span(),
         );
+        // The lease is kept until this task is handed to its upload, which may first wait
+        // for the previous tile's.
+        let _beating = AbortOnDrop(heartbeat.abort_handle());
         let stop = self.stop.clone();
         // The render runs on the rayon pool; when this select drops it, the pool's threads
         // stop at their next pixel because `cancel` is set below.
@@ -427,7 +439,6 @@ impl Daemon {
             }
             _ = stop.wait() => None,
         };
-        heartbeat.abort();
         let (tile, render_ms) = match produced {
             None | Some(Err(TaskError::Stopped)) => {
                 cancel.store(true, Ordering::Relaxed);
