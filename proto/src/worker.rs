@@ -234,8 +234,8 @@ pub struct ResultAck {
 }
 
 /// The headers that go with a result upload (`POST /workers/{id}/tasks/{task}/result`,
-/// body: the tile as EXR bytes, as `tracer::output::encode_exr` writes the resolved
-/// `TileBuffer` with `tessera/spp` set to the samples rendered).
+/// body: the tile as EXR bytes, as `tracer::output::encode_exr_layers` writes the resolved
+/// `TileBuffer`, ZIP-compressed or not, with `tessera/spp` set to the samples rendered).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ResultMetadata {
     /// The lease's attempt (the fencing token's second half).

@@ -1,5 +1,6 @@
 //! What a worker needs to know: where the server is, how to prove who it is, how many
-//! threads to render with, where to cache scenes, and what to be called.
+//! threads to render with, where to cache scenes, what to be called, and how to compress
+//! the tiles it uploads.
 
 use std::net::IpAddr;
 use std::path::PathBuf;

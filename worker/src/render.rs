@@ -122,8 +122,9 @@ pub fn render_lease(
 
 /// The EXR bytes of a rendered tile and the headers that go with them: the tile is
 /// resolved (sums to averages) and written as the data window of the frame, with
-/// `tessera/spp` set to the samples rendered, which is what the server merges passes by.
-/// `rays` is the tracer's own count (camera, bounce and shadow rays).
+/// `tessera/spp` set to the samples rendered, which is what the server merges passes by,
+/// and stored with `compression`. `rays` is the tracer's own count (camera, bounce and
+/// shadow rays).
 pub fn encode_tile(
     lease: &Lease,
     tile: &TileBuffer,
