@@ -295,6 +295,7 @@ impl Daemon {
         }
     }
 
+    /// Adds a task's end to the summary: the one place its task counts change.
     fn count(&mut self, fate: Fate) {
         let s = &mut self.summary;
         match fate {
@@ -422,7 +423,7 @@ impl Daemon {
             r = self.produce(&lease, &cancel) => Some(r),
             end = &mut heartbeat => {
                 cancel.store(true, Ordering::Relaxed);
-                self.summary.tasks_abandoned += 1;
+                self.count(Fate::Abandoned);
                 return match end {
                     Ok(HeartbeatEnd::LeaseGone(why)) => {
                         tracing::warn!(
@@ -442,7 +443,7 @@ impl Daemon {
         let (tile, render_ms) = match produced {
             None | Some(Err(TaskError::Stopped)) => {
                 cancel.store(true, Ordering::Relaxed);
-                self.summary.tasks_interrupted += 1;
+                self.count(Fate::Interrupted);
                 tracing::info!(
                     "shutdown: task {task} (job {} frame {}) aborted, tile dropped",
                     lease.job_id,
@@ -452,17 +453,17 @@ impl Daemon {
             }
             Some(Ok(r)) => r,
             Some(Err(TaskError::Api(e))) => {
-                self.summary.tasks_abandoned += 1;
+                self.count(Fate::Abandoned);
                 return Err(e);
             }
             Some(Err(TaskError::Failed(message))) => {
-                self.summary.tasks_failed += 1;
+                self.count(Fate::Failed);
                 return courier.report_failure(&lease, &message).await;
             }
         };
         // One upload in flight at most: the previous tile's has had this render's time.
         if let Err(e) = self.settle().await {
-            self.summary.tasks_abandoned += 1;
+            self.count(Fate::Abandoned);
             return Err(e);
         }
         let delivery = courier.deliver(lease, tile, render_ms, self.compression);
