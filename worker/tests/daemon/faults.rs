@@ -6,8 +6,10 @@ use proto::JobState;
 
 use crate::common::*;
 
-/// Samples per pixel that keep a 16×16 tile busy for a good second on two threads.
-const SLOW_SPP: u32 = 2048;
+/// Samples per pixel that keep a 16×16 tile busy for a good second on two threads (2048
+/// did when the tracer was four times slower; by now it renders in about 0.25 s, near the
+/// 200 ms the shutdown test waits before it stops the worker).
+const SLOW_SPP: u32 = 8192;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn shutdown_mid_task_gives_the_lease_back_at_once() {
