@@ -243,6 +243,32 @@ mod tests {
     }
 
     #[test]
+    fn sixteen_samples_fill_every_elementary_interval() {
+        // The 4x4 grid is one of five shapes of 16 cells: 1x16, 2x8, 4x4, 8x2 and 16x1.
+        // The thin ones are what make an edge across a pixel (a lamp's) converge fast.
+        for (pixel, dim) in [((3, 5), 0), ((128, 27), 0), ((17, 200), 4), ((0, 0), 9)] {
+            for log_rows in 0..=4 {
+                let (rows, columns) = (1 << log_rows, 16 >> log_rows);
+                let mut cells = [0u32; 16];
+                for i in 0..16 {
+                    let mut s = PixelSampler::new(pixel.0, pixel.1, i, 0, 11);
+                    s.start_dimension(dim);
+                    let p = s.next_2d();
+                    let (r, c) = (
+                        (p.y * rows as f32) as usize,
+                        (p.x * columns as f32) as usize,
+                    );
+                    cells[r * columns + c] += 1;
+                }
+                assert!(
+                    cells.iter().all(|&c| c == 1),
+                    "pixel {pixel:?}, dimension {dim}, {rows} rows: {cells:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn integrates_a_smooth_function_better_than_random() {
         // ∫∫ sin(πx) sin(πy) = 4/π²; with 256 stratified samples the error should be far
         // below the ~1/16 of independent random sampling.
