@@ -61,6 +61,29 @@ pub enum BenchCommand {
     /// The farm against a direct render of the same frames on this machine: one worker
     /// with every thread, then 1, 2 and 4 single-thread workers (the report's farm table).
     Overhead(bench_scaling::OverheadArgs),
+    /// The efficiency target's measurement alone: the measured Cornell box at 256x256,
+    /// depth 8, in camera paths per second and MSE x seconds (the report's Cornell section).
+    Cornell(CornellArgs),
+}
+
+#[derive(Args)]
+pub struct CornellArgs {
+    /// 4 spp against a 64-spp reference instead of 16 against 1024.
+    #[arg(long)]
+    pub quick: bool,
+    /// Renders measured, each with its own seed: the MSE is their mean, the time the
+    /// fastest's.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=20))]
+    pub runs: u32,
+}
+
+/// Runs the Cornell box's efficiency measurement and prints the report's section.
+pub fn run_cornell(args: CornellArgs) -> anyhow::Result<()> {
+    print!(
+        "{}",
+        cornell_section(&cornell_efficiency(args.quick, args.runs)?)
+    );
+    Ok(())
 }
 
 /// The generated mesh is a grid of this many quads a side: 1,002,528 triangles.
@@ -191,12 +214,19 @@ pub struct CornellEfficiency {
     pub spp: u32,
     /// Samples per pixel of its reference.
     pub reference_spp: u32,
+    /// Renders measured, each with its own seed; the time is the fastest's.
+    pub runs: u32,
     /// Camera paths per second.
     pub paths_per_second: f64,
-    /// Mean squared error of the beauty RGB.
+    /// Mean squared error of the beauty RGB, the mean over the renders.
     pub mse: f64,
+    /// The standard error of that mean (0 for one render).
+    pub mse_standard_error: f64,
     /// MSE times seconds: lower is more efficient.
     pub mse_times_seconds: f64,
+    /// The share of the first render's squared error in its worst 0.1% of pixels: near 1
+    /// when a few pixels (fireflies, an edge) decide the MSE.
+    pub worst_pixels_share: f64,
 }
 
 /// Root-mean-square error of the beauty RGB of `a` against `reference`.
@@ -213,6 +243,24 @@ fn mse(a: &Layers, reference: &Layers) -> f64 {
         .map(|(x, r)| (x.truncate() - r.truncate()).as_dvec3().length_squared() / 3.0)
         .sum();
     sum / a.beauty.len() as f64
+}
+
+/// The share of the squared error of `a` against `reference` held by its worst `fraction`
+/// of pixels.
+fn share_of_worst_pixels(a: &Layers, reference: &Layers, fraction: f64) -> f64 {
+    let mut errors: Vec<f64> = a
+        .beauty
+        .iter()
+        .zip(&reference.beauty)
+        .map(|(x, r)| (x.truncate() - r.truncate()).as_dvec3().length_squared())
+        .collect();
+    let total: f64 = errors.iter().sum();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    errors.sort_by(|x, y| y.total_cmp(x));
+    let worst = ((errors.len() as f64 * fraction).ceil() as usize).min(errors.len());
+    errors[..worst].iter().sum::<f64>() / total
 }
 
 /// pbrt's relative MSE: (x - r)² / (r² + 0.01), averaged over pixels and channels.
@@ -470,8 +518,12 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
 }
 
 /// The measured Cornell box at 256x256 and max depth 8, as the efficiency target states
-/// it: camera paths per second, and MSE × seconds against a reference.
-fn cornell_efficiency(quick: bool) -> anyhow::Result<CornellEfficiency> {
+/// it: camera paths per second, and MSE × seconds against a reference. Each of `runs`
+/// renders has a seed of its own, since one render's MSE moves by about 8% from seed to
+/// seed (a few pixels on the lamp's edges hold much of it): the MSE is their mean. The
+/// time is the fastest render's, which a busy neighbour on a shared machine disturbs
+/// least.
+fn cornell_efficiency(quick: bool, runs: u32) -> anyhow::Result<CornellEfficiency> {
     let (spp, reference_spp) = if quick { (4, 64) } else { (16, 1024) };
     let options = FrameOptions {
         width: 256,
@@ -481,27 +533,53 @@ fn cornell_efficiency(quick: bool) -> anyhow::Result<CornellEfficiency> {
     let frame = prepare_frame(Arc::new(tracer::demo::cornell_box()), &options)?;
     let settings = RenderSettings {
         max_depth: 8,
-        seed: SEED,
+        seed: REFERENCE_SEED,
         ..RenderSettings::DEFAULT
     };
     eprintln!("cornell 256x256: reference at {reference_spp} spp ...");
-    let (reference, _, _) = render(
-        &frame,
-        RenderSettings {
-            seed: REFERENCE_SEED,
-            ..settings
-        },
-        reference_spp,
-    );
-    let (image, _, seconds) = render(&frame, settings, spp);
-    let mse = mse(&image, &reference);
+    let (reference, _, _) = render(&frame, settings, reference_spp);
+    let mut seconds = f64::INFINITY;
+    let mut errors = Vec::new();
+    let mut worst_pixels_share = 0.0;
+    for seed in (SEED..).take(runs as usize) {
+        let (image, _, s) = render(&frame, RenderSettings { seed, ..settings }, spp);
+        seconds = seconds.min(s);
+        errors.push(mse(&image, &reference));
+        if seed == SEED {
+            worst_pixels_share = share_of_worst_pixels(&image, &reference, 0.001);
+        }
+    }
+    let n = errors.len() as f64;
+    let mse = errors.iter().sum::<f64>() / n;
+    let variance = errors.iter().map(|e| (e - mse).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
     Ok(CornellEfficiency {
         spp,
         reference_spp,
+        runs,
         paths_per_second: 256.0 * 256.0 * f64::from(spp) / seconds,
         mse,
+        mse_standard_error: (variance / n).sqrt(),
         mse_times_seconds: mse * seconds,
+        worst_pixels_share,
     })
+}
+
+/// The report's section on the efficiency target.
+fn cornell_section(c: &CornellEfficiency) -> String {
+    format!(
+        "\n### Cornell box, 256x256, max depth 8\n\n\
+         {:.3} M camera paths/s at {} spp (the fastest of {} renders, each with its own \
+         seed); MSE {:.3e} (their mean; standard error {:.1e}) against {} spp; MSE x seconds \
+         {:.3e}. The worst 0.1% of pixels hold {:.0}% of the first render's squared error.\n",
+        c.paths_per_second / 1e6,
+        c.spp,
+        c.runs,
+        c.mse,
+        c.mse_standard_error,
+        c.reference_spp,
+        c.mse_times_seconds,
+        100.0 * c.worst_pixels_share
+    )
 }
 
 fn machine() -> Machine {
@@ -548,7 +626,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         .collect::<anyhow::Result<_>>()?;
     let (cornell, big_mesh, features, farm) = match args.scene {
         None => {
-            let cornell = cornell_efficiency(args.quick)?;
+            let cornell = cornell_efficiency(args.quick, 5)?;
             eprintln!("a generated mesh of 1M triangles ...");
             let mesh = bench_rays::big_mesh(BIG_MESH_SIDE)?;
             eprintln!("feature costs ...");
@@ -615,16 +693,7 @@ pub fn markdown(r: &Report) -> String {
         m.cpu, m.threads, m.os, m.version, r.command
     );
     if let Some(c) = &r.cornell {
-        out += &format!(
-            "\n### Cornell box, 256x256, max depth 8\n\n\
-             {:.3} M camera paths/s at {} spp; MSE {:.3e} against {} spp; \
-             MSE x seconds {:.3e}.\n",
-            c.paths_per_second / 1e6,
-            c.spp,
-            c.mse,
-            c.reference_spp,
-            c.mse_times_seconds
-        );
+        out += &cornell_section(c);
     }
     if let Some(b) = &r.big_mesh {
         out += &format!(
@@ -767,6 +836,22 @@ pub fn markdown(r: &Report) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One pixel in a thousand off by 30 and the rest by 1 (each of three channels): that
+    /// pixel holds 900 / (900 + 999) of the squared error, and the MSE is their mean.
+    #[test]
+    fn the_worst_pixels_share_of_the_error() {
+        let reference = Layers::new(TileRect::new(0, 0, 100, 10));
+        let mut image = reference.clone();
+        for (i, b) in image.beauty.iter_mut().enumerate() {
+            let off = if i == 437 { 30.0 } else { 1.0 };
+            *b = glam::Vec4::new(off, off, off, 1.0);
+        }
+        let share = share_of_worst_pixels(&image, &reference, 0.001);
+        assert!((share - 900.0 / 1899.0).abs() < 1e-12, "{share}");
+        assert_eq!(share_of_worst_pixels(&reference, &reference, 0.001), 0.0);
+        assert!((mse(&image, &reference) - 1899.0 / 1000.0).abs() < 1e-12);
+    }
 
     fn p(value: u32, seconds: f64, rmse: f64) -> Point {
         Point {

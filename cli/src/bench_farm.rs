@@ -1134,6 +1134,12 @@ mod tests {
         let b = parse(&["bench", "overhead", "--quick", "--runs", "2"]).unwrap();
         assert!(matches!(b.command, Some(BenchCommand::Overhead(_))));
         assert!(parse(&["bench", "overhead", "--runs", "0"]).is_err());
+        let b = parse(&["bench", "cornell", "--quick", "--runs", "5"]).unwrap();
+        let Some(BenchCommand::Cornell(c)) = b.command else {
+            panic!("no cornell subcommand")
+        };
+        assert_eq!((c.quick, c.runs), (true, 5));
+        assert!(parse(&["bench", "cornell", "--runs", "21"]).is_err());
     }
 
     #[test]

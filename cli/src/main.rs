@@ -68,6 +68,7 @@ fn main() -> anyhow::Result<()> {
         Command::Bench(args) => match args.command {
             Some(bench::BenchCommand::Farm(farm)) => bench_farm::run(farm),
             Some(bench::BenchCommand::Overhead(o)) => bench_scaling::run(o),
+            Some(bench::BenchCommand::Cornell(c)) => bench::run_cornell(c),
             None => bench::run(args),
         },
         Command::Server(args) => server::run(args, layers),
