@@ -527,9 +527,9 @@ fn russian_roulette_saves_rays_without_changing_the_mean() {
 
 /// The Cornell box's lamp lights the room below it and nothing above, as the measured
 /// box's does: seen from the 2 mm gap between lamp and ceiling, the ceiling there gets
-/// only what leaks in from the sides. (Lit from both faces, the gap read about 29, the
-/// ceiling and the lamp's back reflecting each other, and showed through a sliver at the
-/// lamp's near edge.)
+/// only what leaks in from the sides. (With the lamp lit from both faces this read 19.5:
+/// the ceiling and the lamp's back reflect each other there, and the camera saw it through
+/// a sliver at the lamp's near edge.)
 #[test]
 fn the_cornell_lamp_lights_only_the_room_below() {
     let mut scene = tracer::demo::cornell_box();
