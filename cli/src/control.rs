@@ -262,6 +262,11 @@ pub fn job_details(j: &JobStatus, frames: &FrameList, now_ms: i64) -> String {
         &["FRAME", "STATE", "TASKS", "SPP", "NOISE", "FILE"],
         &rows,
     ));
+    for f in &frames.frames {
+        if let Some(why) = &f.failure {
+            out.push_str(&format!("\nframe {} failed to assemble: {why}", f.frame));
+        }
+    }
     out
 }
 
@@ -474,6 +479,7 @@ mod tests {
                     spp_mean: Some(37.25),
                     noise: Some(0.0123),
                     file: "frame_0001.exr".into(),
+                    failure: None,
                 },
                 FrameStatus {
                     frame: 2,
@@ -483,6 +489,7 @@ mod tests {
                     spp_mean: None,
                     noise: None,
                     file: "frame_0002.exr".into(),
+                    failure: None,
                 },
             ],
         };

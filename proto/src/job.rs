@@ -436,6 +436,9 @@ pub struct FrameStatus {
     pub noise: Option<f64>,
     /// The EXR's file name in the job's output folder (`frame_0001.exr`).
     pub file: String,
+    /// Why its assembly failed, if it did (it is assembled again when the job is retried).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failure: Option<String>,
 }
 
 /// `GET /jobs/{id}/frames`.

@@ -4,17 +4,25 @@
 //! pasted into the frame, and the frame is written atomically as a multi-layer EXR plus a
 //! PNG preview. When a pass of a frame completes before the frame does, a progressive PNG
 //! preview is written from the passes in so far.
+//!
+//! A frame is never held whole: it is made and written [`BAND_ROWS`] rows at a time,
+//! reading only those rows of each tile, so what assembly holds ([`assembly_bytes`]) grows
+//! with the frame's width and tile size but not with its height; a job whose frames would
+//! not fit the server's assembly memory is refused when it is submitted.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use glam::{Vec3, Vec4};
 use proto::{JobSpec, OutputLayer, ResultMetadata};
-use tracer::film::{Layers, SamplingSummary, TileRect, NO_HIT_DEPTH, NO_NOISE_ESTIMATE};
-use tracer::output::{self, ExrMetadata, ImageLayer};
+use tracer::film::{
+    Layers, SamplingSummary, SamplingTally, TileRect, NO_HIT_DEPTH, NO_NOISE_ESTIMATE,
+};
+use tracer::output::{self, ExrCompression, ExrMetadata, ExrTarget, ImageLayer, PreviewTarget};
 
-use crate::error::{Error, Result, StorageProblem};
+use crate::error::{Error, Result};
+use crate::limits::MAX_TILE_SIZE;
 use crate::scheduler::TaskRow;
-use crate::store::{self, sha256_hex, Store};
+use crate::store::{sha256_hex, Store};
 
 /// Checks an uploaded tile against its task and returns its pixels.
 pub fn check_tile(
@@ -56,49 +64,116 @@ pub fn check_tile(
 /// standard errors of a weighted mean do: `sqrt(Σ (n_k e_k)²) / Σ n_k` over the passes
 /// that have one (a pass of a single sample has none).
 pub fn merge_passes(parts: &[Layers]) -> Layers {
-    if let [only] = parts {
-        return only.clone();
+    let mut merge = PassMerge::default();
+    for part in parts {
+        merge.add(part.clone());
     }
-    let rect = parts[0].rect;
-    let mut out = Layers::new(rect);
-    for i in 0..rect.area() {
-        let mut beauty = Vec4::ZERO;
-        let mut albedo = Vec3::ZERO;
-        let mut normal = Vec3::ZERO;
-        let (mut depth, mut depth_weight) = (0.0f32, 0.0f32);
-        let (mut total, mut noise_sq, mut noise_weight) = (0.0f32, 0.0f64, 0.0f64);
-        for layers in parts {
+    merge.finish()
+}
+
+/// [`merge_passes`] one pass at a time, holding running sums instead of every pass: the
+/// same sums in the same order, so the same bits. A single pass is kept as it is.
+#[derive(Default)]
+struct PassMerge {
+    first: Option<Layers>,
+    sums: Option<PassSums>,
+}
+
+/// Per-pixel running sums of [`PassMerge`].
+struct PassSums {
+    rect: TileRect,
+    total: Vec<f32>,
+    beauty: Vec<Vec4>,
+    albedo: Vec<Vec3>,
+    normal: Vec<Vec3>,
+    depth: Vec<(f32, f32)>,
+    noise: Vec<(f64, f64)>,
+}
+
+impl PassMerge {
+    /// Adds the next pass (the same rectangle as the others).
+    fn add(&mut self, part: Layers) {
+        if self.first.is_none() && self.sums.is_none() {
+            self.first = Some(part);
+            return;
+        }
+        let sums = self.sums.get_or_insert_with(|| PassSums::new(part.rect));
+        if let Some(first) = self.first.take() {
+            sums.add(&first);
+        }
+        sums.add(&part);
+    }
+
+    /// The merged layers (empty layers of no rectangle if nothing was added).
+    fn finish(self) -> Layers {
+        match (self.first, self.sums) {
+            (Some(only), _) => only,
+            (None, Some(sums)) => sums.finish(),
+            (None, None) => Layers::new(TileRect::new(0, 0, 0, 0)),
+        }
+    }
+}
+
+impl PassSums {
+    fn new(rect: TileRect) -> Self {
+        let n = rect.area();
+        PassSums {
+            rect,
+            total: vec![0.0; n],
+            beauty: vec![Vec4::ZERO; n],
+            albedo: vec![Vec3::ZERO; n],
+            normal: vec![Vec3::ZERO; n],
+            depth: vec![(0.0, 0.0); n],
+            noise: vec![(0.0, 0.0); n],
+        }
+    }
+
+    fn add(&mut self, layers: &Layers) {
+        assert_eq!(
+            layers.rect, self.rect,
+            "passes of one tile cover one rectangle"
+        );
+        for i in 0..self.rect.area() {
             let w = layers.samples[i];
-            total += w;
-            beauty += layers.beauty[i] * w;
-            albedo += layers.albedo[i] * w;
-            normal += layers.normal[i] * w;
+            self.total[i] += w;
+            self.beauty[i] += layers.beauty[i] * w;
+            self.albedo[i] += layers.albedo[i] * w;
+            self.normal[i] += layers.normal[i] * w;
             if layers.depth[i] < NO_HIT_DEPTH {
-                depth += layers.depth[i] * w;
-                depth_weight += w;
+                self.depth[i].0 += layers.depth[i] * w;
+                self.depth[i].1 += w;
             }
             if layers.noise[i] < NO_NOISE_ESTIMATE {
-                noise_sq += (f64::from(w) * f64::from(layers.noise[i])).powi(2);
-                noise_weight += f64::from(w);
+                self.noise[i].0 += (f64::from(w) * f64::from(layers.noise[i])).powi(2);
+                self.noise[i].1 += f64::from(w);
             }
         }
-        let inv = if total > 0.0 { total.recip() } else { 0.0 };
-        out.samples[i] = total;
-        out.noise[i] = if noise_weight > 0.0 {
-            (noise_sq.sqrt() / noise_weight) as f32
-        } else {
-            NO_NOISE_ESTIMATE
-        };
-        out.beauty[i] = beauty * inv;
-        out.albedo[i] = albedo * inv;
-        out.normal[i] = normal.normalize_or_zero();
-        out.depth[i] = if depth_weight > 0.0 {
-            depth / depth_weight
-        } else {
-            NO_HIT_DEPTH
-        };
     }
-    out
+
+    fn finish(self) -> Layers {
+        let mut out = Layers::new(self.rect);
+        for i in 0..self.rect.area() {
+            let total = self.total[i];
+            let inv = if total > 0.0 { total.recip() } else { 0.0 };
+            let (noise_sq, noise_weight) = self.noise[i];
+            let (depth, depth_weight) = self.depth[i];
+            out.samples[i] = total;
+            out.noise[i] = if noise_weight > 0.0 {
+                (noise_sq.sqrt() / noise_weight) as f32
+            } else {
+                NO_NOISE_ESTIMATE
+            };
+            out.beauty[i] = self.beauty[i] * inv;
+            out.albedo[i] = self.albedo[i] * inv;
+            out.normal[i] = self.normal[i].normalize_or_zero();
+            out.depth[i] = if depth_weight > 0.0 {
+                depth / depth_weight
+            } else {
+                NO_HIT_DEPTH
+            };
+        }
+        out
+    }
 }
 
 /// The accepted tile of a task, as stored.
@@ -108,85 +183,209 @@ pub fn read_tile(store: &Store, job: u64, task: u64) -> Result<Layers> {
     Ok(image.layers)
 }
 
-/// A frame as built from its tiles.
-pub struct BuiltFrame {
-    /// Its layers.
-    pub layers: Layers,
-    /// Sample passes merged into it (the passes of its tiles are `0..passes`).
-    pub passes: u32,
+/// Rows of a frame assembled at a time: four ZIP blocks, so that a band's blocks are
+/// compressed on four threads. What a frame's assembly holds grows with this and with
+/// the frame's width, never with its height.
+pub const BAND_ROWS: u32 = 4 * output::BLOCK_ROWS;
+
+/// Bytes of one pixel of [`Layers`]: 13 `f32` channels.
+const LAYER_BYTES: u64 = 13 * 4;
+/// Bytes of one pixel of the running sums of several passes.
+const SUM_BYTES: u64 = 4 + 16 + 12 + 12 + 8 + 16;
+/// Held besides the pixels: code, the database's cache, buffers of files and the PNG
+/// encoder.
+const ASSEMBLY_OVERHEAD_BYTES: u64 = 16 << 20;
+
+/// The most memory that assembling one frame of `spec` takes, in bytes: a band of the
+/// frame (its layers, its preview rows, its EXR blocks before and after compression) and
+/// one tile's share of it being merged (a pass read, the first pass kept, the sums, the
+/// merged result). It does not grow with the frame's height, the number of tiles or of
+/// passes.
+pub fn assembly_bytes(spec: &JobSpec) -> u64 {
+    let band = u64::from(BAND_ROWS);
+    let width = u64::from(spec.width);
+    // A tile's rows are read in whole blocks: up to a block more at either end.
+    let tile_rows = band + 2 * u64::from(output::BLOCK_ROWS);
+    let tile = u64::from(spec.tile_size.unwrap_or(MAX_TILE_SIZE).min(spec.width));
+    width * band * (3 * LAYER_BYTES + 4)
+        + tile * tile_rows * (3 * LAYER_BYTES + SUM_BYTES)
+        + ASSEMBLY_OVERHEAD_BYTES
+}
+
+/// Refuses a spec whose frames this server cannot assemble within `budget` bytes (see
+/// [`assembly_bytes`]), naming the field that sets the size.
+pub fn check_assembly_memory(spec: &JobSpec, budget: u64) -> Result<()> {
+    let needed = assembly_bytes(spec);
+    if needed <= budget {
+        return Ok(());
+    }
+    let mib = |b: u64| b.div_ceil(1 << 20);
+    Err(Error::Invalid {
+        field: "width".into(),
+        message: format!(
+            "assembling a frame {} pixels wide (tiles of {}) takes {} MiB, over this server's \
+             assembly memory of {} MiB (tessera server --assembly-memory); use a smaller \
+             width or tile_size, or give the server more",
+            spec.width,
+            spec.tile_size.unwrap_or(MAX_TILE_SIZE),
+            mib(needed),
+            mib(budget)
+        ),
+    })
+}
+
+/// Where a frame's pixels come from: its accepted tiles, by tile then pass, and for a
+/// time-budget frame assembled before, its merged frame (only the passes it lacks are
+/// read from tiles). It makes the frame one band at a time.
+pub struct FrameSource<'a> {
+    store: &'a Store,
+    spec: &'a JobSpec,
+    frame_no: i32,
+    /// The merged frame and the passes it holds.
+    merged: Option<(PathBuf, u32)>,
+    /// The tasks whose tiles are read: those of passes the merged frame lacks.
+    fresh: Vec<&'a TaskRow>,
+    /// Passes the frame holds once made.
+    passes: u32,
+    /// Asked before each band: an error stops the assembly (the job went away).
+    proceed: Box<dyn Fn() -> Result<()> + 'a>,
+}
+
+impl<'a> FrameSource<'a> {
+    /// The source of frame `frame_no` of `job` from `tasks` (its done tasks, by tile then
+    /// pass).
+    pub fn new(
+        store: &'a Store,
+        spec: &'a JobSpec,
+        job: u64,
+        frame_no: i32,
+        tasks: &'a [TaskRow],
+    ) -> Result<Self> {
+        let merged = merged_passes(store, job, frame_no)?;
+        let held = merged.as_ref().map_or(0, |m| m.1);
+        let fresh: Vec<&TaskRow> = tasks.iter().filter(|t| t.pass >= held).collect();
+        let passes = fresh.iter().map(|t| t.pass + 1).fold(held, u32::max);
+        Ok(FrameSource {
+            store,
+            spec,
+            frame_no,
+            merged,
+            fresh,
+            passes,
+            proceed: Box::new(|| Ok(())),
+        })
+    }
+
+    /// `self`, asking `proceed` before each band.
+    pub fn with_proceed(mut self, proceed: impl Fn() -> Result<()> + 'a) -> Self {
+        self.proceed = Box::new(proceed);
+        self
+    }
+
+    /// Sample passes merged into the frame (the passes of its tiles are `0..passes`).
+    pub fn passes(&self) -> u32 {
+        self.passes
+    }
+
+    /// The frame's size.
+    fn size(&self) -> (u32, u32) {
+        (self.spec.width, self.spec.height)
+    }
+
+    /// The frame's pixels in `band` (full-width rows).
+    pub fn band(&self, band: TileRect) -> Result<Layers> {
+        (self.proceed)()?;
+        let rows = band.y..band.y + band.height;
+        let mut out = match &self.merged {
+            Some((path, _)) => read_rows(path, rows.clone(), self.frame_no)?,
+            None => Layers::new(band),
+        };
+        for group in self.fresh.chunk_by(|a, b| a.tile == b.tile) {
+            let rect = group[0].rect;
+            let top = rect.y.max(band.y);
+            let bottom = (rect.y + rect.height).min(band.y + band.height);
+            if top >= bottom {
+                continue;
+            }
+            let sub = TileRect::new(rect.x, top, rect.width, bottom - top);
+            let mut merge = PassMerge::default();
+            if self.merged.is_some() {
+                merge.add(out.crop(sub));
+            }
+            for t in group {
+                let path = self.store.tile(t.job_id, t.id);
+                let part = output::read_exr_rows(&path, top..bottom)
+                    .map_err(|e| {
+                        Error::BadFrame(format!("reading the tile of task {}: {e}", t.id))
+                    })?
+                    .layers;
+                if part.rect != sub {
+                    return Err(Error::BadFrame(format!(
+                        "the tile of task {} covers {:?}, not its task's {:?}",
+                        t.id, part.rect, sub
+                    )));
+                }
+                merge.add(part);
+            }
+            out.paste(&merge.finish());
+        }
+        Ok(out)
+    }
+
+    /// What the frame's samples reached, over all its pixels.
+    pub fn sampling(&self) -> Result<SamplingSummary> {
+        let mut tally = SamplingTally::default();
+        for band in output::frame_bands(self.size(), BAND_ROWS) {
+            tally.add(&self.band(band)?);
+        }
+        Ok(tally.summary())
+    }
+}
+
+/// Rows of a merged frame.
+fn read_rows(path: &Path, rows: std::ops::Range<u32>, frame_no: i32) -> Result<Layers> {
+    output::read_exr_rows(path, rows)
+        .map(|image| image.layers)
+        .map_err(|e| Error::BadFrame(format!("reading the merged frame {frame_no}: {e}")))
 }
 
 /// The header attribute of a merged frame that says how many passes it holds.
 const MERGED_PASSES: &str = "tessera/passes";
 
-/// Builds a frame (or, for a preview, as much of it as is in) from the accepted tiles of
-/// `tasks` (one frame's done tasks, by tile then pass). A time-budget frame that was
-/// assembled before starts from its merged frame, and only the passes it lacks are read.
-pub fn build_frame(
-    store: &Store,
-    spec: &JobSpec,
-    job: u64,
-    frame_no: i32,
-    tasks: &[TaskRow],
-) -> Result<BuiltFrame> {
-    let (mut frame, merged) = match read_merged(store, job, frame_no)? {
-        Some(built) => (built.layers, built.passes),
-        None => (Layers::new(TileRect::new(0, 0, spec.width, spec.height)), 0),
-    };
-    let fresh: Vec<&TaskRow> = tasks.iter().filter(|t| t.pass >= merged).collect();
-    let mut passes = merged;
-    for group in fresh.chunk_by(|a, b| a.tile == b.tile) {
-        let mut parts = Vec::with_capacity(group.len() + 1);
-        if merged > 0 {
-            parts.push(frame.crop(group[0].rect));
-        }
-        for t in group {
-            parts.push(read_tile(store, t.job_id, t.id)?);
-            passes = passes.max(t.pass + 1);
-        }
-        frame.paste(&merge_passes(&parts));
-    }
-    Ok(BuiltFrame {
-        layers: frame,
-        passes,
-    })
-}
-
-/// The merged frame of a time-budget job's frame, if it was assembled before.
-fn read_merged(store: &Store, job: u64, frame_no: i32) -> Result<Option<BuiltFrame>> {
+/// The merged frame of a time-budget job's frame and the passes it holds, if it was
+/// assembled before.
+fn merged_passes(store: &Store, job: u64, frame_no: i32) -> Result<Option<(PathBuf, u32)>> {
     let path = store.merged_frame(job, frame_no);
     if !path.exists() {
         return Ok(None);
     }
-    let image = output::read_exr(&path)
-        .map_err(|e| Error::Internal(format!("reading the merged frame {frame_no}: {e}")))?;
+    // Reading no rows reads the header alone.
+    let image = output::read_exr_rows(&path, 0..0)
+        .map_err(|e| Error::BadFrame(format!("reading the merged frame {frame_no}: {e}")))?;
     let passes = image
         .attribute(MERGED_PASSES)
         .and_then(|p| p.parse().ok())
         .ok_or_else(|| {
-            Error::Internal(format!(
+            Error::BadFrame(format!(
                 "the merged frame {frame_no} of job {job} does not say its passes"
             ))
         })?;
-    Ok(Some(BuiltFrame {
-        layers: image.layers,
-        passes,
-    }))
+    Ok(Some((path, passes)))
 }
 
 /// Keeps every layer of a time-budget frame, atomically, for its next pass to merge into.
-pub fn write_merged(
-    store: &Store,
-    job: u64,
-    frame_no: i32,
-    spec: &JobSpec,
-    frame: &BuiltFrame,
-) -> Result<()> {
-    let meta = ExrMetadata::new().with(MERGED_PASSES, frame.passes.to_string());
-    let bytes = output::encode_exr((spec.width, spec.height), &frame.layers, &meta)
-        .map_err(|e| Error::Internal(format!("encoding the merged frame {frame_no}: {e}")))?;
-    store::write_atomic(&store.merged_frame(job, frame_no), &bytes)?;
-    Ok(())
+/// A source made after this reads the merged frame alone.
+pub fn write_merged(store: &Store, job: u64, source: &FrameSource) -> Result<()> {
+    let meta = ExrMetadata::new().with(MERGED_PASSES, source.passes().to_string());
+    let path = store.merged_frame(job, source.frame_no);
+    let target = ExrTarget {
+        path: &path,
+        meta: &meta,
+        layers: &ImageLayer::ALL,
+        compression: ExrCompression::Zip,
+    };
+    write_bands(source, Some(target), None)
+        .map_err(|e| e.context(format!("writing the merged frame {}", source.frame_no)))
 }
 
 /// What a frame's EXR header says beyond its spec.
@@ -200,17 +399,16 @@ pub struct FrameFacts {
 }
 
 /// Writes the final frame: `frame_NNNN.exr` with the job's layers and `frame_NNNN.png`,
-/// both atomically. The EXR's header says how it was rendered: the settings, the samples
-/// and estimated error reached, the render time and the scene's features.
+/// both atomically, in one pass over the frame's bands. The EXR's header says how it was
+/// rendered: the settings, the samples and estimated error reached, the render time and
+/// the scene's features.
 pub fn write_frame(
     store: &Store,
     job: u64,
-    frame_no: i32,
-    spec: &JobSpec,
-    frame: &Layers,
+    source: &FrameSource,
     facts: &FrameFacts,
 ) -> Result<()> {
-    let size = (spec.width, spec.height);
+    let (spec, frame_no) = (source.spec, source.frame_no);
     let meta = ExrMetadata::new()
         .with(ExrMetadata::VERSION, env!("CARGO_PKG_VERSION"))
         .with(ExrMetadata::SPP, spec.spp.to_string())
@@ -223,43 +421,52 @@ pub fn write_frame(
         .with(ExrMetadata::SETTINGS, serde_json::to_string(spec)?)
         .with("tessera/job", job.to_string())
         .with("tessera/frame", frame_no.to_string());
-    let bytes = encode_layers(size, frame, &spec.layers, &meta)?;
-    store::write_atomic(&store.frame(job, frame_no, "exr"), &bytes)?;
-    write_preview(store, job, frame_no, spec, frame)
+    let (exr, png) = (
+        store.frame(job, frame_no, "exr"),
+        store.frame(job, frame_no, "png"),
+    );
+    std::fs::create_dir_all(store.job_dir(job))?;
+    let layers = image_layers(&spec.layers);
+    let target = ExrTarget {
+        path: &exr,
+        meta: &meta,
+        layers: &layers,
+        compression: ExrCompression::Zip,
+    };
+    let preview = PreviewTarget {
+        path: &png,
+        exposure: 0.0,
+    };
+    write_bands(source, Some(target), Some(preview))
+        .map_err(|e| e.context(format!("writing frame {frame_no}")))
 }
 
-/// Writes `frame_NNNN.png` atomically.
-pub fn write_preview(
-    store: &Store,
-    job: u64,
-    frame_no: i32,
-    spec: &JobSpec,
-    frame: &Layers,
+/// Writes `frame_NNNN.png` alone, atomically: a progressive preview.
+pub fn write_preview(store: &Store, job: u64, source: &FrameSource) -> Result<()> {
+    let png = store.frame(job, source.frame_no, "png");
+    std::fs::create_dir_all(store.job_dir(job))?;
+    let preview = PreviewTarget {
+        path: &png,
+        exposure: 0.0,
+    };
+    write_bands(source, None, Some(preview))
+        .map_err(|e| e.context(format!("writing the preview of frame {}", source.frame_no)))
+}
+
+/// [`output::write_frame_in_bands`] from `source`.
+fn write_bands(
+    source: &FrameSource,
+    exr: Option<ExrTarget>,
+    preview: Option<PreviewTarget>,
 ) -> Result<()> {
-    let path = store.frame(job, frame_no, "png");
-    std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
-    output::write_preview_png(&path, (spec.width, spec.height), frame, 0.0).map_err(|e| {
-        // A full or read-only disk is the operator's to fix, not a bug: say so (507/503).
-        let problem = match &e {
-            output::OutputError::Io { source, .. } => StorageProblem::of_io(source),
-            _ => None,
-        };
-        let detail = format!("writing preview: {e}");
-        match problem {
-            Some(problem) => Error::Storage { problem, detail },
-            None => Error::Internal(detail),
-        }
+    output::write_frame_in_bands(source.size(), BAND_ROWS, exr, preview, |band| {
+        source.band(band)
     })
 }
 
-/// The EXR bytes of `layers` with only the `wanted` layers (beauty always).
-fn encode_layers(
-    size: (u32, u32),
-    layers: &Layers,
-    wanted: &[OutputLayer],
-    meta: &ExrMetadata,
-) -> Result<Vec<u8>> {
-    let wanted: Vec<ImageLayer> = wanted
+/// The tracer's layers for the job's output layers.
+fn image_layers(wanted: &[OutputLayer]) -> Vec<ImageLayer> {
+    wanted
         .iter()
         .map(|l| match l {
             OutputLayer::Beauty => ImageLayer::Beauty,
@@ -269,9 +476,7 @@ fn encode_layers(
             OutputLayer::Samples => ImageLayer::Samples,
             OutputLayer::Noise => ImageLayer::Noise,
         })
-        .collect();
-    output::encode_exr_layers(size, layers, meta, &wanted, output::ExrCompression::Zip)
-        .map_err(|e| Error::Internal(format!("encoding frame: {e}")))
+        .collect()
 }
 
 #[cfg(test)]
@@ -317,17 +522,8 @@ mod tests {
         assert!((none.noise[0] - 0.1 / 2f32.sqrt()).abs() < 1e-7);
     }
 
-    /// A time-budget frame: its first pass is merged and kept, the tiles go, the next pass
-    /// merges into it; assembling again after a crash (the merged frame written, the frame
-    /// not yet marked) reads no tile and merges nothing twice.
-    #[test]
-    fn a_merged_frame_takes_only_the_passes_it_lacks() {
-        let dir = tempfile::tempdir().unwrap();
-        let store = Store::open(dir.path()).unwrap();
-        let mut spec = JobSpec::new("s");
-        (spec.width, spec.height) = (4, 2);
-        let (left, right) = (TileRect::new(0, 0, 2, 2), TileRect::new(2, 0, 2, 2));
-        let task = |id, tile, pass, rect| TaskRow {
+    fn task(id: u64, tile: u32, pass: u32, rect: TileRect) -> TaskRow {
+        TaskRow {
             id,
             job_id: 1,
             frame: 3,
@@ -340,35 +536,101 @@ mod tests {
             failures: 0,
             worker_id: Some(1),
             check_of: None,
-        };
-        let put = |t: &TaskRow, v: f32| {
-            let bytes =
-                output::encode_exr((4, 2), &layers(t.rect, v, 1.0, 4.0), &ExrMetadata::new())
-                    .unwrap();
-            std::fs::create_dir_all(store.tile_dir(1)).unwrap();
-            std::fs::write(store.tile(1, t.id), bytes).unwrap();
-        };
+        }
+    }
+
+    /// Stores `layers` as the accepted tile of `t`.
+    fn put(store: &Store, size: (u32, u32), t: &TaskRow, layers: &Layers) {
+        let bytes = output::encode_exr(size, layers, &ExrMetadata::new()).unwrap();
+        std::fs::create_dir_all(store.tile_dir(1)).unwrap();
+        std::fs::write(store.tile(1, t.id), bytes).unwrap();
+    }
+
+    /// A time-budget frame: its first pass is merged and kept, the tiles go, the next pass
+    /// merges into it; assembling again after a crash (the merged frame written, the frame
+    /// not yet marked) reads no tile and merges nothing twice.
+    #[test]
+    fn a_merged_frame_takes_only_the_passes_it_lacks() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(dir.path()).unwrap();
+        let mut spec = JobSpec::new("s");
+        (spec.width, spec.height) = (4, 2);
+        let whole = TileRect::new(0, 0, 4, 2);
+        let (left, right) = (TileRect::new(0, 0, 2, 2), TileRect::new(2, 0, 2, 2));
         let first = [task(10, 0, 0, left), task(11, 1, 0, right)];
-        put(&first[0], 1.0);
-        put(&first[1], 1.0);
-        let built = build_frame(&store, &spec, 1, 3, &first).unwrap();
-        assert_eq!(built.passes, 1);
-        write_merged(&store, 1, 3, &spec, &built).unwrap();
+        put(&store, (4, 2), &first[0], &layers(left, 1.0, 1.0, 4.0));
+        put(&store, (4, 2), &first[1], &layers(right, 1.0, 1.0, 4.0));
+        let source = FrameSource::new(&store, &spec, 1, 3, &first).unwrap();
+        assert_eq!(source.passes(), 1);
+        write_merged(&store, 1, &source).unwrap();
         for t in &first {
             std::fs::remove_file(store.tile(1, t.id)).unwrap();
         }
         // The next pass covers the left tile: 4 samples of 3.0 join 4 of 1.0 there.
         let second = task(12, 0, 1, left);
-        put(&second, 3.0);
+        put(&store, (4, 2), &second, &layers(left, 3.0, 1.0, 4.0));
         let all = [first[0].clone(), second.clone(), first[1].clone()];
-        let built = build_frame(&store, &spec, 1, 3, &all).unwrap();
-        assert_eq!(built.passes, 2);
-        let at = |b: &BuiltFrame, x: usize| (b.layers.beauty[x].x, b.layers.samples[x]);
+        let source = FrameSource::new(&store, &spec, 1, 3, &all).unwrap();
+        assert_eq!(source.passes(), 2);
+        let built = source.band(whole).unwrap();
+        let at = |b: &Layers, x: usize| (b.beauty[x].x, b.samples[x]);
         assert_eq!((at(&built, 0), at(&built, 3)), ((2.0, 8.0), (1.0, 4.0)));
-        write_merged(&store, 1, 3, &spec, &built).unwrap();
+        write_merged(&store, 1, &source).unwrap();
         std::fs::remove_file(store.tile(1, second.id)).unwrap();
-        let again = build_frame(&store, &spec, 1, 3, &all).unwrap();
-        assert_eq!((again.passes, again.layers), (2, built.layers));
+        let again = FrameSource::new(&store, &spec, 1, 3, &all).unwrap();
+        assert_eq!((again.passes(), again.band(whole).unwrap()), (2, built));
+    }
+
+    /// A frame taller than a band, in tiles that straddle the bands' edges, some of two
+    /// passes: written band by band, its EXR holds the tiles merged and pasted as a whole
+    /// frame would, only the spec's layers, and its PNG is the whole frame's preview byte
+    /// for byte.
+    #[test]
+    fn a_frame_written_band_by_band_is_its_tiles_merged_and_pasted() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(dir.path()).unwrap();
+        let size = (40, BAND_ROWS + 30);
+        let mut spec = JobSpec::new("s");
+        (spec.width, spec.height) = size;
+        spec.layers = vec![OutputLayer::Beauty, OutputLayer::Depth];
+        let mut expected = Layers::new(TileRect::new(0, 0, size.0, size.1));
+        let mut tasks = Vec::new();
+        for (tile, rect) in expected.rect.tiles(24).into_iter().enumerate() {
+            let tile = tile as u32;
+            let passes = 1 + tile % 2;
+            let parts: Vec<Layers> = (0..passes)
+                .map(|p| {
+                    let v = 0.01 * (tile * 7 + p * 3) as f32;
+                    layers(rect, v, 1.0 + v, 1.0 + p as f32)
+                })
+                .collect();
+            for (p, part) in parts.iter().enumerate() {
+                let t = task(100 + tasks.len() as u64, tile, p as u32, rect);
+                put(&store, size, &t, part);
+                tasks.push(t);
+            }
+            expected.paste(&merge_passes(&parts));
+        }
+        let source = FrameSource::new(&store, &spec, 1, 3, &tasks).unwrap();
+        let facts = FrameFacts {
+            reached: source.sampling().unwrap(),
+            render_seconds: 1.5,
+            features: vec![],
+        };
+        assert_eq!(facts.reached, expected.sampling());
+        write_frame(&store, 1, &source, &facts).unwrap();
+
+        let image = output::read_exr(&store.frame(1, 3, "exr")).unwrap();
+        assert_eq!(image.layers.beauty, expected.beauty);
+        assert_eq!(image.layers.depth, expected.depth);
+        // Albedo was not asked for: the reader fills it with black.
+        assert!(image.layers.albedo.iter().all(|a| *a == Vec3::ZERO));
+        assert_eq!(image.attribute("tessera/frame"), Some("3"));
+        let png = std::fs::read(store.frame(1, 3, "png")).unwrap();
+        assert_eq!(
+            png,
+            output::encode_preview_png(size, &expected, 0.0).unwrap()
+        );
     }
 
     #[test]
@@ -378,25 +640,24 @@ mod tests {
         assert_eq!(merge_passes(std::slice::from_ref(&l)), l);
     }
 
+    /// The largest frame the server accepts takes a bounded, stated amount to assemble,
+    /// and a budget below it refuses the job naming the width.
     #[test]
-    fn layer_subset_writes_only_those_channels() {
-        let rect = TileRect::new(0, 0, 4, 3);
-        let l = layers(rect, 0.5, 2.0, 4.0);
-        let bytes = encode_layers(
-            (4, 3),
-            &l,
-            &[OutputLayer::Beauty, OutputLayer::Depth],
-            &ExrMetadata::new().with("tessera/frame", "7"),
-        )
-        .unwrap();
-        let image = output::decode_exr(&bytes).unwrap();
-        assert_eq!(image.layers.beauty, l.beauty);
-        assert_eq!(image.layers.depth, l.depth);
-        // Albedo was not written: the decoder fills it with black.
-        assert!(image.layers.albedo.iter().all(|a| *a == Vec3::ZERO));
-        assert_eq!(image.attribute("tessera/frame"), Some("7"));
-        let all = encode_layers((4, 3), &l, &OutputLayer::ALL, &ExrMetadata::new()).unwrap();
-        assert_eq!(output::decode_exr(&all).unwrap().layers, l);
-        assert!(bytes.len() < all.len());
+    fn assembly_memory_grows_with_width_not_height() {
+        let mut spec = JobSpec::new("s");
+        (spec.width, spec.height, spec.tile_size) = (1920, 1080, Some(64));
+        let hd = assembly_bytes(&spec);
+        spec.height = crate::limits::MAX_RESOLUTION;
+        assert_eq!(assembly_bytes(&spec), hd);
+        (spec.width, spec.tile_size) = (crate::limits::MAX_RESOLUTION, Some(MAX_TILE_SIZE));
+        let largest = assembly_bytes(&spec);
+        assert!(largest < 512 << 20, "{largest} bytes");
+        check_assembly_memory(&spec, largest).unwrap();
+        let err = check_assembly_memory(&spec, largest - 1).unwrap_err();
+        assert!(
+            matches!(&err, Error::Invalid { field, .. } if field == "width"),
+            "{err}"
+        );
+        assert!(err.to_string().contains("--assembly-memory"), "{err}");
     }
 }

@@ -34,6 +34,9 @@ pub struct Config {
     pub max_scene_bytes: usize,
     /// Largest tile upload, bytes.
     pub max_tile_bytes: usize,
+    /// Memory one frame's assembly may take, bytes: a job whose frames need more is
+    /// refused when it is submitted (see [`crate::assembly::assembly_bytes`]).
+    pub assembly_memory: u64,
 }
 
 impl Config {
@@ -52,6 +55,7 @@ impl Config {
             max_tasks_per_job: limits::DEFAULT_MAX_TASKS_PER_JOB,
             max_scene_bytes: limits::DEFAULT_MAX_SCENE_BYTES,
             max_tile_bytes: limits::MAX_TILE_BYTES,
+            assembly_memory: limits::DEFAULT_ASSEMBLY_MEMORY,
         }
     }
 

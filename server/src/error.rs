@@ -46,6 +46,12 @@ pub enum Error {
     /// The storage failed (500); the message is logged, the client gets a summary.
     #[error("{0}")]
     Internal(String),
+    /// A frame cannot be assembled from what is stored for it (a tile unreadable or not
+    /// what its task says, a frame over the server's assembly memory): trying again would
+    /// fail again, so the frame is marked failed with this reason (500 if it ever reaches
+    /// a client).
+    #[error("{0}")]
+    BadFrame(String),
 }
 
 /// Why the data folder takes no more writes.
@@ -106,6 +112,49 @@ impl From<std::io::Error> for Error {
                 detail: format!("storage: {e}"),
             },
             None => Error::Internal(format!("storage: {e}")),
+        }
+    }
+}
+
+impl From<tracer::output::OutputError> for Error {
+    /// A full or read-only disk is the operator's to fix, not a bug: it stays a
+    /// [`Error::Storage`] (507/503); anything else is internal.
+    fn from(e: tracer::output::OutputError) -> Self {
+        let problem = match &e {
+            tracer::output::OutputError::Io { source, .. } => StorageProblem::of_io(source),
+            _ => None,
+        };
+        match problem {
+            Some(problem) => Error::Storage {
+                problem,
+                detail: e.to_string(),
+            },
+            None => Error::Internal(e.to_string()),
+        }
+    }
+}
+
+impl Error {
+    /// The same error with `what` (what was being done) before its message.
+    pub fn context(self, what: impl std::fmt::Display) -> Error {
+        match self {
+            Error::NotFound(m) => Error::NotFound(format!("{what}: {m}")),
+            Error::Invalid { field, message } => Error::Invalid {
+                field,
+                message: format!("{what}: {message}"),
+            },
+            Error::BadRequest(m) => Error::BadRequest(format!("{what}: {m}")),
+            Error::BadScene(m) => Error::BadScene(format!("{what}: {m}")),
+            Error::BadTile(m) => Error::BadTile(format!("{what}: {m}")),
+            Error::TooLarge(m) => Error::TooLarge(format!("{what}: {m}")),
+            Error::Conflict(m) => Error::Conflict(format!("{what}: {m}")),
+            Error::LeaseGone(m) => Error::LeaseGone(format!("{what}: {m}")),
+            Error::Storage { problem, detail } => Error::Storage {
+                problem,
+                detail: format!("{what}: {detail}"),
+            },
+            Error::Internal(m) => Error::Internal(format!("{what}: {m}")),
+            Error::BadFrame(m) => Error::BadFrame(format!("{what}: {m}")),
         }
     }
 }

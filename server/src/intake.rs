@@ -9,8 +9,8 @@ use proto::{ResultMetadata, TaskToken};
 use tracer::film::Layers;
 
 use crate::app::{now_ms, App};
-use crate::assembly;
-use crate::error::Result;
+use crate::assembly::{self, FrameSource};
+use crate::error::{Error, Result};
 use crate::scheduler::{self, Accepted, TaskRow};
 use crate::store::write_atomic;
 use crate::verify::{self, Verdict};
@@ -140,8 +140,31 @@ fn judge(
 /// marked assembled (a time-budget job plans its next passes then), then its tile files
 /// removed. A time-budget frame also keeps every layer merged so far, for its next pass;
 /// those go once the job finishes cleanly.
+///
+/// A frame that cannot be made from what is stored for it ([`Error::BadFrame`]: a tile
+/// unreadable, a frame over this server's assembly memory) is marked failed with the
+/// reason, and the job with it: assembling again would fail again, so it waits for the
+/// job to be retried. A job cancelled or deleted meanwhile stops the assembly, which is
+/// then no error. Other errors (a full disk, a folder in the way) are returned, for the
+/// upload to report and the sweeper to try again.
 pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     let _guard = app.assembly.lock().unwrap_or_else(|p| p.into_inner());
+    match assemble(app, job, frame) {
+        Err(Error::BadFrame(reason)) => {
+            tracing::error!("job {job} frame {frame} failed to assemble: {reason}");
+            app.db
+                .with(|c| scheduler::fail_frame(c, job, frame, &reason, now_ms()))
+        }
+        Err(Error::Conflict(why) | Error::NotFound(why)) => {
+            tracing::info!("job {job} frame {frame} not assembled: {why}");
+            Ok(())
+        }
+        other => other,
+    }
+}
+
+/// [`finish_frame`]'s work, with the assembly lock held.
+fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     let (spec, tasks, assembled, render_seconds, features) = app.db.with(|c| -> Result<_> {
         Ok((
             scheduler::job_spec(c, job)?,
@@ -155,22 +178,30 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     if assembled {
         return Ok(());
     }
+    // The job was accepted within the budget, but the server may have been restarted
+    // with a smaller one since.
+    assembly::check_assembly_memory(&spec, app.config.assembly_memory)
+        .map_err(|e| Error::BadFrame(e.to_string()))?;
+    // The job may be cancelled or deleted while a big frame is written: each band asks.
+    let wanted = || app.db.with(|c| scheduler::assembly_wanted(c, job));
     let started = Instant::now();
     let tile_bytes: u64 = tasks
         .iter()
         .filter_map(|t| std::fs::metadata(app.store.tile(job, t.id)).ok())
         .map(|m| m.len())
         .sum();
-    let built = assembly::build_frame(&app.store, &spec, job, frame, &tasks)?;
+    let mut source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?.with_proceed(wanted);
     if spec.time_budget.is_some() {
-        assembly::write_merged(&app.store, job, frame, &spec, &built)?;
+        assembly::write_merged(&app.store, job, &source)?;
+        // From here on the merged frame holds every pass, and is read alone.
+        source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?.with_proceed(wanted);
     }
     let facts = assembly::FrameFacts {
-        reached: built.layers.sampling(),
+        reached: source.sampling()?,
         render_seconds,
         features,
     };
-    assembly::write_frame(&app.store, job, frame, &spec, &built.layers, &facts)?;
+    assembly::write_frame(&app.store, job, &source, &facts)?;
     let (now, timing) = (now_ms(), app.timing());
     app.db
         .with(|c| scheduler::mark_assembled(c, job, frame, now, &facts.reached, timing))?;
@@ -220,6 +251,6 @@ pub fn preview_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     if assembled {
         return Ok(());
     }
-    let built = assembly::build_frame(&app.store, &spec, job, frame, &tasks)?;
-    assembly::write_preview(&app.store, job, frame, &spec, &built.layers)
+    let source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?;
+    assembly::write_preview(&app.store, job, &source)
 }

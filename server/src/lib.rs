@@ -83,8 +83,10 @@ pub enum StartError {
 }
 
 /// Opens the data folder and the database, and recovers from the previous run: leases
-/// that were live are re-queued (their workers hear 409 and stop), and frames whose tiles
-/// were all in but not yet assembled are assembled.
+/// that were live are re-queued (their workers hear 409 and stop). Frames whose tiles
+/// were all in but not yet assembled are left to the sweeper, which starts once the
+/// server listens: a big frame takes minutes, and the API must be there meanwhile (to
+/// cancel or delete its job, say).
 pub fn open(config: Config) -> Result<AppState, StartError> {
     let store = store::Store::open(&config.data_dir).map_err(|source| StartError::DataDir {
         path: config.data_dir.display().to_string(),
@@ -104,13 +106,6 @@ pub fn open(config: Config) -> Result<AppState, StartError> {
     let revoked = app.db.with(|c| scheduler::revoke_all_leases(c, now))?;
     if revoked > 0 {
         tracing::info!("re-queued {revoked} leases from before the restart");
-    }
-    for (job, frame) in app.db.with(|c| scheduler::unassembled_frames(c))? {
-        // A frame that cannot be written now (a full disk, say) is no reason to stay
-        // down: the sweeper tries again every tick.
-        if let Err(e) = intake::finish_frame(&app, job, frame) {
-            tracing::error!("assembling job {job} frame {frame}: {e}; trying again later");
-        }
     }
     Ok(app)
 }
@@ -171,9 +166,10 @@ pub fn openapi() -> utoipa::openapi::OpenApi {
     api::api(app).1
 }
 
-/// Every `sweep_interval`: re-queues expired leases, plans time-budget jobs again (the
-/// workers may have changed), and assembles frames whose tiles are all in but whose
-/// assembly failed (a full disk, say) when their last tile came.
+/// At once and then every `sweep_interval`: re-queues expired leases, plans time-budget
+/// jobs again (the workers may have changed), and assembles frames whose tiles are all in
+/// but which are not assembled: left by a restart, or whose assembly met a full disk when
+/// their last tile came.
 async fn sweep(app: AppState) {
     let mut tick = tokio::time::interval(app.config.sweep_interval);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);

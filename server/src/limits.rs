@@ -35,6 +35,9 @@ pub const MAX_NAME_BYTES: usize = 200;
 pub const DEFAULT_MAX_TASKS_PER_JOB: u64 = 1_000_000;
 /// Default scene upload limit: 512 MiB.
 pub const DEFAULT_MAX_SCENE_BYTES: usize = 512 << 20;
+/// Default memory for assembling one frame: 1 GiB. The largest frame accepted (16384
+/// wide, 1024-pixel tiles) takes about 200 MiB (`assembly::assembly_bytes`).
+pub const DEFAULT_ASSEMBLY_MEMORY: u64 = 1 << 30;
 /// Tile upload limit: 64 MiB.
 pub const MAX_TILE_BYTES: usize = 64 << 20;
 /// JSON request bodies (job specs, heartbeats, registrations): 64 KiB.

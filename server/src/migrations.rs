@@ -114,6 +114,9 @@ const MIGRATIONS: &[&str] = &[
     UPDATE frames SET assembled_tasks = tasks_total WHERE assembled_ms IS NOT NULL;
     ALTER TABLE jobs ADD COLUMN budget_plan TEXT;           -- proto::BudgetPlan as JSON
     "#,
+    // 6: a frame whose assembly failed (a tile unreadable, too large for this server) says
+    // why, and is not assembled again until the job is retried.
+    "ALTER TABLE frames ADD COLUMN failure TEXT;",
 ];
 
 /// The schema version this build writes.

@@ -886,16 +886,22 @@ pub fn cancel(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
     Ok(())
 }
 
-/// Re-queues a job's failed tasks with fresh attempts, and lifts its worker blocks.
-/// Returns how many tasks.
+/// Re-queues a job's failed tasks with fresh attempts, lifts its worker blocks, and lets
+/// frames whose assembly failed be assembled again. Returns how many tasks and frames.
 pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
     let tx = conn.transaction()?;
     if job_control(&tx, job)? == "cancelled" {
         return Err(Error::Conflict(format!("job {job} is cancelled")));
     }
     let failed = job_tasks(&tx, job, &[TaskState::Failed])?;
-    if failed.is_empty() {
-        return Err(Error::Conflict(format!("job {job} has no failed tasks")));
+    let frames = tx.exec(
+        "UPDATE frames SET failure = NULL WHERE job_id = ?1 AND failure IS NOT NULL",
+        [job],
+    )?;
+    if failed.is_empty() && frames == 0 {
+        return Err(Error::Conflict(format!(
+            "job {job} has no failed tasks or frames"
+        )));
     }
     for task in &failed {
         set_state(&tx, task, TaskEvent::Retry)?;
@@ -908,11 +914,11 @@ pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
         now,
         Some(job),
         "job_retried",
-        &format!("{} tasks", failed.len()),
+        &format!("{} tasks, {frames} frames", failed.len()),
     )?;
     update_finished(&tx, job, now)?;
     tx.commit()?;
-    Ok(failed.len())
+    Ok(failed.len() + frames)
 }
 
 /// Deletes a job's rows (its files are removed by the caller after this commits).
@@ -994,13 +1000,55 @@ pub fn finished_cleanly(conn: &Connection, job: u64) -> Result<bool> {
 }
 
 /// Frames whose tasks are all done but which are not assembled from all of them (a crash
-/// in between, or a full disk).
+/// in between, or a full disk), of jobs not cancelled.
 pub fn unassembled_frames(conn: &Connection) -> Result<Vec<(u64, i32)>> {
     let mut stmt = conn.prepare_cached(&format!(
-        "SELECT job_id, frame FROM frames WHERE {FRAME_NEEDS_ASSEMBLY}"
+        "SELECT job_id, frame FROM frames JOIN jobs ON jobs.id = frames.job_id
+         WHERE control != 'cancelled' AND {FRAME_NEEDS_ASSEMBLY}"
     ))?;
     let rows = stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?;
     Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// Whether a frame of `job` should still be assembled: `NotFound` once the job is
+/// deleted, `Conflict` once it is cancelled (an assembly under way stops).
+pub fn assembly_wanted(conn: &Connection, job: u64) -> Result<()> {
+    let control: Option<String> = conn
+        .row("SELECT control FROM jobs WHERE id = ?1", [job], |r| {
+            r.get(0)
+        })
+        .optional()?;
+    match control.as_deref() {
+        None => Err(Error::NotFound(format!("job {job} was deleted"))),
+        Some("cancelled") => Err(Error::Conflict(format!("job {job} was cancelled"))),
+        Some(_) => Ok(()),
+    }
+}
+
+/// Marks a frame whose assembly failed, with the reason: it is not assembled again until
+/// the job is retried, and the job counts as failed.
+pub fn fail_frame(
+    conn: &mut Connection,
+    job: u64,
+    frame: i32,
+    reason: &str,
+    now: i64,
+) -> Result<()> {
+    let tx = conn.transaction()?;
+    tx.exec(
+        "UPDATE frames SET failure = ?3 WHERE job_id = ?1 AND frame = ?2",
+        params![job, frame, reason],
+    )?;
+    log(
+        &tx,
+        now,
+        Some(job),
+        "frame_failed",
+        &format!("{frame}: {reason}"),
+    )?;
+    update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(())
 }
 
 /// Whether a frame is assembled from all of its tasks so far.
@@ -1015,7 +1063,7 @@ pub fn is_assembled(conn: &Connection, job: u64, frame: i32) -> Result<bool> {
 /// A frame (row of `frames`) whose tasks are all done but that is not assembled from all
 /// of them: a time-budget frame that got a pass is assembled again.
 const FRAME_NEEDS_ASSEMBLY: &str =
-    "tasks_done = tasks_total AND assembled_tasks IS NOT tasks_total";
+    "tasks_done = tasks_total AND assembled_tasks IS NOT tasks_total AND failure IS NULL";
 
 /// The done render tasks of one frame (for assembly), by tile then pass.
 pub fn done_tasks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<TaskRow>> {

@@ -78,14 +78,17 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
         |r| Ok((r.get(0)?, r.get(1)?)),
     )?;
     let frames_failed: u64 = conn.row(
-        "SELECT count(DISTINCT frame) FROM tasks WHERE job_id = ?1 AND state = 'failed'",
+        "SELECT count(*) FROM frames f WHERE job_id = ?1
+           AND (failure IS NOT NULL
+                OR EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = f.job_id
+                             AND t.frame = f.frame AND t.state = 'failed'))",
         [job],
         |r| r.get(0),
     )?;
 
     let state = if control == "cancelled" {
         JobState::Cancelled
-    } else if tasks.failed > 0 {
+    } else if frames_failed > 0 {
         JobState::Failed
     } else if frames_done == frames_total && finished_ms.is_some() {
         // (A time-budget job's frames all exist after its first pass; it is done when
@@ -175,7 +178,7 @@ const FRAME_QUERY: &str = "SELECT f.frame, f.tasks_total, f.tasks_done, f.assemb
            AND t.state = 'failed'),
         (SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id AND t.frame = f.frame
            AND t.state = 'leased'),
-        j.control
+        j.control, f.failure
      FROM frames f JOIN jobs j ON j.id = f.job_id";
 
 fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
@@ -185,7 +188,10 @@ fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
     let (spp_mean, noise): (Option<f64>, Option<f64>) = (r.get(4)?, r.get(5)?);
     let (failed, leased): (u64, u64) = (r.get(6)?, r.get(7)?);
     let control: String = r.get(8)?;
-    let state = if assembled.is_some() {
+    let failure: Option<String> = r.get(9)?;
+    let state = if failure.is_some() {
+        FrameState::Failed
+    } else if assembled.is_some() {
         FrameState::Done
     } else if failed > 0 {
         FrameState::Failed
@@ -204,6 +210,7 @@ fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
         spp_mean,
         noise,
         file: proto::job::frame_file_name(frame, "exr"),
+        failure,
     })
 }
 

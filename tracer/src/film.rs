@@ -275,6 +275,46 @@ pub struct SamplingSummary {
     pub mean_noise: Option<f64>,
 }
 
+/// A [`SamplingSummary`] gathered over pixels that arrive in parts (a frame assembled band
+/// by band): adding every part in pixel order gives the summary of the whole, to the bit.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SamplingTally {
+    pixels: u64,
+    samples_sum: f64,
+    min_samples: Option<f32>,
+    max_samples: f32,
+    noise_sum: f64,
+    estimated: u64,
+}
+
+impl SamplingTally {
+    /// Counts the pixels of `layers`.
+    pub fn add(&mut self, layers: &Layers) {
+        self.pixels += layers.samples.len() as u64;
+        for &s in &layers.samples {
+            self.samples_sum += f64::from(s);
+            self.min_samples = Some(self.min_samples.map_or(s, |m| m.min(s)));
+            self.max_samples = self.max_samples.max(s);
+        }
+        for &e in &layers.noise {
+            if e < NO_NOISE_ESTIMATE {
+                self.noise_sum += f64::from(e);
+                self.estimated += 1;
+            }
+        }
+    }
+
+    /// What the pixels counted so far reached.
+    pub fn summary(&self) -> SamplingSummary {
+        SamplingSummary {
+            mean_samples: self.samples_sum / self.pixels.max(1) as f64,
+            min_samples: self.min_samples.unwrap_or(0.0) as u32,
+            max_samples: self.max_samples as u32,
+            mean_noise: (self.estimated > 0).then(|| self.noise_sum / self.estimated as f64),
+        }
+    }
+}
+
 /// Written as the noise of a pixel with too few samples to estimate it (fewer than two,
 /// or all of one parity): large and finite, like [`NO_HIT_DEPTH`].
 pub const NO_NOISE_ESTIMATE: f32 = 1.0e10;
@@ -345,20 +385,9 @@ impl Layers {
 
     /// What the samples reached over these pixels: for a frame's status and metadata.
     pub fn sampling(&self) -> SamplingSummary {
-        let n = self.samples.len().max(1) as f64;
-        let (mut noise_sum, mut estimated) = (0.0f64, 0usize);
-        for &e in &self.noise {
-            if e < NO_NOISE_ESTIMATE {
-                noise_sum += f64::from(e);
-                estimated += 1;
-            }
-        }
-        SamplingSummary {
-            mean_samples: self.samples.iter().map(|&s| f64::from(s)).sum::<f64>() / n,
-            min_samples: self.samples.iter().copied().reduce(f32::min).unwrap_or(0.0) as u32,
-            max_samples: self.samples.iter().copied().fold(0.0, f32::max) as u32,
-            mean_noise: (estimated > 0).then(|| noise_sum / estimated as f64),
-        }
+        let mut tally = SamplingTally::default();
+        tally.add(self);
+        tally.summary()
     }
 
     /// The sub-rectangle `sub` of `self` as its own layers.

@@ -4,6 +4,7 @@
 //! |---|---|
 //! | `output/exr.rs` | [`encode_exr`] / [`decode_exr`], their file twins, [`validate_tile`] |
 //! | `output/preview.rs` | the ACES filmic curve, the sRGB OETF, 8-bit RGBA previews and PNGs |
+//! | `output/bands.rs` | frames larger than memory: EXR and PNG written band by band, EXR rows read alone |
 //! | `output/atomic.rs` | writing a file atomically: temp file, fsync, rename |
 //!
 //! An EXR holds one part, scan lines with ZIP compression (or none), every channel `f32`, named as
@@ -14,6 +15,7 @@
 //! [`Layers::paste`](crate::film::Layers::paste).
 
 mod atomic;
+mod bands;
 mod exr;
 mod preview;
 
@@ -21,6 +23,9 @@ use std::path::PathBuf;
 
 use crate::film::{Layers, TileRect};
 
+pub use self::bands::{
+    frame_bands, read_exr_rows, write_frame_in_bands, ExrTarget, PreviewTarget, BLOCK_ROWS,
+};
 pub use self::exr::{
     check_finite, decode_exr, encode_exr, encode_exr_layers, read_exr, validate_tile, write_exr,
     ExrCompression, ExrImage, ExrMetadata, ImageLayer, CHANNEL_NAMES,
@@ -61,7 +66,7 @@ pub enum OutputError {
     Encode(#[source] ::exr::error::Error),
     /// The PNG encoder failed.
     #[error("cannot encode PNG preview: {0}")]
-    Png(#[source] image::ImageError),
+    Png(#[source] png::EncodingError),
     /// A channel that must be present is not.
     #[error("no channel `{channel}` in the image (channels present: {})", present.join(", "))]
     MissingChannel {
@@ -135,16 +140,9 @@ fn rect_text(r: TileRect) -> String {
 /// non-empty rectangle inside a non-empty frame that OpenEXR's `i32` coordinates can hold,
 /// and one value per pixel in every layer.
 fn check_shape(frame_size: (u32, u32), layers: &Layers) -> Result<(), OutputError> {
+    check_frame_size(frame_size)?;
     let (w, h) = frame_size;
     let rect = layers.rect;
-    if w == 0 || h == 0 {
-        return Err(OutputError::BadWindow(format!("frame {w}x{h} is empty")));
-    }
-    if w > i32::MAX as u32 || h > i32::MAX as u32 {
-        return Err(OutputError::BadWindow(format!(
-            "frame {w}x{h} is too large for OpenEXR"
-        )));
-    }
     if rect.area() == 0 {
         return Err(OutputError::BadWindow(format!(
             "data window {} is empty; an image needs at least one pixel",
@@ -158,6 +156,21 @@ fn check_shape(frame_size: (u32, u32), layers: &Layers) -> Result<(), OutputErro
         )));
     }
     check_lengths(layers)
+}
+
+/// Checks that a `frame_size` frame is not empty and that OpenEXR's `i32` coordinates
+/// can hold it.
+fn check_frame_size(frame_size: (u32, u32)) -> Result<(), OutputError> {
+    let (w, h) = frame_size;
+    if w == 0 || h == 0 {
+        return Err(OutputError::BadWindow(format!("frame {w}x{h} is empty")));
+    }
+    if w > i32::MAX as u32 || h > i32::MAX as u32 {
+        return Err(OutputError::BadWindow(format!(
+            "frame {w}x{h} is too large for OpenEXR"
+        )));
+    }
+    Ok(())
 }
 
 /// Checks that every layer holds one value per pixel of `layers.rect`.

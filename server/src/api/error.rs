@@ -32,6 +32,7 @@ impl Error {
                 ..
             } => (StatusCode::SERVICE_UNAVAILABLE, "storage_read_only"),
             Error::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal"),
+            Error::BadFrame(_) => (StatusCode::INTERNAL_SERVER_ERROR, "frame_failed"),
         }
     }
 
@@ -42,7 +43,7 @@ impl Error {
             Error::Invalid { field, message } => {
                 (format!("{field}: {message}"), Some(field.clone()))
             }
-            Error::Internal(_) => (
+            Error::Internal(_) | Error::BadFrame(_) => (
                 "the server could not complete the request; its log says why".to_string(),
                 None,
             ),
@@ -71,7 +72,9 @@ impl IntoResponse for Error {
     fn into_response(self) -> Response {
         let (status, _) = self.status();
         match &self {
-            Error::Internal(detail) => tracing::error!("internal error: {detail}"),
+            Error::Internal(detail) | Error::BadFrame(detail) => {
+                tracing::error!("internal error: {detail}")
+            }
             Error::Storage { .. } => tracing::error!("{self}"),
             _ => {}
         }

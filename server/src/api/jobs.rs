@@ -9,7 +9,7 @@ use rusqlite::OptionalExtension;
 use super::error::{JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
-use crate::{scheduler, spec, status};
+use crate::{assembly, scheduler, spec, status};
 
 /// Creates a job: the spec is checked field by field and split into tasks.
 #[utoipa::path(
@@ -27,7 +27,7 @@ pub async fn create(
     State(app): State<AppState>,
     JsonBody(spec): JsonBody<JobSpec>,
 ) -> Result<(StatusCode, Json<JobStatus>)> {
-    let max_tasks = app.config.max_tasks_per_job;
+    let (max_tasks, assembly_memory) = (app.config.max_tasks_per_job, app.config.assembly_memory);
     let now = now_ms();
     let id = app
         .db
@@ -55,6 +55,7 @@ pub async fn create(
                 field: e.field,
                 message: e.message,
             })?;
+            assembly::check_assembly_memory(&plan.spec, assembly_memory)?;
             scheduler::create_job(c, &plan, now)
         })
         .await?;

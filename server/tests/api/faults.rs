@@ -94,10 +94,10 @@ async fn kill_and_restart_mid_job_keeps_accepted_tiles_and_finishes_every_frame(
     }
 }
 
-#[tokio::test(flavor = "multi_thread")]
-async fn a_frame_whose_tiles_were_in_but_not_assembled_is_assembled_at_startup() {
-    let dir = tempfile::tempdir().unwrap();
-    let cfg = config(dir.path());
+/// Runs a one-frame job to its last tile, then crashes the server between that tile's
+/// commit and the frame's write: the tile file stored, the task done, the frame complete
+/// but not assembled. Returns the job and the last tile's file.
+async fn crash_before_assembly(cfg: &server::Config) -> (JobStatus, std::path::PathBuf) {
     let s = TestServer::start(cfg.clone());
     let c = client();
     let scene = upload_scene(&s, &c, quad_scene()).await;
@@ -113,8 +113,6 @@ async fn a_frame_whose_tiles_were_in_but_not_assembled_is_assembled_at_startup()
         assert_eq!(w.upload(&s, &lease, exr).await.status(), StatusCode::OK);
     }
     s.crash();
-    // What a crash between the last tile's commit and the frame's write leaves: the tile
-    // file stored, the task done, the frame complete but not assembled.
     let tile = cfg
         .data_dir
         .join(format!("tiles/{}/{}.exr", job.id, last.token.task_id));
@@ -127,11 +125,38 @@ async fn a_frame_whose_tiles_were_in_but_not_assembled_is_assembled_at_startup()
     .unwrap();
     db.execute("UPDATE frames SET tasks_done = tasks_total", [])
         .unwrap();
-    drop(db);
+    (job, tile)
+}
 
+/// Polls the job until `done` holds of its status.
+async fn wait_for(
+    s: &TestServer,
+    c: &reqwest::Client,
+    job: u64,
+    done: impl Fn(&JobStatus) -> bool,
+) -> JobStatus {
+    for _ in 0..600 {
+        let st = status(s, c, job).await;
+        if done(&st) {
+            return st;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("job {job}: {:?}", status(s, c, job).await);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_frame_whose_tiles_were_in_but_not_assembled_is_assembled_after_startup() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(dir.path());
+    cfg.sweep_interval = Duration::from_millis(50);
+    let (job, _) = crash_before_assembly(&cfg).await;
+
+    // The server answers first and assembles in the background.
     let s = TestServer::start(cfg.clone());
-    let done = status(&s, &c, job.id).await;
-    assert_eq!((done.state, done.frames_done), (JobState::Done, 1));
+    let c = client();
+    let done = wait_for(&s, &c, job.id, |st| st.frames_done == 1).await;
+    assert_eq!(done.state, JobState::Done);
     assert!(cfg
         .data_dir
         .join(format!("jobs/{}/frame_0001.exr", job.id))
@@ -140,6 +165,46 @@ async fn a_frame_whose_tiles_were_in_but_not_assembled_is_assembled_at_startup()
         .data_dir
         .join(format!("jobs/{}/frame_0001.png", job.id))
         .is_file());
+}
+
+/// A stored tile that no longer reads (a damaged disk, a file truncated by hand) fails its
+/// frame with the reason instead of being tried forever; once the file is mended, retrying
+/// the job assembles the frame.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_frame_with_an_unreadable_tile_fails_with_the_reason_and_a_retry_mends_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(dir.path());
+    cfg.sweep_interval = Duration::from_millis(50);
+    let (job, tile) = crash_before_assembly(&cfg).await;
+    let good = std::fs::read(&tile).unwrap();
+    std::fs::write(&tile, &good[..good.len() / 2]).unwrap();
+
+    let s = TestServer::start(cfg.clone());
+    let c = client();
+    let failed = wait_for(&s, &c, job.id, |st| st.frames_failed == 1).await;
+    assert_eq!((failed.state, failed.frames_done), (JobState::Failed, 0));
+    let frames: proto::FrameList = c
+        .get(s.url(&format!("/jobs/{}/frames", job.id)))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let frame = &frames.frames[0];
+    assert_eq!(frame.state, proto::FrameState::Failed);
+    let why = frame.failure.as_deref().unwrap_or_default();
+    assert!(why.contains("reading the tile of task"), "{why}");
+
+    std::fs::write(&tile, &good).unwrap();
+    let retried = c
+        .post(s.url(&format!("/jobs/{}/retry", job.id)))
+        .send()
+        .await
+        .unwrap();
+    assert!(retried.status().is_success(), "{}", retried.status());
+    let done = wait_for(&s, &c, job.id, |st| st.frames_done == 1).await;
+    assert_eq!((done.state, done.frames_failed), (JobState::Done, 0));
 }
 
 #[tokio::test(flavor = "multi_thread")]

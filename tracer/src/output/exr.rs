@@ -7,13 +7,19 @@
 use std::io::Cursor;
 use std::path::Path;
 
+use ::exr::block::writer::ChunksWriter;
+use ::exr::block::{BlockIndex, UncompressedBlock};
 use ::exr::compression::Compression;
-use ::exr::image::{AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer};
+use ::exr::error::UnitResult;
 use ::exr::math::Vec2;
-use ::exr::meta::attribute::{AttributeValue, Chromaticities, IntegerBounds, Text};
+use ::exr::meta::attribute::{
+    AttributeValue, ChannelDescription, Chromaticities, IntegerBounds, LineOrder, SampleType, Text,
+};
 use ::exr::meta::header::{standard_names, Header, ImageAttributes, LayerAttributes};
-use ::exr::meta::MetaData;
-use ::exr::prelude::traits::{read, ReadChannels, ReadLayers, WritableImage};
+use ::exr::meta::{BlockDescription, MetaData};
+use ::exr::prelude::traits::{read, ReadChannels, ReadLayers};
+use rayon::prelude::*;
+use smallvec::{smallvec, SmallVec};
 
 use super::{atomic, check_lengths, check_shape, rect_text, OutputError};
 use crate::film::{Layers, SamplingSummary, TileRect};
@@ -74,7 +80,7 @@ impl ImageLayer {
 
 /// One component of one layer.
 #[derive(Clone, Copy)]
-enum Slot {
+pub(super) enum Slot {
     Beauty(usize),
     Albedo(usize),
     Normal(usize),
@@ -97,7 +103,7 @@ impl Slot {
     }
 
     /// The value of this component at pixel `i`.
-    fn get(self, layers: &Layers, i: usize) -> f32 {
+    pub(super) fn get(self, layers: &Layers, i: usize) -> f32 {
         match self {
             Slot::Beauty(c) => layers.beauty[i][c],
             Slot::Albedo(c) => layers.albedo[i][c],
@@ -109,7 +115,7 @@ impl Slot {
     }
 
     /// Sets this component at pixel `i`.
-    fn set(self, layers: &mut Layers, i: usize, v: f32) {
+    pub(super) fn set(self, layers: &mut Layers, i: usize, v: f32) {
         match self {
             Slot::Beauty(c) => layers.beauty[i][c] = v,
             Slot::Albedo(c) => layers.albedo[i][c] = v,
@@ -263,22 +269,33 @@ pub fn encode_exr_layers(
     compression: ExrCompression,
 ) -> Result<Vec<u8>, OutputError> {
     check_shape(frame_size, layers)?;
-    let rect = layers.rect;
-    let n = rect.area();
+    let header = header(frame_size, layers.rect, meta, wanted, compression)?;
+    let mut out = Cursor::new(Vec::new());
+    ::exr::block::write(&mut out, smallvec![header], true, |meta, chunks| {
+        write_blocks(&meta, chunks, layers)
+    })
+    .map_err(OutputError::Encode)?;
+    Ok(out.into_inner())
+}
 
-    let channels = AnyChannels::sort(
-        CHANNEL_NAMES
-            .iter()
-            .zip(SLOTS)
-            .filter(|(_, slot)| {
-                slot.layer() == ImageLayer::Beauty || wanted.contains(&slot.layer())
-            })
-            .map(|(&name, slot)| {
-                let values = (0..n).map(|i| slot.get(layers, i)).collect();
-                AnyChannel::new(name, FlatSamples::F32(values))
-            })
-            .collect(),
-    );
+/// The one header of a Tessera EXR whose data window is `rect` in a `frame_size` frame:
+/// scan lines in increasing y, the `wanted` layers' channels (beauty always) in `f32`,
+/// sorted by name as OpenEXR requires, Rec.709 chromaticities, `meta` as string
+/// attributes.
+pub(super) fn header(
+    frame_size: (u32, u32),
+    rect: TileRect,
+    meta: &ExrMetadata,
+    wanted: &[ImageLayer],
+    compression: ExrCompression,
+) -> Result<Header, OutputError> {
+    let mut channels: SmallVec<[ChannelDescription; 5]> = CHANNEL_NAMES
+        .iter()
+        .zip(SLOTS)
+        .filter(|(_, slot)| slot.layer() == ImageLayer::Beauty || wanted.contains(&slot.layer()))
+        .map(|(&name, _)| ChannelDescription::named(name, SampleType::F32))
+        .collect();
+    channels.sort_unstable_by(|a, b| a.name.cmp(&b.name));
 
     let mut layer_attributes = LayerAttributes {
         layer_position: Vec2(rect.x as i32, rect.y as i32),
@@ -300,30 +317,90 @@ pub fn encode_exr_layers(
         white: Vec2(0.3127, 0.3290),
     });
 
-    let encoding = match compression {
-        ExrCompression::Zip => Encoding::SMALL_LOSSLESS, // 16 scan lines per block, increasing y
-        ExrCompression::Uncompressed => Encoding {
-            compression: Compression::Uncompressed,
-            ..Encoding::SMALL_LOSSLESS
-        },
+    let compression = match compression {
+        // Deflate over 16 scan lines.
+        ExrCompression::Zip => Compression::ZIP16,
+        ExrCompression::Uncompressed => Compression::Uncompressed,
     };
-    let layer = Layer::new(
+    Ok(Header::new(
+        Text::from(""),
         Vec2(rect.width as usize, rect.height as usize),
-        layer_attributes,
-        encoding,
         channels,
-    );
-    let image = Image::new(image_attributes, layer);
+    )
+    .with_encoding(
+        compression,
+        BlockDescription::ScanLines,
+        LineOrder::Increasing,
+    )
+    .with_shared_attributes(image_attributes)
+    .with_attributes(layer_attributes))
+}
 
-    let mut out = Cursor::new(Vec::new());
-    let write = image.write();
-    let write = if n >= PARALLEL_MIN_PIXELS {
-        write
-    } else {
-        write.non_parallel()
+/// Writes the scan-line blocks that `layers` covers: whole rows of the header's data
+/// window, starting at a block boundary (or ending at the window's last row). Blocks are
+/// compressed in parallel when there is enough of them to pay for it.
+pub(super) fn write_blocks(
+    meta: &MetaData,
+    chunks: &mut impl ChunksWriter,
+    layers: &Layers,
+) -> UnitResult {
+    let header = &meta.headers[0];
+    let window = header.data_window();
+    let rows = header.compression.scan_lines_per_block();
+    let first = layers.rect.y as usize - window.position.1 as usize;
+    let slots: Vec<Slot> = header
+        .channels
+        .list
+        .iter()
+        .map(|c| slot_named(&c.name.to_string()).expect("Tessera writes its own channels"))
+        .collect();
+    let blocks = (0..layers.rect.height as usize).step_by(rows).map(|row| {
+        let index = BlockIndex {
+            layer: 0,
+            level: Vec2(0, 0),
+            pixel_position: Vec2(0, first + row),
+            pixel_size: Vec2(
+                layers.rect.width as usize,
+                rows.min(layers.rect.height as usize - row),
+            ),
+        };
+        ((first + row) / rows, index)
+    });
+    let compress = |(number, index): (usize, BlockIndex)| {
+        let block = UncompressedBlock::from_lines(&header.channels, index, |line| {
+            let slot = slots[line.location.channel];
+            let y = line.location.position.1 - first;
+            let start = y * layers.rect.width as usize;
+            line.write_samples(|i| slot.get(layers, start + i))
+                .expect("a line holds one f32 per pixel");
+        });
+        block
+            .compress_to_chunk(&meta.headers)
+            .map(|chunk| (number, chunk))
     };
-    write.to_buffered(&mut out).map_err(OutputError::Encode)?;
-    Ok(out.into_inner())
+    let compressed: Vec<_> = if layers.rect.area() >= PARALLEL_MIN_PIXELS {
+        blocks
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(compress)
+            .collect()
+    } else {
+        blocks.map(compress).collect()
+    };
+    for result in compressed {
+        let (number, chunk) = result?;
+        chunks.write_chunk(number, chunk)?;
+    }
+    Ok(())
+}
+
+/// The component of [`Layers`] that the channel `name` holds, if it is one of
+/// [`CHANNEL_NAMES`].
+pub(super) fn slot_named(name: &str) -> Option<Slot> {
+    CHANNEL_NAMES
+        .iter()
+        .position(|&n| n == name)
+        .map(|i| SLOTS[i])
 }
 
 /// [`encode_exr`] written atomically to `path` (a temp file in the same folder, fsync,
@@ -437,7 +514,7 @@ pub fn check_finite(layers: &Layers) -> Result<(), OutputError> {
 }
 
 /// The header of the first part, refusing deep data.
-fn first_header(meta: &MetaData) -> Result<&Header, OutputError> {
+pub(super) fn first_header(meta: &MetaData) -> Result<&Header, OutputError> {
     let header = meta
         .headers
         .first()
@@ -450,7 +527,7 @@ fn first_header(meta: &MetaData) -> Result<&Header, OutputError> {
 
 /// The frame size and the data window relative to the display window's corner, refusing
 /// a data window that is empty or reaches outside the display window.
-fn windows(
+pub(super) fn windows(
     display: IntegerBounds,
     data: IntegerBounds,
 ) -> Result<((u32, u32), TileRect), OutputError> {
@@ -628,7 +705,10 @@ fn set_attributes(attributes: &mut LayerAttributes, meta: &ExrMetadata) -> Resul
 
 /// Every string attribute of a header, sorted by name; bytes that are not UTF-8 are
 /// replaced.
-fn string_attributes(image: &ImageAttributes, layer: &LayerAttributes) -> Vec<(String, String)> {
+pub(super) fn string_attributes(
+    image: &ImageAttributes,
+    layer: &LayerAttributes,
+) -> Vec<(String, String)> {
     let text = |t: &Text| String::from_utf8_lossy(t.bytes()).into_owned();
     let mut out: Vec<(String, String)> = standard_texts(layer)
         .into_iter()

@@ -8,10 +8,10 @@
 //! the exposure-scaled values with no further scale (some implementations multiply by 0.6
 //! first; an exposure of log2(0.6) ≈ −0.74 stops gives that).
 
+use std::io::Write;
 use std::path::Path;
 
 use glam::Vec4;
-use image::{codecs::png::PngEncoder, ExtendedColorType, ImageEncoder};
 use rayon::prelude::*;
 
 use super::{atomic, check_shape, OutputError};
@@ -105,15 +105,30 @@ pub fn encode_preview_png(
     };
 
     let mut png = Vec::new();
-    PngEncoder::new(&mut png)
-        .write_image(
-            &canvas,
-            frame_size.0,
-            frame_size.1,
-            ExtendedColorType::Rgba8,
-        )
-        .map_err(OutputError::Png)?;
+    let mut writer = png_writer(&mut png, frame_size)?;
+    let mut stream = writer.stream_writer().map_err(OutputError::Png)?;
+    stream
+        .write_all(&canvas)
+        .map_err(|e| OutputError::Png(e.into()))?;
+    stream.finish().map_err(OutputError::Png)?;
+    writer.finish().map_err(OutputError::Png)?;
     Ok(png)
+}
+
+/// A PNG of a `frame_size` frame being written to `w`, its header written: 8-bit sRGB
+/// RGBA, to be given rows of [`preview_rgba8`] in order through its stream writer, then
+/// finished. Whole previews and frames written band by band go through it alike, so they
+/// come out byte for byte the same.
+pub(super) fn png_writer<W: Write>(
+    w: W,
+    frame_size: (u32, u32),
+) -> Result<png::Writer<W>, OutputError> {
+    let mut encoder = png::Encoder::new(w, frame_size.0, frame_size.1);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(png::Compression::Balanced);
+    encoder.set_filter(png::Filter::Adaptive);
+    encoder.write_header().map_err(OutputError::Png)
 }
 
 /// [`encode_preview_png`] written atomically to `path` (temp file, fsync, rename).
