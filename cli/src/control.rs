@@ -360,7 +360,7 @@ pub fn control(args: ControlArgs, control: Control) -> anyhow::Result<()> {
             Control::Cancel => "cancelled: unfinished tasks will not run",
             Control::Pause => "paused: nothing more is leased until `tessera resume`",
             Control::Resume => "resumed",
-            Control::Retry => "failed tasks queued again",
+            Control::Retry => "failed tasks and frames queued again",
         };
         println!(
             "job {} {what} (now {}, frames {}/{})",

@@ -54,7 +54,8 @@ enum Command {
     Pause(control::ControlArgs),
     /// Resume a paused job.
     Resume(control::ControlArgs),
-    /// Queue a job's failed tasks again, with fresh attempts.
+    /// Queue a job's failed tasks again, with fresh attempts, and assemble again the
+    /// frames whose assembly failed.
     Retry(control::ControlArgs),
     /// List the farm's workers.
     Workers(control::WorkersArgs),

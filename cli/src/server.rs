@@ -46,6 +46,13 @@ pub struct ServerArgs {
           default_value_t = server::limits::MAX_TILE_BYTES as u64,
           value_parser = clap::value_parser!(u64).range(1..=(i64::MAX as u64).min(usize::MAX as u64)))]
     pub max_tile_bytes: u64,
+    /// Memory one frame's assembly may take, MiB: frames are assembled a band of rows at
+    /// a time, and a job whose frames need more than this (very wide frames in big tiles)
+    /// is refused when it is submitted.
+    #[arg(long, env = "TESSERA_ASSEMBLY_MEMORY", value_name = "MIB",
+          default_value_t = server::limits::DEFAULT_ASSEMBLY_MEMORY >> 20,
+          value_parser = clap::value_parser!(u64).range(1..=(1 << 40)))]
+    pub assembly_memory: u64,
     #[command(flatten)]
     #[serde(flatten)]
     pub common: Common,
@@ -77,6 +84,7 @@ pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
     config.max_tasks_per_job = args.max_tasks_per_job;
     config.verify_fraction = args.verify_fraction;
     config.max_tile_bytes = args.max_tile_bytes as usize;
+    config.assembly_memory = args.assembly_memory << 20;
     if !args.listen.ip().is_loopback()
         && (config.worker_token.is_none() || config.client_token.is_none())
     {

@@ -82,8 +82,9 @@ pub enum StartError {
     Serve(#[source] std::io::Error),
 }
 
-/// Opens the data folder and the database, and recovers from the previous run: leases
-/// that were live are re-queued (their workers hear 409 and stop). Frames whose tiles
+/// Opens the data folder and the database, and recovers from the previous run: temp files
+/// of writes it cut short are removed, leases that were live are re-queued (their
+/// workers hear 409 and stop). Frames whose tiles
 /// were all in but not yet assembled are left to the sweeper, which starts once the
 /// server listens: a big frame takes minutes, and the API must be there meanwhile (to
 /// cancel or delete its job, say).
@@ -92,6 +93,15 @@ pub fn open(config: Config) -> Result<AppState, StartError> {
         path: config.data_dir.display().to_string(),
         source,
     })?;
+    let removed = store
+        .remove_temp_files()
+        .map_err(|source| StartError::DataDir {
+            path: config.data_dir.display().to_string(),
+            source,
+        })?;
+    if removed > 0 {
+        tracing::info!("removed {removed} temp files of writes cut short by the last stop");
+    }
     let db = db::Db::open(&store.database())?;
     let app = Arc::new(App {
         config,

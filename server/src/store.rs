@@ -32,6 +32,29 @@ impl Store {
         })
     }
 
+    /// Removes the temp files that writes cut short by a crash left (hidden files in the
+    /// scene, tile and job folders: every atomic write's temp file is one), which can be
+    /// as large as a frame. Call it before anything writes. Returns how many went.
+    pub fn remove_temp_files(&self) -> io::Result<usize> {
+        let mut folders = vec![self.root.join("scenes")];
+        for area in ["tiles", "jobs"] {
+            for entry in fs::read_dir(self.root.join(area))? {
+                folders.push(entry?.path());
+            }
+        }
+        let mut removed = 0;
+        for folder in folders.iter().filter(|f| f.is_dir()) {
+            for entry in fs::read_dir(folder)? {
+                let entry = entry?;
+                if entry.file_name().to_string_lossy().starts_with('.') && entry.path().is_file() {
+                    fs::remove_file(entry.path())?;
+                    removed += 1;
+                }
+            }
+        }
+        Ok(removed)
+    }
+
     /// A store rooted at `root` without touching the disk.
     pub fn unopened(root: &Path) -> Store {
         Store {
@@ -137,6 +160,22 @@ mod tests {
         assert!(is_digest(&sha256_hex(b"abc")));
         assert!(!is_digest("../../etc/passwd"));
         assert!(!is_digest(&"A".repeat(64)));
+    }
+
+    #[test]
+    fn temp_files_left_by_a_crash_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(dir.path()).unwrap();
+        let frame = store.frame(3, 1, "exr");
+        fs::create_dir_all(frame.parent().unwrap()).unwrap();
+        fs::write(&frame, b"frame").unwrap();
+        let temp = frame.with_file_name(".frame_0001.exr.tmp-123-0");
+        fs::write(&temp, b"half a frame").unwrap();
+        let tile = store.tile(3, 9).with_file_name(".9.exr.123.0.tmp");
+        fs::create_dir_all(tile.parent().unwrap()).unwrap();
+        fs::write(&tile, b"half a tile").unwrap();
+        assert_eq!(store.remove_temp_files().unwrap(), 2);
+        assert!(frame.is_file() && !temp.exists() && !tile.exists());
     }
 
     #[test]

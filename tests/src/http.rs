@@ -78,7 +78,17 @@ impl Request<'_> {
         self.exchange(port, claimed)
     }
 
-    fn exchange(&self, port: u16, content_length: usize) -> Answer {
+    /// Sends the request whole and returns the open connection without waiting for the
+    /// answer: for a request whose handling the test interrupts (a server killed while it
+    /// works on it).
+    pub fn send_unanswered(&self, port: u16) -> TcpStream {
+        let mut stream = self.send_head(port, self.body.len());
+        stream.write_all(self.body).expect("sending the body");
+        stream
+    }
+
+    /// Connects and sends the request line and headers.
+    fn send_head(&self, port: u16, content_length: usize) -> TcpStream {
         let mut stream = TcpStream::connect(("127.0.0.1", port)).expect("connecting");
         stream.set_read_timeout(Some(ANSWER_TIMEOUT)).unwrap();
         let mut head = format!(
@@ -91,6 +101,11 @@ impl Request<'_> {
         }
         head += "\r\n";
         stream.write_all(head.as_bytes()).expect("sending the head");
+        stream
+    }
+
+    fn exchange(&self, port: u16, content_length: usize) -> Answer {
+        let mut stream = self.send_head(port, content_length);
         // The server may answer (413) and close before it has read everything: a failed
         // write is then not the test's failure; the answer says what happened.
         let _ = stream.write_all(self.body);

@@ -216,6 +216,18 @@ impl Process {
         self.child.id()
     }
 
+    /// The most memory it has held so far (its peak resident set, `VmHWM`), bytes.
+    pub fn peak_memory_bytes(&self) -> u64 {
+        let status = fs::read_to_string(format!("/proc/{}/status", self.pid()))
+            .expect("reading /proc/<pid>/status of a running process");
+        let kib: u64 = status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .expect("/proc/<pid>/status has VmHWM");
+        kib << 10
+    }
+
     /// What it has logged so far.
     pub fn log(&self) -> String {
         fs::read_to_string(&self.log).unwrap_or_default()
@@ -349,6 +361,18 @@ impl Farm {
 
     /// [`Farm::start_server`] with more flags (tokens, limits).
     pub fn start_server_with(&mut self, lease_seconds: u64, extra: &[&str]) {
+        self.start_server_limited(lease_seconds, extra, None);
+    }
+
+    /// [`Farm::start_server_with`], the server's data segment limited to `memory_bytes`
+    /// when given (`RLIMIT_DATA`: its heap and private writable mappings; an allocation
+    /// past it fails, and Rust aborts the process on it).
+    pub fn start_server_limited(
+        &mut self,
+        lease_seconds: u64,
+        extra: &[&str],
+        memory_bytes: Option<u64>,
+    ) {
         self.servers_started += 1;
         let listen = format!("127.0.0.1:{}", self.port);
         let lease = lease_seconds.to_string();
@@ -363,7 +387,26 @@ impl Farm {
             &lease,
         ];
         args.extend(extra);
-        self.server = Some(Process::start(&name, &args, self.path()));
+        let mut command = Command::new(tessera_bin());
+        command.args(&args);
+        if let Some(limit) = memory_bytes {
+            use std::os::unix::process::CommandExt;
+            let rlimit = libc::rlimit {
+                rlim_cur: limit,
+                rlim_max: limit,
+            };
+            // SAFETY: setrlimit(2) is async-signal-safe and touches only the child.
+            unsafe {
+                command.pre_exec(move || {
+                    if libc::setrlimit(libc::RLIMIT_DATA, &rlimit) == 0 {
+                        Ok(())
+                    } else {
+                        Err(std::io::Error::last_os_error())
+                    }
+                });
+            }
+        }
+        self.server = Some(Process::spawn(&name, command, self.path()));
         self.small_disk = false;
         self.wait_for_server();
     }

@@ -8,6 +8,8 @@ use tests::{render_directly, settings, Farm};
 
 #[path = "faults/disk.rs"]
 mod disk;
+#[path = "faults/memory.rs"]
+mod memory;
 #[path = "faults/verify.rs"]
 mod verify;
 

@@ -164,13 +164,14 @@ pub async fn resume(
     control(app, id, scheduler::resume).await
 }
 
-/// Re-queues a job's failed tasks with fresh attempts.
+/// Re-queues a job's failed tasks with fresh attempts, and assembles again the frames
+/// whose assembly failed.
 #[utoipa::path(
     post,
     path = "/jobs/{id}/retry",
     tag = "jobs",
     params(("id" = u64, Path, description = "job id")),
-    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 409, description = "no failed tasks, or cancelled", body = proto::ErrorBody)),
+    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 409, description = "no failed tasks or frames, or cancelled", body = proto::ErrorBody)),
     security(("client_token" = []))
 )]
 pub async fn retry(

@@ -366,3 +366,34 @@ async fn worker_calls_with_bad_ids_or_fields_are_refused() {
         );
     }
 }
+
+/// A job whose frames the server could not assemble within its assembly memory is refused
+/// at submission, naming the width and the limit; a narrower one of the same height is
+/// taken (what assembly holds grows with width, not height).
+#[tokio::test(flavor = "multi_thread")]
+async fn a_job_too_wide_to_assemble_within_the_memory_budget_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(dir.path());
+    cfg.assembly_memory = 64 << 20;
+    let s = TestServer::start(cfg);
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let mut spec = JobSpec::new(&scene.digest);
+    (spec.width, spec.height, spec.tile_size) = (16_384, 16_384, Some(1_024));
+    let res = c.post(s.url("/jobs")).json(&spec).send().await.unwrap();
+    let err = error_body(res, StatusCode::UNPROCESSABLE_ENTITY).await;
+    assert_eq!(err.field.as_deref(), Some("width"));
+    assert!(err.message.contains("64 MiB"), "{}", err.message);
+    let jobs: proto::JobList = c
+        .get(s.url("/jobs"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert!(jobs.jobs.is_empty());
+
+    (spec.width, spec.tile_size) = (2_048, Some(256));
+    create_job(&s, &c, &spec).await;
+}
