@@ -240,6 +240,7 @@ pub fn check_assembly_memory(spec: &JobSpec, budget: u64) -> Result<()> {
 pub struct FrameSource<'a> {
     store: &'a Store,
     spec: &'a JobSpec,
+    job: u64,
     frame_no: i32,
     /// The merged frame and the passes it holds.
     merged: Option<(PathBuf, u32)>,
@@ -268,6 +269,7 @@ impl<'a> FrameSource<'a> {
         Ok(FrameSource {
             store,
             spec,
+            job,
             frame_no,
             merged,
             fresh,
@@ -373,21 +375,6 @@ fn merged_passes(store: &Store, job: u64, frame_no: i32) -> Result<Option<(PathB
     Ok(Some((path, passes)))
 }
 
-/// Keeps every layer of a time-budget frame, atomically, for its next pass to merge into.
-/// A source made after this reads the merged frame alone.
-pub fn write_merged(store: &Store, job: u64, source: &FrameSource) -> Result<()> {
-    let meta = ExrMetadata::new().with(MERGED_PASSES, source.passes().to_string());
-    let path = store.merged_frame(job, source.frame_no);
-    let target = ExrTarget {
-        path: &path,
-        meta: &meta,
-        layers: &ImageLayer::ALL,
-        compression: ExrCompression::Zip,
-    };
-    write_bands(source, Some(target), None)
-        .map_err(|e| e.context(format!("writing the merged frame {}", source.frame_no)))
-}
-
 /// What a frame's EXR header says beyond its spec.
 pub struct FrameFacts {
     /// What its samples reached.
@@ -398,70 +385,71 @@ pub struct FrameFacts {
     pub features: Vec<String>,
 }
 
-/// Writes the final frame: `frame_NNNN.exr` with the job's layers and `frame_NNNN.png`,
-/// both atomically, in one pass over the frame's bands. The EXR's header says how it was
-/// rendered: the settings, the samples and estimated error reached, the render time and
-/// the scene's features.
-pub fn write_frame(
-    store: &Store,
-    job: u64,
-    source: &FrameSource,
-    facts: &FrameFacts,
-) -> Result<()> {
-    let (spec, frame_no) = (source.spec, source.frame_no);
-    let meta = ExrMetadata::new()
-        .with(ExrMetadata::VERSION, env!("CARGO_PKG_VERSION"))
-        .with(ExrMetadata::SPP, spec.spp.to_string())
-        .with_sampling(&facts.reached)
-        .with(
-            ExrMetadata::RENDER_SECONDS,
-            format!("{:.3}", facts.render_seconds),
-        )
-        .with(ExrMetadata::FEATURES, facts.features.join(","))
-        .with(ExrMetadata::SETTINGS, serde_json::to_string(spec)?)
-        .with("tessera/job", job.to_string())
-        .with("tessera/frame", frame_no.to_string());
-    let (exr, png) = (
-        store.frame(job, frame_no, "exr"),
-        store.frame(job, frame_no, "png"),
-    );
-    std::fs::create_dir_all(store.job_dir(job))?;
-    let layers = image_layers(&spec.layers);
-    let target = ExrTarget {
-        path: &exr,
-        meta: &meta,
-        layers: &layers,
-        compression: ExrCompression::Zip,
-    };
-    let preview = PreviewTarget {
-        path: &png,
-        exposure: 0.0,
-    };
-    write_bands(source, Some(target), Some(preview))
-        .map_err(|e| e.context(format!("writing frame {frame_no}")))
-}
+impl FrameSource<'_> {
+    /// Keeps every layer of a time-budget frame, atomically, for its next pass to merge
+    /// into. A source made after this reads the merged frame alone.
+    pub fn write_merged(&self) -> Result<()> {
+        let meta = ExrMetadata::new().with(MERGED_PASSES, self.passes.to_string());
+        let path = self.store.merged_frame(self.job, self.frame_no);
+        let target = ExrTarget {
+            path: &path,
+            meta: &meta,
+            layers: &ImageLayer::ALL,
+            compression: ExrCompression::Zip,
+        };
+        self.write_bands(Some(target), false)
+            .map_err(|e| e.context(format!("writing the merged frame {}", self.frame_no)))
+    }
 
-/// Writes `frame_NNNN.png` alone, atomically: a progressive preview.
-pub fn write_preview(store: &Store, job: u64, source: &FrameSource) -> Result<()> {
-    let png = store.frame(job, source.frame_no, "png");
-    std::fs::create_dir_all(store.job_dir(job))?;
-    let preview = PreviewTarget {
-        path: &png,
-        exposure: 0.0,
-    };
-    write_bands(source, None, Some(preview))
-        .map_err(|e| e.context(format!("writing the preview of frame {}", source.frame_no)))
-}
+    /// Writes the final frame: `frame_NNNN.exr` with the job's layers and
+    /// `frame_NNNN.png`, both atomically, in one pass over the frame's bands. The EXR's
+    /// header says how it was rendered: the settings, the samples and estimated error
+    /// reached, the render time and the scene's features.
+    pub fn write_frame(&self, facts: &FrameFacts) -> Result<()> {
+        let (spec, job, frame_no) = (self.spec, self.job, self.frame_no);
+        let meta = ExrMetadata::new()
+            .with(ExrMetadata::VERSION, env!("CARGO_PKG_VERSION"))
+            .with(ExrMetadata::SPP, spec.spp.to_string())
+            .with_sampling(&facts.reached)
+            .with(
+                ExrMetadata::RENDER_SECONDS,
+                format!("{:.3}", facts.render_seconds),
+            )
+            .with(ExrMetadata::FEATURES, facts.features.join(","))
+            .with(ExrMetadata::SETTINGS, serde_json::to_string(spec)?)
+            .with("tessera/job", job.to_string())
+            .with("tessera/frame", frame_no.to_string());
+        let exr = self.store.frame(job, frame_no, "exr");
+        let layers = image_layers(&spec.layers);
+        let target = ExrTarget {
+            path: &exr,
+            meta: &meta,
+            layers: &layers,
+            compression: ExrCompression::Zip,
+        };
+        self.write_bands(Some(target), true)
+            .map_err(|e| e.context(format!("writing frame {frame_no}")))
+    }
 
-/// [`output::write_frame_in_bands`] from `source`.
-fn write_bands(
-    source: &FrameSource,
-    exr: Option<ExrTarget>,
-    preview: Option<PreviewTarget>,
-) -> Result<()> {
-    output::write_frame_in_bands(source.size(), BAND_ROWS, exr, preview, |band| {
-        source.band(band)
-    })
+    /// Writes `frame_NNNN.png` alone, atomically: a progressive preview.
+    pub fn write_preview(&self) -> Result<()> {
+        self.write_bands(None, true)
+            .map_err(|e| e.context(format!("writing the preview of frame {}", self.frame_no)))
+    }
+
+    /// [`output::write_frame_in_bands`] of this frame: `exr` if given, and the frame's
+    /// PNG preview (in the job's output folder, with the final EXR) if `preview`.
+    fn write_bands(&self, exr: Option<ExrTarget>, preview: bool) -> Result<()> {
+        let png = self.store.frame(self.job, self.frame_no, "png");
+        if preview {
+            std::fs::create_dir_all(self.store.job_dir(self.job))?;
+        }
+        let preview = preview.then_some(PreviewTarget {
+            path: &png,
+            exposure: 0.0,
+        });
+        output::write_frame_in_bands(self.size(), BAND_ROWS, exr, preview, |band| self.band(band))
+    }
 }
 
 /// The tracer's layers for the job's output layers.
@@ -562,7 +550,7 @@ mod tests {
         put(&store, (4, 2), &first[1], &layers(right, 1.0, 1.0, 4.0));
         let source = FrameSource::new(&store, &spec, 1, 3, &first).unwrap();
         assert_eq!(source.passes(), 1);
-        write_merged(&store, 1, &source).unwrap();
+        source.write_merged().unwrap();
         for t in &first {
             std::fs::remove_file(store.tile(1, t.id)).unwrap();
         }
@@ -575,7 +563,7 @@ mod tests {
         let built = source.band(whole).unwrap();
         let at = |b: &Layers, x: usize| (b.beauty[x].x, b.samples[x]);
         assert_eq!((at(&built, 0), at(&built, 3)), ((2.0, 8.0), (1.0, 4.0)));
-        write_merged(&store, 1, &source).unwrap();
+        source.write_merged().unwrap();
         std::fs::remove_file(store.tile(1, second.id)).unwrap();
         let again = FrameSource::new(&store, &spec, 1, 3, &all).unwrap();
         assert_eq!((again.passes(), again.band(whole).unwrap()), (2, built));
@@ -618,7 +606,7 @@ mod tests {
             features: vec![],
         };
         assert_eq!(facts.reached, expected.sampling());
-        write_frame(&store, 1, &source, &facts).unwrap();
+        source.write_frame(&facts).unwrap();
 
         let image = output::read_exr(&store.frame(1, 3, "exr")).unwrap();
         assert_eq!(image.layers.beauty, expected.beauty);

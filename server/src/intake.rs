@@ -192,7 +192,7 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
         .sum();
     let mut source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?.with_proceed(wanted);
     if spec.time_budget.is_some() {
-        assembly::write_merged(&app.store, job, &source)?;
+        source.write_merged()?;
         // From here on the merged frame holds every pass, and is read alone.
         source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?.with_proceed(wanted);
     }
@@ -201,7 +201,7 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
         render_seconds,
         features,
     };
-    assembly::write_frame(&app.store, job, &source, &facts)?;
+    source.write_frame(&facts)?;
     let (now, timing) = (now_ms(), app.timing());
     app.db
         .with(|c| scheduler::mark_assembled(c, job, frame, now, &facts.reached, timing))?;
@@ -252,5 +252,5 @@ pub fn preview_frame(app: &App, job: u64, frame: i32) -> Result<()> {
         return Ok(());
     }
     let source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?;
-    assembly::write_preview(&app.store, job, &source)
+    source.write_preview()
 }
