@@ -8,10 +8,9 @@
 //! data/jobs/<job>/frame_0001.exr, frame_0001.png
 //! ```
 
-use std::fs::{self, File};
-use std::io::{self, Write};
+use std::fs;
+use std::io;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use sha2::{Digest, Sha256};
 
@@ -122,29 +121,13 @@ pub fn is_digest(s: &str) -> bool {
             .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
 }
 
-/// Writes `bytes` to `path` atomically: a temp file in the same folder, fsync, rename,
-/// fsync of the folder. A reader (or a restarted server) sees the old file or the new
-/// one, never half of one.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    fs::create_dir_all(dir)?;
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
-    // Unique per process and call: two writers of one path must not share a temp file.
-    static NEXT: AtomicU64 = AtomicU64::new(0);
-    let n = NEXT.fetch_add(1, Ordering::Relaxed);
-    let tmp = dir.join(format!(".{name}.{}.{n}.tmp", std::process::id()));
-    let result = (|| {
-        let mut f = File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        fs::rename(&tmp, path)?;
-        File::open(dir)?.sync_all()
-    })();
-    result.map_err(|e| {
-        let _ = fs::remove_file(&tmp);
-        // Name the file, keeping the kind (a full disk must still read as one).
-        io::Error::new(e.kind(), format!("writing {}: {e}", path.display()))
-    })
+/// Writes `bytes` to `path` atomically (the tracer's [`tracer::output::write_atomic`]),
+/// creating its folder when missing. A reader (or a restarted server) sees the old file or
+/// the new one, never half of one; a full or read-only disk stays
+/// [`Error::Storage`](crate::error::Error::Storage).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> crate::error::Result<()> {
+    fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
+    Ok(tracer::output::write_atomic(path, bytes)?)
 }
 
 #[cfg(test)]

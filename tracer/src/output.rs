@@ -2,6 +2,7 @@
 //!
 //! | file | what it holds |
 //! |---|---|
+//! | `output/attributes.rs` | [`ExrMetadata`]: the header's string attributes, written and read back |
 //! | `output/exr.rs` | [`encode_exr`] / [`decode_exr`], their file twins, [`validate_tile`] |
 //! | `output/preview.rs` | the ACES filmic curve, the sRGB OETF, 8-bit RGBA previews and PNGs |
 //! | `output/bands.rs` | frames larger than memory: EXR and PNG written band by band, EXR rows read alone |
@@ -15,6 +16,7 @@
 //! [`Layers::paste`](crate::film::Layers::paste).
 
 mod atomic;
+mod attributes;
 mod bands;
 mod exr;
 mod preview;
@@ -23,12 +25,14 @@ use std::path::PathBuf;
 
 use crate::film::{Layers, TileRect};
 
+pub use self::atomic::write as write_atomic;
+pub use self::attributes::ExrMetadata;
 pub use self::bands::{
     frame_bands, read_exr_rows, write_frame_in_bands, ExrTarget, PreviewTarget, BLOCK_ROWS,
 };
 pub use self::exr::{
     check_finite, decode_exr, encode_exr, encode_exr_layers, read_exr, validate_tile, write_exr,
-    ExrCompression, ExrImage, ExrMetadata, ImageLayer, CHANNEL_NAMES,
+    ExrCompression, ExrImage, ImageLayer, CHANNEL_NAMES,
 };
 pub use self::preview::{
     aces_filmic, encode_preview_png, preview_rgba8, srgb_oetf, write_preview_png,

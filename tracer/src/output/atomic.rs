@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use super::OutputError;
 
 /// Writes `bytes` to `path` atomically (see [`AtomicFile`]).
-pub(super) fn write(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+pub fn write(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
     let mut file = AtomicFile::create(path)?;
     file.write_all(bytes).map_err(|e| file.error(e))?;
     file.commit()
