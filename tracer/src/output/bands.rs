@@ -14,7 +14,8 @@ use rayon::prelude::*;
 use smallvec::smallvec;
 
 use super::atomic::AtomicFile;
-use super::exr::{first_header, header, slot_named, string_attributes, windows, write_blocks};
+use super::attributes::string_attributes;
+use super::exr::{first_header, header, slot_named, windows, write_blocks};
 use super::preview::{png_writer, preview_rgba8};
 use super::{check_frame_size, check_lengths, rect_text, ExrCompression, ExrImage};
 use super::{ExrMetadata, ImageLayer, OutputError};
