@@ -5,10 +5,11 @@
 //! PNG preview. When a pass of a frame completes before the frame does, a progressive PNG
 //! preview is written from the passes in so far.
 //!
-//! A frame is never held whole: it is made and written [`BAND_ROWS`] rows at a time,
-//! reading only those rows of each tile, so what assembly holds ([`assembly_bytes`]) grows
-//! with the frame's width and tile size but not with its height; a job whose frames would
-//! not fit the server's assembly memory is refused when it is submitted.
+//! A frame is never held whole: it is made and written a band of rows at a time, reading
+//! only those rows of each tile, so what assembly holds ([`assembly_bytes`]) grows with
+//! the band's rows, the frame's width and the tile size but not with the frame's height.
+//! Bands are as large as the server's assembly memory allows ([`band_rows`]); a job whose
+//! frames would not fit even a block of rows at a time is refused when it is submitted.
 
 use std::path::{Path, PathBuf};
 
@@ -183,10 +184,10 @@ pub fn read_tile(store: &Store, job: u64, task: u64) -> Result<Layers> {
     Ok(image.layers)
 }
 
-/// Rows of a frame assembled at a time: four ZIP blocks, so that a band's blocks are
-/// compressed on four threads. What a frame's assembly holds grows with this and with
-/// the frame's width, never with its height.
-pub const BAND_ROWS: u32 = 4 * output::BLOCK_ROWS;
+/// Pixels of a frame assembled at a time, at most: a band of whole rows. Enough ZIP
+/// blocks per band that compressing them keeps every core busy (64-row bands of a
+/// 2560-wide frame assembled 1.5x slower than the whole frame did); more buys nothing.
+const BAND_PIXELS: u32 = 1 << 20;
 
 /// Bytes of one pixel of [`Layers`]: 13 `f32` channels.
 const LAYER_BYTES: u64 = 13 * 4;
@@ -196,13 +197,13 @@ const SUM_BYTES: u64 = 4 + 16 + 12 + 12 + 8 + 16;
 /// encoder.
 const ASSEMBLY_OVERHEAD_BYTES: u64 = 16 << 20;
 
-/// The most memory that assembling one frame of `spec` takes, in bytes: a band of the
-/// frame (its layers, its preview rows, its EXR blocks before and after compression) and
-/// one tile's share of it being merged (a pass read, the first pass kept, the sums, the
-/// merged result). It does not grow with the frame's height, the number of tiles or of
-/// passes.
-pub fn assembly_bytes(spec: &JobSpec) -> u64 {
-    let band = u64::from(BAND_ROWS);
+/// The most memory that assembling a frame of `spec` takes with bands of `rows` rows, in
+/// bytes: a band (its layers, its preview rows, its EXR blocks before and after
+/// compression) and one tile's share of it being merged (a pass read, the first pass
+/// kept, the sums, the merged result). It does not grow with the frame's height, the
+/// number of tiles or of passes.
+pub fn assembly_bytes(spec: &JobSpec, rows: u32) -> u64 {
+    let band = u64::from(rows);
     let width = u64::from(spec.width);
     // A tile's rows are read in whole blocks: up to a block more at either end.
     let tile_rows = band + 2 * u64::from(output::BLOCK_ROWS);
@@ -212,23 +213,34 @@ pub fn assembly_bytes(spec: &JobSpec) -> u64 {
         + ASSEMBLY_OVERHEAD_BYTES
 }
 
-/// Refuses a spec whose frames this server cannot assemble within `budget` bytes (see
-/// [`assembly_bytes`]), naming the field that sets the size.
+/// Rows of a frame of `spec` assembled at a time within `budget` bytes: up to
+/// [`BAND_PIXELS`], in whole ZIP blocks, fewer where the budget is tight; `None` when
+/// even one block of rows does not fit.
+pub fn band_rows(spec: &JobSpec, budget: u64) -> Option<u32> {
+    let block = output::BLOCK_ROWS;
+    let blocks = (BAND_PIXELS / spec.width.max(1) / block).max(1);
+    (1..=blocks)
+        .rev()
+        .map(|n| n * block)
+        .find(|&rows| assembly_bytes(spec, rows) <= budget)
+}
+
+/// Refuses a spec whose frames this server cannot assemble within `budget` bytes, even a
+/// block of rows at a time, naming the field that sets the size.
 pub fn check_assembly_memory(spec: &JobSpec, budget: u64) -> Result<()> {
-    let needed = assembly_bytes(spec);
-    if needed <= budget {
+    if band_rows(spec, budget).is_some() {
         return Ok(());
     }
     let mib = |b: u64| b.div_ceil(1 << 20);
     Err(Error::Invalid {
         field: "width".into(),
         message: format!(
-            "assembling a frame {} pixels wide (tiles of {}) takes {} MiB, over this server's \
-             assembly memory of {} MiB (tessera server --assembly-memory); use a smaller \
-             width or tile_size, or give the server more",
+            "assembling a frame {} pixels wide (tiles of {}) takes at least {} MiB, over this \
+             server's assembly memory of {} MiB (tessera server --assembly-memory); use a \
+             smaller width or tile_size, or give the server more",
             spec.width,
             spec.tile_size.unwrap_or(MAX_TILE_SIZE),
-            mib(needed),
+            mib(assembly_bytes(spec, output::BLOCK_ROWS)),
             mib(budget)
         ),
     })
@@ -248,20 +260,28 @@ pub struct FrameSource<'a> {
     fresh: Vec<&'a TaskRow>,
     /// Passes the frame holds once made.
     passes: u32,
+    /// Rows made at a time.
+    band_rows: u32,
     /// Asked before each band: an error stops the assembly (the job went away).
     proceed: Box<dyn Fn() -> Result<()> + 'a>,
 }
 
 impl<'a> FrameSource<'a> {
     /// The source of frame `frame_no` of `job` from `tasks` (its done tasks, by tile then
-    /// pass).
+    /// pass), making bands as large as `budget` bytes allow ([`band_rows`]); a frame that
+    /// does not fit even a block of rows at a time is [`Error::BadFrame`].
     pub fn new(
         store: &'a Store,
         spec: &'a JobSpec,
         job: u64,
         frame_no: i32,
         tasks: &'a [TaskRow],
+        budget: u64,
     ) -> Result<Self> {
+        // The job was accepted within a budget, but the server may have been restarted
+        // with a smaller one since.
+        check_assembly_memory(spec, budget).map_err(|e| Error::BadFrame(e.to_string()))?;
+        let band_rows = band_rows(spec, budget).unwrap_or(output::BLOCK_ROWS);
         let merged = merged_passes(store, job, frame_no)?;
         let held = merged.as_ref().map_or(0, |m| m.1);
         let fresh: Vec<&TaskRow> = tasks.iter().filter(|t| t.pass >= held).collect();
@@ -274,6 +294,7 @@ impl<'a> FrameSource<'a> {
             merged,
             fresh,
             passes,
+            band_rows,
             proceed: Box::new(|| Ok(())),
         })
     }
@@ -337,7 +358,7 @@ impl<'a> FrameSource<'a> {
     /// What the frame's samples reached, over all its pixels.
     pub fn sampling(&self) -> Result<SamplingSummary> {
         let mut tally = SamplingTally::default();
-        for band in output::frame_bands(self.size(), BAND_ROWS) {
+        for band in output::frame_bands(self.size(), self.band_rows) {
             tally.add(&self.band(band)?);
         }
         Ok(tally.summary())
@@ -448,7 +469,9 @@ impl FrameSource<'_> {
             path: &png,
             exposure: 0.0,
         });
-        output::write_frame_in_bands(self.size(), BAND_ROWS, exr, preview, |band| self.band(band))
+        output::write_frame_in_bands(self.size(), self.band_rows, exr, preview, |band| {
+            self.band(band)
+        })
     }
 }
 
@@ -548,7 +571,7 @@ mod tests {
         let first = [task(10, 0, 0, left), task(11, 1, 0, right)];
         put(&store, (4, 2), &first[0], &layers(left, 1.0, 1.0, 4.0));
         put(&store, (4, 2), &first[1], &layers(right, 1.0, 1.0, 4.0));
-        let source = FrameSource::new(&store, &spec, 1, 3, &first).unwrap();
+        let source = FrameSource::new(&store, &spec, 1, 3, &first, 1 << 30).unwrap();
         assert_eq!(source.passes(), 1);
         source.write_merged().unwrap();
         for t in &first {
@@ -558,14 +581,14 @@ mod tests {
         let second = task(12, 0, 1, left);
         put(&store, (4, 2), &second, &layers(left, 3.0, 1.0, 4.0));
         let all = [first[0].clone(), second.clone(), first[1].clone()];
-        let source = FrameSource::new(&store, &spec, 1, 3, &all).unwrap();
+        let source = FrameSource::new(&store, &spec, 1, 3, &all, 1 << 30).unwrap();
         assert_eq!(source.passes(), 2);
         let built = source.band(whole).unwrap();
         let at = |b: &Layers, x: usize| (b.beauty[x].x, b.samples[x]);
         assert_eq!((at(&built, 0), at(&built, 3)), ((2.0, 8.0), (1.0, 4.0)));
         source.write_merged().unwrap();
         std::fs::remove_file(store.tile(1, second.id)).unwrap();
-        let again = FrameSource::new(&store, &spec, 1, 3, &all).unwrap();
+        let again = FrameSource::new(&store, &spec, 1, 3, &all, 1 << 30).unwrap();
         assert_eq!((again.passes(), again.band(whole).unwrap()), (2, built));
     }
 
@@ -577,7 +600,8 @@ mod tests {
     fn a_frame_written_band_by_band_is_its_tiles_merged_and_pasted() {
         let dir = tempfile::tempdir().unwrap();
         let store = Store::open(dir.path()).unwrap();
-        let size = (40, BAND_ROWS + 30);
+        // Bands of 64 rows, not the million pixels of a real one, keep the test small.
+        let size = (40, 64 + 30);
         let mut spec = JobSpec::new("s");
         (spec.width, spec.height) = size;
         spec.layers = vec![OutputLayer::Beauty, OutputLayer::Depth];
@@ -599,7 +623,8 @@ mod tests {
             }
             expected.paste(&merge_passes(&parts));
         }
-        let source = FrameSource::new(&store, &spec, 1, 3, &tasks).unwrap();
+        let mut source = FrameSource::new(&store, &spec, 1, 3, &tasks, 1 << 30).unwrap();
+        source.band_rows = 64;
         let facts = FrameFacts {
             reached: source.sampling().unwrap(),
             render_seconds: 1.5,
@@ -628,20 +653,30 @@ mod tests {
         assert_eq!(merge_passes(std::slice::from_ref(&l)), l);
     }
 
-    /// The largest frame the server accepts takes a bounded, stated amount to assemble,
-    /// and a budget below it refuses the job naming the width.
+    /// What assembly holds grows with the band's rows and the width, not the height;
+    /// a tight budget gets narrower bands, and one that fits not even a block of rows
+    /// refuses the job naming the width.
     #[test]
-    fn assembly_memory_grows_with_width_not_height() {
+    fn bands_fit_the_assembly_memory() {
         let mut spec = JobSpec::new("s");
         (spec.width, spec.height, spec.tile_size) = (1920, 1080, Some(64));
-        let hd = assembly_bytes(&spec);
+        let hd = assembly_bytes(&spec, 64);
         spec.height = crate::limits::MAX_RESOLUTION;
-        assert_eq!(assembly_bytes(&spec), hd);
+        assert_eq!(assembly_bytes(&spec, 64), hd);
+        // A million pixels a band: 544 rows of 1920, in whole blocks.
+        assert_eq!(band_rows(&spec, 1 << 30), Some(544));
+        assert_eq!(band_rows(&spec, assembly_bytes(&spec, 64)), Some(64));
+
         (spec.width, spec.tile_size) = (crate::limits::MAX_RESOLUTION, Some(MAX_TILE_SIZE));
-        let largest = assembly_bytes(&spec);
+        assert_eq!(
+            band_rows(&spec, crate::limits::DEFAULT_ASSEMBLY_MEMORY),
+            Some(64)
+        );
+        let largest = assembly_bytes(&spec, 64);
         assert!(largest < 512 << 20, "{largest} bytes");
-        check_assembly_memory(&spec, largest).unwrap();
-        let err = check_assembly_memory(&spec, largest - 1).unwrap_err();
+        let least = assembly_bytes(&spec, output::BLOCK_ROWS);
+        check_assembly_memory(&spec, least).unwrap();
+        let err = check_assembly_memory(&spec, least - 1).unwrap_err();
         assert!(
             matches!(&err, Error::Invalid { field, .. } if field == "width"),
             "{err}"

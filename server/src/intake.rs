@@ -178,10 +178,7 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     if assembled {
         return Ok(());
     }
-    // The job was accepted within the budget, but the server may have been restarted
-    // with a smaller one since.
-    assembly::check_assembly_memory(&spec, app.config.assembly_memory)
-        .map_err(|e| Error::BadFrame(e.to_string()))?;
+    let budget = app.config.assembly_memory;
     // The job may be cancelled or deleted while a big frame is written: each band asks.
     let wanted = || app.db.with(|c| scheduler::assembly_wanted(c, job));
     let started = Instant::now();
@@ -190,11 +187,13 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
         .filter_map(|t| std::fs::metadata(app.store.tile(job, t.id)).ok())
         .map(|m| m.len())
         .sum();
-    let mut source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?.with_proceed(wanted);
+    let mut source =
+        FrameSource::new(&app.store, &spec, job, frame, &tasks, budget)?.with_proceed(wanted);
     if spec.time_budget.is_some() {
         source.write_merged()?;
         // From here on the merged frame holds every pass, and is read alone.
-        source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?.with_proceed(wanted);
+        source =
+            FrameSource::new(&app.store, &spec, job, frame, &tasks, budget)?.with_proceed(wanted);
     }
     let facts = assembly::FrameFacts {
         reached: source.sampling()?,
@@ -251,6 +250,7 @@ pub fn preview_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     if assembled {
         return Ok(());
     }
-    let source = FrameSource::new(&app.store, &spec, job, frame, &tasks)?;
+    let budget = app.config.assembly_memory;
+    let source = FrameSource::new(&app.store, &spec, job, frame, &tasks, budget)?;
     source.write_preview()
 }
