@@ -2,6 +2,9 @@
 //! BVH (static and deforming), closest-hit camera rays, and whole paths through the demo
 //! scene. Run with `cargo bench -p tracer`.
 
+// Test scenes use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use std::sync::Arc;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};

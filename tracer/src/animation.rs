@@ -10,6 +10,7 @@
 
 use glam::{DMat4, DQuat, DVec3};
 
+use crate::math;
 use crate::scene::{Node, Scene, Trs};
 
 /// One glTF animation.
@@ -277,9 +278,9 @@ fn slerp(a: DQuat, b: DQuat, u: f64) -> DQuat {
     if d > 1.0 - 1e-10 {
         return a * (1.0 - u) + b * u;
     }
-    let theta = d.min(1.0).acos();
-    let s = theta.sin();
-    a * (((1.0 - u) * theta).sin() / s) + b * ((u * theta).sin() / s)
+    let theta = math::acos_f64(d.min(1.0));
+    let s = math::sin_f64(theta);
+    a * (math::sin_f64((1.0 - u) * theta) / s) + b * (math::sin_f64(u * theta) / s)
 }
 
 // ---------------------------------------------------------------------------------------

@@ -7,6 +7,7 @@ use glam::{Affine3A, Quat, Vec2, Vec3};
 
 use crate::bvh::Segment;
 use crate::geometry::Ray;
+use crate::math;
 
 /// A glTF camera projection.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -72,8 +73,14 @@ impl Camera {
             Some(steps @ [_, _, ..]) => {
                 let s = Segment::new(time, steps.len());
                 let (a, b) = (&steps[s.index], &steps[s.index + 1]);
+                // The shorter arc: q and -q are the same rotation.
+                let b_rotation = if a.rotation.dot(b.rotation) < 0.0 {
+                    -b.rotation
+                } else {
+                    b.rotation
+                };
                 Affine3A::from_rotation_translation(
-                    a.rotation.slerp(b.rotation, s.w1),
+                    math::slerp(a.rotation, b_rotation, s.w1),
                     s.lerp(a.position, b.position),
                 )
             }
@@ -87,7 +94,7 @@ impl Camera {
         let ndc = Vec2::new(2.0 * film.x - 1.0, 1.0 - 2.0 * film.y);
         let (origin, dir) = match self.projection {
             Projection::Perspective { yfov, .. } => {
-                let h = (0.5 * yfov).tan();
+                let h = math::tan(0.5 * yfov);
                 let d = Vec3::new(ndc.x * h * self.aspect, ndc.y * h, -1.0);
                 (Vec3::ZERO, d)
             }

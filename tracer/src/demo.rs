@@ -2,12 +2,13 @@
 //! measurements, scaled to a 2 m box) with an area light, a diffuse box, a metal sphere and
 //! a glass sphere; still, or animated for the farm's demo.
 
-use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
+use glam::{DMat4, DVec3, Vec3, Vec4};
 
 use crate::animation::{Animation, Channel, Interpolation, Target};
 use crate::camera::Projection;
 use crate::light::Environment;
 use crate::material::Material;
+use crate::math;
 use crate::scene::{CameraDef, Scene, SceneBuilder, Trs};
 use crate::shapes::{cube, quad, uv_sphere};
 
@@ -122,12 +123,12 @@ pub fn cornell_box() -> Scene {
     let white = b.material(diffuse("block", WHITE));
     let tall = DMat4::from_scale_rotation_translation(
         DVec3::new(0.6, 1.2, 0.6),
-        DQuat::from_rotation_y(0.29),
+        math::rotation_y_f64(0.29),
         DVec3::new(-0.33, 0.6, -0.3),
     );
     let short = DMat4::from_scale_rotation_translation(
         DVec3::new(0.6, 0.6, 0.6),
-        DQuat::from_rotation_y(-0.3),
+        math::rotation_y_f64(-0.3),
         DVec3::new(0.34, 0.3, 0.25),
     );
     b.mesh("tall block", vec![cube(white)], tall);
@@ -158,7 +159,7 @@ fn demo_objects(b: &mut SceneBuilder) -> [u32; 3] {
     });
     let boxy = Trs {
         translation: DVec3::new(-0.4, 0.55, -0.35),
-        rotation: DQuat::from_rotation_y(0.35),
+        rotation: math::rotation_y_f64(0.35),
         scale: DVec3::new(0.55, 1.1, 0.55),
     };
     let sphere_at = |r: f64, x: f64, z: f64| Trs {
@@ -220,7 +221,7 @@ pub fn animated_demo_scene() -> Scene {
     let turn: Vec<f32> = (0..=4)
         .flat_map(|k| {
             let angle = 0.35 + std::f32::consts::FRAC_PI_4 * k as f32;
-            let q = glam::Quat::from_rotation_y(angle);
+            let q = math::rotation_y(angle);
             [q.x, q.y, q.z, q.w]
         })
         .collect();

@@ -11,6 +11,7 @@
 //! | [`shapes`] | quads, cubes and spheres as triangle primitives |
 //! | [`geometry`] | rays, hits, boxes, shading frames, the self-intersection offset |
 //! | [`triangle`] | the watertight ray/triangle test |
+//! | [`math`] | sine, power and the rest, the same bits on every machine |
 //! | [`bvh`] | SAH BVH per mesh and the top-level BVH over instances |
 //! | [`camera`] | perspective and orthographic cameras |
 //! | [`texture`] | images, samplers, KHR_texture_transform, sRGB |
@@ -34,6 +35,8 @@
 // `!(x > 0.0)` is how the tracer rejects NaN together with the values it guards against;
 // rewriting it as `x <= 0.0` would let NaN through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Unit tests compare against the platform's maths and build scenes with glam's rotations.
+#![cfg_attr(test, allow(clippy::disallowed_methods))]
 
 pub mod animation;
 pub mod bsdf;
@@ -48,6 +51,7 @@ pub mod integrator;
 pub mod light;
 pub mod loader;
 pub mod material;
+pub mod math;
 pub mod motion;
 pub mod output;
 mod prepare;

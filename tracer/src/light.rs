@@ -110,7 +110,7 @@ impl Environment {
             Environment::Constant(c) => {
                 let z = 1.0 - 2.0 * u.x;
                 let r = (1.0 - z * z).max(0.0).sqrt();
-                let (s, co) = (2.0 * std::f32::consts::PI * u.y).sin_cos();
+                let (s, co) = crate::math::sin_cos(2.0 * std::f32::consts::PI * u.y);
                 Some((
                     Vec3::new(r * co, r * s, z),
                     *c,

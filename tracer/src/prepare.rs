@@ -521,7 +521,7 @@ fn pixel_footprint(projection: &Projection, height: u32) -> PixelFootprint {
     match *projection {
         Projection::Perspective { yfov, .. } => PixelFootprint {
             absolute: 0.0,
-            per_distance: 2.0 * (0.5 * yfov as f64).tan() / h,
+            per_distance: 2.0 * crate::math::tan_f64(0.5 * yfov as f64) / h,
         },
         Projection::Orthographic { ymag, .. } => PixelFootprint {
             absolute: 2.0 * ymag as f64 / h,

@@ -2,6 +2,7 @@
 
 use glam::Vec3;
 
+use crate::math;
 use crate::scene::Primitive;
 
 /// A quad a, b, c, d (counter-clockwise seen from its front) as two triangles with flat
@@ -59,9 +60,9 @@ pub fn uv_sphere(material: u32, rings: u32, segments: u32) -> Primitive {
         for s in 0..=segments {
             let phi = std::f32::consts::TAU * s as f32 / segments as f32;
             let n = Vec3::new(
-                theta.sin() * phi.cos(),
-                theta.cos(),
-                -theta.sin() * phi.sin(),
+                math::sin(theta) * math::cos(phi),
+                math::cos(theta),
+                -math::sin(theta) * math::sin(phi),
             );
             prim.positions.push(n);
             prim.normals.push(n);
@@ -87,7 +88,7 @@ pub fn uv_sphere(material: u32, rings: u32, segments: u32) -> Primitive {
 pub fn bumpy_grid(n: usize) -> Vec<[Vec3; 3]> {
     let p = |i: usize, j: usize| {
         let (x, z) = (i as f32 / n as f32, j as f32 / n as f32);
-        Vec3::new(x, 0.05 * (13.0 * x).sin() * (11.0 * z).cos(), z)
+        Vec3::new(x, 0.05 * math::sin(13.0 * x) * math::cos(11.0 * z), z)
     };
     let mut tris = Vec::with_capacity(2 * n * n);
     for i in 0..n {

@@ -58,7 +58,7 @@ impl UvTransform {
     /// Applies the transform to a texture coordinate, as the extension's matrix does.
     pub fn apply(&self, uv: Vec2) -> Vec2 {
         let s = uv * self.scale;
-        let (sin, cos) = self.rotation.sin_cos();
+        let (sin, cos) = crate::math::sin_cos(self.rotation);
         Vec2::new(cos * s.x + sin * s.y, -sin * s.x + cos * s.y) + self.offset
     }
 }
@@ -96,7 +96,7 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 {
         c / 12.92
     } else {
-        ((c + 0.055) / 1.055).powf(2.4)
+        crate::math::powf((c + 0.055) / 1.055, 2.4)
     }
 }
 
@@ -105,7 +105,7 @@ pub fn linear_to_srgb(c: f32) -> f32 {
     if c <= 0.0031308 {
         c * 12.92
     } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
+        1.055 * crate::math::powf(c, 1.0 / 2.4) - 0.055
     }
 }
 

@@ -2,6 +2,9 @@
 //! in base64 data: URIs) to posed nodes and deformed vertices, against values worked out by
 //! hand; the loader's errors for broken animation data; and the shared sample models.
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use std::f64::consts::FRAC_1_SQRT_2;
 use std::path::{Path, PathBuf};
 

@@ -4,6 +4,9 @@
 //! reflect what they receive. (The statistical tests of every sampling routine live
 //! beside the maths, in `src/bsdf/tests.rs`.)
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use glam::{Vec2, Vec3};
 use tracer::bsdf::{precompute_tables, Bsdf, SurfaceParams};
 

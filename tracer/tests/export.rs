@@ -3,6 +3,9 @@
 //! with motion blur too); a scene exercising the parts the demos do not use survives the
 //! round trip; and what the exporter cannot write is refused with an error naming it.
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};

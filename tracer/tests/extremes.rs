@@ -5,6 +5,9 @@
 //! Each case prints what it measured, so `cargo test -p tracer --test extremes --
 //! --nocapture` gives the table of the closing note.
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 mod common;
 
 #[path = "extremes/support.rs"]

@@ -3,6 +3,9 @@
 //! follow their pdf, environment maps are oriented and importance-sampled as documented,
 //! and punctual lights deliver the glTF units.
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use std::f64::consts::PI;
 
 use glam::{Affine3A, DVec3, Quat, Vec2, Vec3};

@@ -3,6 +3,9 @@
 //! tangents, the material extensions, default scenes, packing, and errors that name the
 //! element at fault.
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use std::io::Cursor;
 use std::path::PathBuf;
 

@@ -1,5 +1,8 @@
 //! EXR and PNG output: round trips, what other readers see, tile validation, previews.
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use std::path::PathBuf;
 
 use exr::prelude::{

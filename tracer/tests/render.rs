@@ -1,6 +1,9 @@
 //! Whole renders against known answers: white furnace, closed-form irradiance, and the
 //! determinism of tiles, sample ranges and regions.
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -555,4 +558,81 @@ fn the_cornell_lamp_lights_only_the_room_below() {
     );
     let mean = mean_radiance(&lit);
     assert!(mean < 0.5, "the ceiling above the lamp reads {mean}");
+}
+
+/// A hash of every bit of every layer.
+fn layers_hash(layers: &Layers) -> u64 {
+    let words = layers
+        .beauty
+        .iter()
+        .flat_map(|p| p.to_array())
+        .chain(layers.albedo.iter().flat_map(|p| p.to_array()))
+        .chain(layers.normal.iter().flat_map(|p| p.to_array()))
+        .chain(layers.depth.iter().copied());
+    words.fold(0xcbf29ce484222325u64, |h, w| {
+        (h ^ u64::from(w.to_bits())).wrapping_mul(0x100000001b3)
+    })
+}
+
+/// The farm compares tiles from different workers bit for bit, so a pixel must not
+/// depend on the CPU that traced it. These renders touch every transcendental function
+/// of the tracer (GGX and light sampling, slerped motion blur, the environment map's
+/// angles, a spot cone) and must give the bits this machine's class gave when the
+/// constants were written; CI runs them on whatever CPU it gets.
+#[test]
+fn every_machine_renders_the_same_bits() {
+    // The animated demo at frame 12 with a 180° shutter: metal, glass, a moving box.
+    let options = FrameOptions {
+        frame: 12,
+        width: 24,
+        height: 24,
+        shutter: tracer::motion::Shutter {
+            open: -0.25,
+            close: 0.25,
+        },
+        ..Default::default()
+    };
+    let demo = prepare_frame(Arc::new(tracer::demo::animated_demo_scene()), &options).unwrap();
+    let demo = render(&demo, &RenderSettings::default(), 4).resolve();
+
+    // A glossy sphere in an environment map with a bright patch, under a spot light.
+    let (w, h) = (32, 16);
+    let mut pixels = vec![Vec3::new(0.2, 0.3, 0.5); w * h];
+    pixels[5 * w + 9] = Vec3::splat(40.0);
+    let map = tracer::light::EnvironmentMap::from_pixels(w, h, pixels).unwrap();
+    let mut b = SceneBuilder::default();
+    let m = b.material(Material {
+        base_color: Vec4::new(0.8, 0.5, 0.3, 1.0),
+        roughness: 0.3,
+        ..Default::default()
+    });
+    b.mesh("sphere", vec![uv_sphere(m, 16, 32)], DMat4::IDENTITY);
+    let spot = PunctualLight::Spot {
+        intensity: Vec3::splat(30.0),
+        range: None,
+        inner_cone: 0.2,
+        outer_cone: 0.5,
+    };
+    b.light(spot, DMat4::from_translation(DVec3::new(0.0, 0.0, 3.0)));
+    let camera = CameraDef {
+        name: None,
+        projection: Projection::Perspective {
+            yfov: 0.7,
+            aspect_ratio: None,
+            znear: 0.01,
+        },
+    };
+    b.camera(camera, DMat4::from_translation(DVec3::new(0.0, 0.5, 4.0)));
+    b.environment(Environment::Map(map));
+    let lit = render(&frame(b.finish(), 24, 24), &RenderSettings::default(), 4).resolve();
+
+    let got = [layers_hash(&demo), layers_hash(&lit)];
+    assert_eq!(
+        got,
+        [271044113710445491, 13998067277777092205],
+        "this machine renders other bits than the machine that wrote the constants: \
+         CPU-dependent maths reached the tracer (a platform sin, exp or pow, or a SIMD \
+         path chosen at run time). If the image changed on purpose, these are the new \
+         constants."
+    );
 }

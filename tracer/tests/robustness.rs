@@ -1,6 +1,9 @@
 //! Robustness of ray casting through the public API: no self-intersection at any scale,
 //! no leaks through closed meshes, and BVH answers equal to brute force.
 
+// Test scenes and closed forms use the platform's maths; tracer::math is for the tracer.
+#![allow(clippy::disallowed_methods)]
+
 use glam::{Affine3A, Quat, Vec3};
 use tracer::bvh::{Instance, MeshBvh, SceneBvh};
 use tracer::geometry::{barycentric, offset_ray_origin, Ray};

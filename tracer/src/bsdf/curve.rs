@@ -207,9 +207,10 @@ impl Integrand {
 
     /// The visible normal at (v, φ) and its cosine with `wo`.
     fn normal(&self, v: f64, phi: f64) -> (glam::Vec3, f32) {
+        let (sin_phi, cos_phi) = crate::math::sin_cos_f64(phi);
         let q = QuadPoint {
-            cos_phi: phi.cos() as f32,
-            sin_phi: phi.sin() as f32,
+            cos_phi: cos_phi as f32,
+            sin_phi: sin_phi as f32,
             uy: (1.0 - (1.0 - v) * (1.0 - v)) as f32,
             weight: 0.0,
         };

@@ -59,7 +59,7 @@ pub(crate) fn sample_visible_normal(wo: Vec3, alpha: f32, u: Vec2) -> Vec3 {
     let phi = TAU * u.x;
     let z = (1.0 - u.y) * (1.0 + wo_std.z) - wo_std.z;
     let sin_theta = (1.0 - z * z).max(0.0).sqrt();
-    let (sin_phi, cos_phi) = phi.sin_cos();
+    let (sin_phi, cos_phi) = crate::math::sin_cos(phi);
     let c = Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, z);
     // Offset by the view direction to get the (stretched) half vector, then unstretch.
     let h = c + wo_std;
@@ -103,7 +103,7 @@ pub(crate) fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
             std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y),
         )
     };
-    let (s, c) = theta.sin_cos();
+    let (s, c) = crate::math::sin_cos(theta);
     let x = r * c;
     let y = r * s;
     Vec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt())

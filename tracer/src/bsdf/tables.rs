@@ -129,9 +129,10 @@ pub(super) fn quad_points<const N_PHI: usize, const N_Z: usize>() -> Vec<QuadPoi
         let jac = 2.0 * (1.0 - v);
         for a in 0..N_PHI {
             let phi = std::f64::consts::PI * (a as f64 + 0.5) / N_PHI as f64;
+            let (sin_phi, cos_phi) = crate::math::sin_cos_f64(phi);
             pts.push(QuadPoint {
-                cos_phi: phi.cos() as f32,
-                sin_phi: phi.sin() as f32,
+                cos_phi: cos_phi as f32,
+                sin_phi: sin_phi as f32,
                 uy: uy as f32,
                 weight: (jac / (N_PHI * N_Z) as f64) as f32,
             });

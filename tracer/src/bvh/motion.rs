@@ -139,27 +139,6 @@ fn decompose(m: &DMat3) -> Option<(DQuat, DMat3)> {
     Some((rotation, stretch * sign))
 }
 
-/// `a` to `b` along the great arc (constant angular speed) for unit quaternions on the same
-/// hemisphere. The angle comes from `atan2(|a - b|, |a + b|)`, accurate for tiny angles
-/// where `acos(a·b)` is not.
-#[inline]
-fn slerp(a: Quat, b: Quat, u: f32) -> Quat {
-    if u == 0.0 {
-        return a;
-    }
-    if u == 1.0 {
-        return b;
-    }
-    let theta = 2.0 * (a - b).length().atan2((a + b).length());
-    let s = theta.sin();
-    let (wa, wb) = if s > 0.0 {
-        (((1.0 - u) * theta).sin() / s, (u * theta).sin() / s)
-    } else {
-        (1.0 - u, u)
-    };
-    (a * wa + b * wb).normalize()
-}
-
 impl MotionTransform {
     /// Decomposes `steps` (at least one; evenly spaced over the shutter, affine: the last
     /// row is ignored). Non-finite steps give non-finite transforms.
@@ -232,7 +211,7 @@ impl MotionTransform {
         }
         compose(&Step {
             translation: a.translation * seg.w0 + b.translation * seg.w1,
-            rotation: slerp(a.rotation, b.rotation, seg.w1),
+            rotation: crate::math::slerp(a.rotation, b.rotation, seg.w1),
             stretch: a.stretch * seg.w0 + b.stretch * seg.w1,
         })
     }
@@ -289,7 +268,7 @@ impl MotionTransform {
             let pad = reach(sa, sb) * AT_ROUNDING;
             let (qa, qb) = (sa.rotation.as_dquat(), sb.rotation.as_dquat());
             // Rotation angle over the segment (twice the quaternions' angle).
-            let theta = 4.0 * (qa - qb).length().atan2((qa + qb).length());
+            let theta = 4.0 * crate::math::atan2_f64((qa - qb).length(), (qa + qb).length());
             let n = ((theta / 0.05).ceil() as usize).clamp(1, 1024);
             let phi = theta / n as f64;
             let (s0, s1) = (sa.stretch.as_dmat3(), sb.stretch.as_dmat3());

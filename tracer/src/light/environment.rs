@@ -29,6 +29,7 @@ use glam::{Quat, Vec2, Vec3};
 
 use super::distribution::Distribution2D;
 use super::{luminance, LightError};
+use crate::math;
 
 /// An equirectangular high-dynamic-range image of the light arriving from infinitely far
 /// away, in linear RGB (nits). Cloning is cheap: the pixels and sampling tables are shared.
@@ -115,10 +116,10 @@ impl EnvironmentMap {
         let d_phi = 2.0 * std::f64::consts::PI / width as f64;
         for y in 0..height {
             let theta = std::f32::consts::PI * (y as f32 + 0.5) / height as f32;
-            let sin_theta = theta.sin();
+            let sin_theta = math::sin(theta);
             let theta0 = std::f64::consts::PI * y as f64 / height as f64;
             let theta1 = std::f64::consts::PI * (y + 1) as f64 / height as f64;
-            let row_solid_angle = d_phi * (theta0.cos() - theta1.cos());
+            let row_solid_angle = d_phi * (math::cos_f64(theta0) - math::cos_f64(theta1));
             for x in 0..width {
                 let l = luminance(pixels[y * width + x]);
                 func.push(l * sin_theta);
@@ -169,8 +170,8 @@ impl EnvironmentMap {
     /// be unit; zero gives (0.5, 0.5)).
     pub fn direction_to_uv(&self, dir: Vec3) -> Vec2 {
         let d = (self.rotation.inverse() * dir).normalize_or_zero();
-        let theta = d.y.clamp(-1.0, 1.0).acos();
-        let phi = d.z.atan2(d.x);
+        let theta = math::acos(d.y.clamp(-1.0, 1.0));
+        let phi = math::atan2(d.z, d.x);
         Vec2::new(
             0.5 + phi / (2.0 * std::f32::consts::PI),
             theta / std::f32::consts::PI,
@@ -236,8 +237,8 @@ impl EnvironmentMap {
 fn local_direction(uv: Vec2) -> (Vec3, f32) {
     let theta = uv.y * std::f32::consts::PI;
     let phi = (uv.x - 0.5) * 2.0 * std::f32::consts::PI;
-    let (sin_theta, cos_theta) = theta.sin_cos();
-    let (sin_phi, cos_phi) = phi.sin_cos();
+    let (sin_theta, cos_theta) = math::sin_cos(theta);
+    let (sin_phi, cos_phi) = math::sin_cos(phi);
     (
         Vec3::new(sin_theta * cos_phi, cos_theta, sin_theta * sin_phi),
         sin_theta,

@@ -39,7 +39,7 @@ impl SpotCone {
         };
         let outer = clean(outer_cone);
         let inner = clean(inner_cone).min(outer);
-        let (cos_inner, cos_outer) = (inner.cos(), outer.cos());
+        let (cos_inner, cos_outer) = (crate::math::cos(inner), crate::math::cos(outer));
         Self {
             cos_outer,
             scale: 1.0 / (cos_inner - cos_outer).max(1e-3),
@@ -67,7 +67,7 @@ impl SpotCone {
 /// a direction at `angle` radians from the spot's axis. In [0, 1]; 1 for `angle <=
 /// inner_cone`, 0 for `angle >= outer_cone`; never NaN, also for `inner == outer == 0`.
 pub fn spot_attenuation(angle: f32, inner_cone: f32, outer_cone: f32) -> f32 {
-    SpotCone::new(inner_cone, outer_cone).attenuation(angle.cos())
+    SpotCone::new(inner_cone, outer_cone).attenuation(crate::math::cos(angle))
 }
 
 /// A punctual light placed in (camera-relative) world space.

@@ -211,7 +211,7 @@ impl TriangleLight {
 
         // Uniformly choose the area A' of the sub-triangle (a, b, c').
         let ap_pi = std::f32::consts::PI + u.x * omega;
-        let (sin_ap, cos_ap) = ap_pi.sin_cos();
+        let (sin_ap, cos_ap) = crate::math::sin_cos(ap_pi);
         let sin_phi = sin_ap * cos_alpha - cos_ap * sin_alpha;
         let cos_phi = cos_ap * cos_alpha + sin_ap * sin_alpha;
         let k1 = cos_phi + cos_alpha;

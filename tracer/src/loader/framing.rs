@@ -5,6 +5,7 @@ use glam::{DMat4, DVec3};
 
 use crate::camera::Projection;
 use crate::geometry::Aabb;
+use crate::math;
 use crate::scene::{Mesh, Scene};
 
 /// Vertical field of view of [`framing_camera`]: a moderate telephoto, 40°.
@@ -81,9 +82,9 @@ pub fn framing_camera(bounds: &Aabb, aspect: f32) -> (Projection, DMat4) {
         1.0
     };
     let half_v = 0.5 * FRAMING_YFOV as f64;
-    let half_h = (half_v.tan() * aspect).atan();
+    let half_h = math::atan_f64(math::tan_f64(half_v) * aspect);
     // The sphere fits when its angular radius is within the narrower half-angle.
-    let distance = radius / half_v.min(half_h).sin();
+    let distance = radius / math::sin_f64(half_v.min(half_h));
     let dir = FRAMING_DIRECTION.normalize();
     let eye = center + dir * distance;
     // Columns: camera x (right), y (up), z (backwards = towards the camera), position.

@@ -43,7 +43,7 @@ pub fn srgb_oetf(linear: f32) -> f32 {
     } else if x <= 0.003_130_8 {
         12.92 * x
     } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
+        1.055 * crate::math::powf(x, 1.0 / 2.4) - 0.055
     }
 }
 
@@ -56,7 +56,7 @@ fn preview_pixel(beauty: Vec4, scale: f32) -> [u8; 4] {
 /// 2^`exposure` (in stops); a non-finite exposure counts as 0 stops.
 fn exposure_scale(exposure: f32) -> f32 {
     if exposure.is_finite() {
-        exposure.exp2()
+        crate::math::exp2(exposure)
     } else {
         1.0
     }

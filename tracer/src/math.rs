@@ -1,0 +1,178 @@
+//! The transcendental functions the tracer uses, the same bits on every machine.
+//!
+//! The farm verifies tiles by comparing their bits across workers, so a pixel must not
+//! depend on the CPU that traced it. The C library's `sinf`, `expf`, `powf`... do: glibc
+//! picks an FMA or an SSE2 build of each at load time, and they round differently. These
+//! are the `libm` crate's (musl's algorithms), compiled into the binary from plain IEEE
+//! operations, so every x86-64 machine runs the same instructions. `tracer/clippy.toml`
+//! forbids the `std` and `glam` methods they replace, so a new call cannot slip back.
+//!
+//! The square root, `mul_add`, `abs`, `min` and `max` are exactly rounded IEEE operations
+//! and need no wrapper.
+
+use glam::{DQuat, Quat};
+
+/// `(sin x, cos x)`.
+#[inline]
+pub fn sin_cos(x: f32) -> (f32, f32) {
+    libm::sincosf(x)
+}
+
+/// `sin x`.
+#[inline]
+pub fn sin(x: f32) -> f32 {
+    libm::sinf(x)
+}
+
+/// `cos x`.
+#[inline]
+pub fn cos(x: f32) -> f32 {
+    libm::cosf(x)
+}
+
+/// `tan x`.
+#[inline]
+pub fn tan(x: f32) -> f32 {
+    libm::tanf(x)
+}
+
+/// `atan2(y, x)`.
+#[inline]
+pub fn atan2(y: f32, x: f32) -> f32 {
+    libm::atan2f(y, x)
+}
+
+/// `acos x`.
+#[inline]
+pub fn acos(x: f32) -> f32 {
+    libm::acosf(x)
+}
+
+/// `x^y`.
+#[inline]
+pub fn powf(x: f32, y: f32) -> f32 {
+    libm::powf(x, y)
+}
+
+/// `2^x`.
+#[inline]
+pub fn exp2(x: f32) -> f32 {
+    libm::exp2f(x)
+}
+
+/// Double-precision `(sin x, cos x)`.
+#[inline]
+pub fn sin_cos_f64(x: f64) -> (f64, f64) {
+    libm::sincos(x)
+}
+
+/// Double-precision `sin x`.
+#[inline]
+pub fn sin_f64(x: f64) -> f64 {
+    libm::sin(x)
+}
+
+/// Double-precision `cos x`.
+#[inline]
+pub fn cos_f64(x: f64) -> f64 {
+    libm::cos(x)
+}
+
+/// Double-precision `tan x`.
+#[inline]
+pub fn tan_f64(x: f64) -> f64 {
+    libm::tan(x)
+}
+
+/// Double-precision `atan2(y, x)`.
+#[inline]
+pub fn atan2_f64(y: f64, x: f64) -> f64 {
+    libm::atan2(y, x)
+}
+
+/// Double-precision `atan x`.
+#[inline]
+pub fn atan_f64(x: f64) -> f64 {
+    libm::atan(x)
+}
+
+/// Double-precision `acos x`.
+#[inline]
+pub fn acos_f64(x: f64) -> f64 {
+    libm::acos(x)
+}
+
+/// `a` to `b` along the great arc (constant angular speed) for unit quaternions on the same
+/// hemisphere. The angle comes from `atan2(|a - b|, |a + b|)`, accurate for tiny angles
+/// where `acos(a·b)` is not.
+#[inline]
+pub fn slerp(a: Quat, b: Quat, u: f32) -> Quat {
+    if u == 0.0 {
+        return a;
+    }
+    if u == 1.0 {
+        return b;
+    }
+    let theta = 2.0 * atan2((a - b).length(), (a + b).length());
+    let s = sin(theta);
+    let (wa, wb) = if s > 0.0 {
+        (sin((1.0 - u) * theta) / s, sin(u * theta) / s)
+    } else {
+        (1.0 - u, u)
+    };
+    (a * wa + b * wb).normalize()
+}
+
+/// A rotation by `angle` radians about the y axis (`glam`'s own computes its sine with
+/// the C library).
+pub fn rotation_y(angle: f32) -> Quat {
+    let (s, c) = sin_cos(0.5 * angle);
+    Quat::from_xyzw(0.0, s, 0.0, c)
+}
+
+/// Double-precision [`rotation_y`].
+pub fn rotation_y_f64(angle: f64) -> DQuat {
+    let (s, c) = sin_cos_f64(0.5 * angle);
+    DQuat::from_xyzw(0.0, s, 0.0, c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Within a couple of ulps of the platform's over the ranges the tracer uses.
+    #[test]
+    fn agrees_with_the_platform_library() {
+        let ulps = |a: f32, b: f32| (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs();
+        for i in 0..=10_000 {
+            let x = -7.0 + 14.0 * i as f32 / 10_000.0;
+            let (s, c) = sin_cos(x);
+            assert!(
+                (s - x.sin()).abs() <= 1e-7 && (c - x.cos()).abs() <= 1e-7,
+                "{x}"
+            );
+            assert_eq!((sin(x), cos(x)), (s, c), "{x}");
+            let u = i as f32 / 10_000.0;
+            assert!(
+                ulps(acos(2.0 * u - 1.0), (2.0 * u - 1.0).acos()) <= 2,
+                "{u}"
+            );
+            assert!(ulps(atan2(x, 1.5), x.atan2(1.5)) <= 2, "{x}");
+            assert!(ulps(powf(u, 2.4), u.powf(2.4)) <= 2, "{u}");
+            assert!(ulps(exp2(x), x.exp2()) <= 2, "{x}");
+            let d = f64::from(x);
+            assert!((tan_f64(0.2 * d) - (0.2 * d).tan()).abs() <= 1e-15);
+            assert!((atan_f64(d) - d.atan()).abs() <= 1e-15);
+        }
+    }
+
+    #[test]
+    fn rotations_match_glam() {
+        for angle in [-3.0f32, -0.3, 0.0, 0.29, 1.0, 2.5] {
+            let ours = rotation_y(angle);
+            assert!(ours.abs_diff_eq(Quat::from_rotation_y(angle), 1e-7));
+            let ours = rotation_y_f64(f64::from(angle));
+            assert!(ours.abs_diff_eq(DQuat::from_rotation_y(f64::from(angle)), 1e-15));
+        }
+    }
+}
