@@ -2,11 +2,6 @@
 
 mod args;
 mod bench;
-mod bench_farm;
-mod bench_features;
-mod bench_plots;
-mod bench_rays;
-mod bench_scaling;
 mod client;
 mod control;
 mod demo;
@@ -67,9 +62,10 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Render(args) => render::run(args),
         Command::Bench(args) => match args.command {
-            Some(bench::BenchCommand::Farm(farm)) => bench_farm::run(farm),
-            Some(bench::BenchCommand::Overhead(o)) => bench_scaling::run(o),
-            Some(bench::BenchCommand::Cornell(c)) => bench::run_cornell(c),
+            Some(bench::BenchCommand::Farm(farm)) => bench::farm::run(farm),
+            Some(bench::BenchCommand::Overhead(o)) => bench::scaling::run(o),
+            Some(bench::BenchCommand::Cornell(c)) => bench::cornell::run_cornell(c),
+            Some(bench::BenchCommand::Rays(r)) => bench::rays::run(r),
             None => bench::run(args),
         },
         Command::Server(args) => server::run(args, layers),

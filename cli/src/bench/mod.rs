@@ -24,11 +24,20 @@ use tracer::render::{
 use tracer::scene::Scene;
 
 use crate::args::parse_size;
-use crate::bench_features::{self, FeatureCost};
-use crate::bench_plots;
-use crate::bench_rays::{self, BigMesh, RayRate};
-use crate::bench_scaling::{self, FarmCosts, Work};
 use crate::render::load_scene;
+use cornell::{cornell_efficiency, cornell_section, CornellArgs, CornellEfficiency};
+use features::FeatureCost;
+use rays::{BigMesh, RayRate};
+use scaling::{FarmCosts, Work};
+
+pub mod cornell;
+#[cfg(feature = "embree")]
+mod embree;
+pub mod farm;
+mod features;
+mod plots;
+pub mod rays;
+pub mod scaling;
 
 #[derive(Args)]
 #[command(args_conflicts_with_subcommands = true)]
@@ -57,33 +66,16 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// Load-test the farm server: simulated workers long-poll for empty tasks; tasks per
     /// second, lease latency and server memory, and nothing lost or done twice.
-    Farm(crate::bench_farm::FarmBenchArgs),
+    Farm(crate::bench::farm::FarmBenchArgs),
     /// The farm against a direct render of the same frames on this machine: one worker
     /// with every thread, then 1, 2 and 4 single-thread workers (the report's farm table).
-    Overhead(bench_scaling::OverheadArgs),
+    Overhead(scaling::OverheadArgs),
     /// The efficiency target's measurement alone: the measured Cornell box at 256x256,
     /// depth 8, in camera paths per second and MSE x seconds (the report's Cornell section).
     Cornell(CornellArgs),
-}
-
-#[derive(Args)]
-pub struct CornellArgs {
-    /// 4 spp against a 64-spp reference instead of 16 against 1024.
-    #[arg(long)]
-    pub quick: bool,
-    /// Renders measured, each with its own seed: the MSE is their mean, the time the
-    /// fastest's.
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=20))]
-    pub runs: u32,
-}
-
-/// Runs the Cornell box's efficiency measurement and prints the report's section.
-pub fn run_cornell(args: CornellArgs) -> anyhow::Result<()> {
-    print!(
-        "{}",
-        cornell_section(&cornell_efficiency(args.quick, args.runs)?)
-    );
-    Ok(())
+    /// Closest-hit and any-hit rays per second through the BVH of one mesh on one thread,
+    /// and beside native Embree's on the same rays with `--embree`.
+    Rays(rays::RaysArgs),
 }
 
 /// The generated mesh is a grid of this many quads a side: 1,002,528 triangles.
@@ -205,28 +197,6 @@ pub struct PresetPoint {
     pub estimated_error: Option<f64>,
     /// Measured RMSE.
     pub rmse: f64,
-}
-
-/// The measured Cornell box at the comparison's setup: 256x256, max depth 8.
-#[derive(Serialize)]
-pub struct CornellEfficiency {
-    /// Samples per pixel of the measured render.
-    pub spp: u32,
-    /// Samples per pixel of its reference.
-    pub reference_spp: u32,
-    /// Renders measured, each with its own seed; the time is the fastest's.
-    pub runs: u32,
-    /// Camera paths per second.
-    pub paths_per_second: f64,
-    /// Mean squared error of the beauty RGB, the mean over the renders.
-    pub mse: f64,
-    /// The standard error of that mean (0 for one render).
-    pub mse_standard_error: f64,
-    /// MSE times seconds: lower is more efficient.
-    pub mse_times_seconds: f64,
-    /// The share of the first render's squared error in its worst 0.1% of pixels: near 1
-    /// when a few pixels (fireflies, an edge) decide the MSE.
-    pub worst_pixels_share: f64,
 }
 
 /// Root-mean-square error of the beauty RGB of `a` against `reference`.
@@ -394,7 +364,7 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
         reference_spp,
     );
 
-    let rays = bench_rays::scene_rates(&frame)?;
+    let rays = rays::scene_rates(&frame)?;
     let (_, path_rays, seconds) = render(&frame, settings, 16);
     let paths = f64::from(frame.width * frame.height) * 16.0;
 
@@ -517,71 +487,6 @@ fn measure_scene(subject: Subject, reference_spp: u32, quick: bool) -> anyhow::R
     })
 }
 
-/// The measured Cornell box at 256x256 and max depth 8, as the efficiency target states
-/// it: camera paths per second, and MSE × seconds against a reference. Each of `runs`
-/// renders has a seed of its own, since one render's MSE moves by about 8% from seed to
-/// seed (a few pixels on the lamp's edges hold much of it): the MSE is their mean. The
-/// time is the fastest render's, which a busy neighbour on a shared machine disturbs
-/// least.
-fn cornell_efficiency(quick: bool, runs: u32) -> anyhow::Result<CornellEfficiency> {
-    let (spp, reference_spp) = if quick { (4, 64) } else { (16, 1024) };
-    let options = FrameOptions {
-        width: 256,
-        height: 256,
-        ..Default::default()
-    };
-    let frame = prepare_frame(Arc::new(tracer::demo::cornell_box()), &options)?;
-    let settings = RenderSettings {
-        max_depth: 8,
-        seed: REFERENCE_SEED,
-        ..RenderSettings::DEFAULT
-    };
-    eprintln!("cornell 256x256: reference at {reference_spp} spp ...");
-    let (reference, _, _) = render(&frame, settings, reference_spp);
-    let mut seconds = f64::INFINITY;
-    let mut errors = Vec::new();
-    let mut worst_pixels_share = 0.0;
-    for seed in (SEED..).take(runs as usize) {
-        let (image, _, s) = render(&frame, RenderSettings { seed, ..settings }, spp);
-        seconds = seconds.min(s);
-        errors.push(mse(&image, &reference));
-        if seed == SEED {
-            worst_pixels_share = share_of_worst_pixels(&image, &reference, 0.001);
-        }
-    }
-    let n = errors.len() as f64;
-    let mse = errors.iter().sum::<f64>() / n;
-    let variance = errors.iter().map(|e| (e - mse).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-    Ok(CornellEfficiency {
-        spp,
-        reference_spp,
-        runs,
-        paths_per_second: 256.0 * 256.0 * f64::from(spp) / seconds,
-        mse,
-        mse_standard_error: (variance / n).sqrt(),
-        mse_times_seconds: mse * seconds,
-        worst_pixels_share,
-    })
-}
-
-/// The report's section on the efficiency target.
-fn cornell_section(c: &CornellEfficiency) -> String {
-    format!(
-        "\n### Cornell box, 256x256, max depth 8\n\n\
-         {:.3} M camera paths/s at {} spp (the fastest of {} renders, each with its own \
-         seed); MSE {:.3e} (their mean; standard error {:.1e}) against {} spp; MSE x seconds \
-         {:.3e}. The worst 0.1% of pixels hold {:.0}% of the first render's squared error.\n",
-        c.paths_per_second / 1e6,
-        c.spp,
-        c.runs,
-        c.mse,
-        c.mse_standard_error,
-        c.reference_spp,
-        c.mse_times_seconds,
-        100.0 * c.worst_pixels_share
-    )
-}
-
 fn machine() -> Machine {
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
@@ -628,13 +533,13 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         None => {
             let cornell = cornell_efficiency(args.quick, 5)?;
             eprintln!("a generated mesh of 1M triangles ...");
-            let mesh = bench_rays::big_mesh(BIG_MESH_SIDE)?;
+            let mesh = rays::big_mesh(BIG_MESH_SIDE)?;
             eprintln!("feature costs ...");
             let spp = if args.quick { 8 } else { 32 };
-            let features = bench_features::feature_costs(size, spp)?;
+            let features = features::feature_costs(size, spp)?;
             // The full report takes the fastest of two runs of each: a shared machine's
             // speed drifts by more than the farm's overhead.
-            let farm = bench_scaling::farm_costs(
+            let farm = scaling::farm_costs(
                 Work::for_report(args.quick),
                 rayon::current_num_threads() as u32,
                 if args.quick { 1 } else { 2 },
@@ -658,7 +563,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     let markdown = markdown(&report);
     print!("{markdown}");
     write_report(&args.out, &report, &markdown)?;
-    let plots = bench_plots::write(&args.out, &report.scenes)?;
+    let plots = plots::write(&args.out, &report.scenes)?;
     eprintln!(
         "{} plots written to {}",
         plots.len(),
@@ -703,7 +608,7 @@ pub fn markdown(r: &Report) -> String {
             b.build_seconds_one_thread,
             b.build_seconds_all_threads,
             b.bytes_per_triangle,
-            bench_rays::table(&b.rays)
+            rays::table(&b.rays)
         );
     }
     if let Some(f) = &r.farm {
@@ -719,7 +624,7 @@ pub fn markdown(r: &Report) -> String {
             f.work.height,
             f.work.spp,
             f.repeats,
-            bench_scaling::table(f)
+            scaling::table(f)
         );
     }
     if !r.features.is_empty() {
@@ -728,7 +633,7 @@ pub fn markdown(r: &Report) -> String {
              without a feature and with it ({}x{}):\n\n{}",
             r.scenes.first().map_or(0, |s| s.width),
             r.scenes.first().map_or(0, |s| s.height),
-            bench_features::table(&r.features)
+            features::table(&r.features)
         );
     }
     for s in &r.scenes {
@@ -746,12 +651,12 @@ pub fn markdown(r: &Report) -> String {
             s.paths_per_second / 1e6,
             s.rays_per_second / 1e6,
             opt(s.seconds_to_target, 3),
-            bench_rays::table(&s.rays),
+            rays::table(&s.rays),
         );
         out += &format!(
             "\n![{}: error against time for each sweep]({})\n",
             s.name,
-            bench_plots::plot_path(&s.name)
+            plots::plot_path(&s.name)
         );
         let table = |out: &mut String, title: &str, head: &str, points: &[Point]| {
             let value = |v: u32| match head {
@@ -908,16 +813,16 @@ mod tests {
 
         // Its figure: four panels of labelled points and lines on white.
         let dir = tempfile::tempdir().unwrap();
-        let written = bench_plots::write(dir.path(), &report.scenes).unwrap();
+        let written = plots::write(dir.path(), &report.scenes).unwrap();
         assert_eq!(written, vec![dir.path().join("plots/motion-blur.png")]);
         let png = image::open(&written[0]).unwrap().to_rgb8();
-        assert_eq!(png.dimensions(), (bench_plots::WIDTH, bench_plots::HEIGHT));
+        assert_eq!(png.dimensions(), (plots::WIDTH, plots::HEIGHT));
         let count = |f: &dyn Fn(&image::Rgb<u8>) -> bool| png.pixels().filter(|p| f(p)).count();
         let white = count(&|p| p.0 == [255, 255, 255]);
         let blue = count(&|p| p.0[2] > 200 && p.0[0] < 80 && p.0[1] < 80);
         let red = count(&|p| p.0[0] > 200 && p.0[1] < 80 && p.0[2] < 80);
         let dark = count(&|p| p.0.iter().all(|&c| c < 100));
-        let area = (bench_plots::WIDTH * bench_plots::HEIGHT) as usize;
+        let area = (plots::WIDTH * plots::HEIGHT) as usize;
         assert!(white > area / 2, "{white} white pixels");
         // The four sweeps' lines and markers, the presets' markers, axes and text.
         assert!(blue > 1000, "{blue} blue pixels");

@@ -17,7 +17,7 @@ use anyhow::{bail, Context};
 use proto::{FrameRange, JobSpec};
 use serde::Serialize;
 
-use crate::bench_farm::{children_cpu_seconds, cpu_seconds};
+use crate::bench::farm::{children_cpu_seconds, cpu_seconds};
 use crate::client::Client;
 use crate::demo::{tessera_command, LocalServer, Workers};
 
@@ -272,7 +272,7 @@ async fn farm_seconds(
 /// 4 single-thread workers, each against a direct render with the same threads: the
 /// fastest of `repeats` runs of each, taken in turn.
 pub fn farm_costs(work: Work, threads: u32, repeats: u32) -> anyhow::Result<FarmCosts> {
-    let (dir, _) = crate::bench_farm::data_folder(None)?;
+    let (dir, _) = crate::bench::farm::data_folder(None)?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let result = runtime.block_on(async {
         let server = LocalServer::start(&dir.join("data")).await?;

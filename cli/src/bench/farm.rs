@@ -32,7 +32,7 @@ use tracer::film::{SampleValue, TileBuffer, TileRect};
 use tracer::output::ExrCompression;
 use worker::api::{Api, ApiError, LeaseAnswer, UploadAnswer};
 
-use crate::bench_rays::Rng;
+use crate::bench::rays::Rng;
 use crate::client::Client;
 use crate::demo::{terminate, tessera_command};
 

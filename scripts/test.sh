@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The whole test suite, as CI runs it (.ci/run calls this). First installs the optional
+# parts that some tests need, where this machine allows it (Embree 3, for the BVH
+# comparison of `tessera bench rays --embree`), then runs `cargo test --workspace` with the
+# cargo features those parts enable. Where a part cannot be installed, it says so loudly
+# and its tests report themselves skipped. Arguments go to `cargo test`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+features=()
+if bash scripts/install-embree.sh; then
+    features+=(cli/embree)
+else
+    echo "=== WARNING: Embree 3 is not installed: the Embree comparison's tests will be skipped ===" >&2
+fi
+
+if [ ${#features[@]} -gt 0 ]; then
+    exec cargo test --workspace --features "$(IFS=,; echo "${features[*]}")" "$@"
+fi
+exec cargo test --workspace "$@"
