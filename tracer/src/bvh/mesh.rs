@@ -7,7 +7,7 @@ use super::motion::Segment;
 use super::node::{
     ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
 };
-use super::wide::{collapse, traverse_wide, WideNode, WideRay};
+use super::wide::{collapse, prefetch, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
 use crate::triangle::{intersect_triangle, RayPrecomputed};
 
@@ -294,6 +294,10 @@ impl MeshBvh {
             &WideRay::new(ray),
             &mut t_max,
             stack,
+            |start| {
+                prefetch(&self.triangles[start as usize]);
+                prefetch(&self.ids[start as usize]);
+            },
             |start, count, t_max, _| {
                 let range = start as usize..(start + count) as usize;
                 for (tri, &id) in self.triangles[range.clone()].iter().zip(&self.ids[range]) {

@@ -178,21 +178,48 @@ fn min_or_acc(acc: Vec4, x: Vec4) -> Vec4 {
     return Vec4::select(x.cmplt(acc), x, acc);
 }
 
+/// Hierarchies of more nodes than this (32 KiB, a core's L1 data cache) prefetch the
+/// children a ray enters; smaller ones stay in the cache, where a prefetch only costs
+/// instructions (1.1% more on the Cornell box).
+const PREFETCH_ABOVE: usize = 256;
+
+/// Asks the CPU to start loading the two cache lines from `item` on (a node, or the first
+/// triangles of a leaf) into the cache.
+#[inline(always)]
+pub(super) fn prefetch<T>(item: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let p = (item as *const T).cast::<i8>();
+        // SAFETY: a prefetch is a hint; it reads nothing and cannot fault.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(p);
+            _mm_prefetch::<_MM_HINT_T0>(p.add(64));
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = item;
+}
+
 /// Visits the leaves of a four-wide hierarchy whose boxes the ray enters before `t_max`,
 /// nearest child first; `leaf` and `stack` work as for the binary
 /// [`traverse`](super::node::traverse). Stack entries name a node's lane (`4·node + lane`).
+/// `prefetch_leaf(start)` is called for each leaf entered, when it is pushed, so that its
+/// primitives can be on their way into the cache by the time it is visited.
 #[inline(always)]
 pub(super) fn traverse_wide(
     nodes: &[WideNode],
     ray: &WideRay,
     t_max: &mut f32,
     stack: &mut Vec<Deferred>,
+    prefetch_leaf: impl Fn(u32),
     mut leaf: impl FnMut(u32, u32, &mut f32, &mut Vec<Deferred>) -> bool,
 ) {
     if nodes.is_empty() {
         return;
     }
     let base = stack.len();
+    let prefetching = nodes.len() > PREFETCH_ABOVE;
     let mut current = 0u32;
     loop {
         let (entry, mut hits) = ray.enter(&nodes[current as usize], *t_max);
@@ -200,9 +227,20 @@ pub(super) fn traverse_wide(
         // Push the children entered, kept in falling order of distance above `first`, so
         // that the nearest is popped first.
         let first = stack.len();
+        let node = &nodes[current as usize];
         while hits != 0 {
             let lane = hits.trailing_zeros();
             hits &= hits - 1;
+            if prefetching {
+                // Fetch every child entered at once: in a large tree each node is a cache
+                // miss, and misses issued together overlap.
+                let start = node.start[lane as usize];
+                if node.count[lane as usize] == 0 {
+                    prefetch(&nodes[start as usize]);
+                } else {
+                    prefetch_leaf(start);
+                }
+            }
             stack.push((current * WIDTH as u32 + lane, entry[lane as usize]));
             let mut i = stack.len() - 1;
             while i > first && stack[i - 1].1 < stack[i].1 {
@@ -378,6 +416,7 @@ mod tests {
                 &WideRay::new(&ray),
                 &mut { t_max },
                 &mut stack,
+                |_| {},
                 |s, c, _, _| {
                     seen_wide.push((s, c));
                     false
@@ -411,12 +450,19 @@ mod tests {
         let mut stack = vec![(7, 1.0)];
         let mut order = Vec::new();
         let mut t_max = f32::INFINITY;
-        traverse_wide(&wide, &ray, &mut t_max, &mut stack, |start, _, t_max, _| {
-            order.push(prims[start as usize].index);
-            // A hit at the near face of the first leaf entered rules out the rest.
-            *t_max = prims[start as usize].min.x + 1.0;
-            false
-        });
+        traverse_wide(
+            &wide,
+            &ray,
+            &mut t_max,
+            &mut stack,
+            |_| {},
+            |start, _, t_max, _| {
+                order.push(prims[start as usize].index);
+                // A hit at the near face of the first leaf entered rules out the rest.
+                *t_max = prims[start as usize].min.x + 1.0;
+                false
+            },
+        );
         assert_eq!(order, [0]);
         assert_eq!(
             stack,
@@ -425,10 +471,17 @@ mod tests {
         );
         let mut visits = 0;
         let mut t_max = f32::INFINITY;
-        traverse_wide(&wide, &ray, &mut t_max, &mut stack, |_, _, _, _| {
-            visits += 1;
-            true
-        });
+        traverse_wide(
+            &wide,
+            &ray,
+            &mut t_max,
+            &mut stack,
+            |_| {},
+            |_, _, _, _| {
+                visits += 1;
+                true
+            },
+        );
         assert_eq!((visits, stack.len()), (1, 1));
     }
 
