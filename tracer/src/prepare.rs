@@ -458,7 +458,20 @@ pub fn prepare_frame(
                 .collect()
         })
         .collect();
-    let any_hit_filter = hit_filter.iter().flatten().any(|&f| f);
+    let filtered_instances: Vec<bool> = bvh
+        .instances()
+        .iter()
+        .map(|inst| {
+            let m = inst.mesh as usize;
+            let source = if m < n_scene_meshes {
+                m
+            } else {
+                deformed[m - n_scene_meshes].source as usize
+            };
+            hit_filter[source].contains(&true)
+        })
+        .collect();
+    let any_hit_filter = filtered_instances.contains(&true);
 
     Ok(PreparedFrame {
         scene,
@@ -473,6 +486,7 @@ pub fn prepare_frame(
         motion,
         lights,
         hit_filter,
+        filtered_instances,
         any_hit_filter,
         material_bsdfs,
         features,

@@ -199,7 +199,10 @@ pub struct PreparedFrame {
     /// Per scene mesh, per primitive: whether a hit must be checked by [`PreparedFrame::accepts`]
     /// (alpha cut-outs, single-sided back faces). Meshes that need none pay nothing.
     pub(crate) hit_filter: Vec<Vec<bool>>,
-    /// Whether any primitive needs the hit filter.
+    /// Per instance, whether its mesh has a primitive that needs the hit filter: a hit on
+    /// any other instance is accepted without looking its triangle up.
+    pub(crate) filtered_instances: Vec<bool>,
+    /// Whether any instance needs the hit filter.
     pub(crate) any_hit_filter: bool,
     /// Per scene material, its BSDF where every texture and the vertex colour are white
     /// (with the albedo curve of rough glass).
@@ -402,7 +405,7 @@ impl PreparedFrame {
         let meshes = |m| self.mesh_bvh(m);
         if self.any_hit_filter {
             self.bvh.intersect(meshes, ray, t_max, |i, t, b1, b2| {
-                self.accepts(ray, i, t, b1, b2)
+                !self.filtered_instances[i as usize] || self.accepts(ray, i, t, b1, b2)
             })
         } else {
             self.bvh.intersect(meshes, ray, t_max, |_, _, _, _| true)
@@ -414,7 +417,7 @@ impl PreparedFrame {
         let meshes = |m| self.mesh_bvh(m);
         if self.any_hit_filter {
             self.bvh.occluded(meshes, ray, t_max, |i, t, b1, b2| {
-                self.accepts(ray, i, t, b1, b2)
+                !self.filtered_instances[i as usize] || self.accepts(ray, i, t, b1, b2)
             })
         } else {
             self.bvh.occluded(meshes, ray, t_max, |_, _, _, _| true)
