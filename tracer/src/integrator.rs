@@ -6,12 +6,13 @@ use glam::{Vec2, Vec3, Vec4};
 
 use crate::bsdf::Bsdf;
 use crate::film::SampleValue;
+use crate::frame::PreparedFrame;
 use crate::geometry::{
     barycentric, hit_point_error, offset_ray_origin_bounded, plane_hit_point, Frame, Hit, Ray,
 };
 use crate::light::Emitter;
-use crate::render::{PreparedFrame, RenderSettings};
 use crate::sampler::PixelSampler;
+use crate::settings::RenderSettings;
 
 /// Sampler dimensions used by the camera before the first bounce: pixel position, then
 /// the shutter time (drawn only when something moves, so a still frame skips it).

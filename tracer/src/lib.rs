@@ -22,8 +22,10 @@
 //! | [`integrator`] | unidirectional path tracing with NEE and MIS |
 //! | [`film`] | tile buffers: beauty, albedo, normal, depth |
 //! | [`motion`] | the shutter, motion steps, meshes deformed for one frame |
+//! | [`settings`] | what a render is asked for: frame options, sampling settings, noise target |
 //! | `prepare` | [`render::prepare_frame`]: the scene posed, placed and built for one frame |
-//! | [`render`] | the prepared frame and the one entry point, [`render::render_tile`] |
+//! | [`frame`] | the prepared frame and its ray queries (closest hit, occlusion, the triangle hit) |
+//! | [`render`] | the one entry point, [`render::render_tile`] |
 //! | [`output`] | multi-layer EXR files and ACES-tone-mapped PNG previews |
 //!
 //! Units follow the glTF specs: emission in nits (cd/m²) is radiance, point and spot
@@ -46,6 +48,7 @@ pub mod deform;
 pub mod demo;
 pub mod export;
 pub mod film;
+pub mod frame;
 pub mod geometry;
 pub mod integrator;
 pub mod light;
@@ -58,6 +61,7 @@ mod prepare;
 pub mod render;
 pub mod sampler;
 pub mod scene;
+pub mod settings;
 pub mod shapes;
 #[cfg(test)]
 mod test_rng;

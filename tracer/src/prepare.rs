@@ -17,6 +17,7 @@ use crate::bsdf::Bsdf;
 use crate::bvh::{Instance, SceneBvh};
 use crate::camera::{Camera, Projection, RigidStep};
 use crate::deform::{self, Deformed};
+use crate::frame::PreparedFrame;
 use crate::geometry::Aabb;
 use crate::light::{EmissiveTriangle, Environment, LightSet};
 use crate::loader::{framing_camera, mesh_bounds, scene_bounds};
@@ -24,8 +25,8 @@ use crate::material::AlphaMode;
 use crate::motion::{
     auto_steps, place, step_positions, DeformedMesh, PixelFootprint, MAX_MOTION_STEPS, PROBES,
 };
-use crate::render::{CameraChoice, FrameOptions, PreparedFrame, RenderError};
 use crate::scene::{Node, Scene};
+use crate::settings::{CameraChoice, FrameOptions, RenderError};
 
 /// The node graph at one time: every node instance with its world transform, and the
 /// first world transform of each node (the one joints of a skin use).
@@ -248,23 +249,7 @@ pub fn prepare_frame(
     scene: Arc<Scene>,
     options: &FrameOptions,
 ) -> Result<PreparedFrame, RenderError> {
-    if options.width == 0 || options.height == 0 {
-        return Err(RenderError::EmptyImage(options.width, options.height));
-    }
-    if !(options.fps.is_finite() && options.fps > 0.0) {
-        return Err(RenderError::Time(format!(
-            "fps {} must be a positive number",
-            options.fps
-        )));
-    }
-    options.shutter.validate().map_err(RenderError::Time)?;
-    if let Some(n) = options.motion_steps {
-        if !(1..=MAX_MOTION_STEPS).contains(&n) {
-            return Err(RenderError::Time(format!(
-                "motion steps {n} must be between 1 and {MAX_MOTION_STEPS}"
-            )));
-        }
-    }
+    check_options(options)?;
     let animations = options
         .animation
         .resolve(&scene)
@@ -350,52 +335,7 @@ pub fn prepare_frame(
         motion: camera_moves.then(|| camera_steps.into()),
     };
 
-    // Instances: rigid ones with one transform per step, deformed ones as per-frame meshes.
-    let mut instances = Vec::new();
-    let mut deformed = Vec::new();
-    for (j, &(node, _)) in poses[0].instances.iter().enumerate() {
-        let Some(mesh) = scene.nodes[node as usize].mesh else {
-            continue;
-        };
-        // Rays cannot enter a placement that has no inverse (a zero scale on one axis): bake
-        // its vertices into the frame, as for a deformed mesh, so that a mesh flattened onto
-        // a plane draws as that plane (the limit of ever thinner scales). A zero scale on
-        // every axis leaves only zero-area triangles, which draw nothing.
-        let flattened = poses.len() == 1 && has_no_inverse(&(relative * poses[0].instances[j].1));
-        // So is a mesh that its placement would resolve far too coarsely near the camera.
-        let coarse = poses.len() == 1
-            && coarse_placement(
-                &scene.meshes[mesh as usize],
-                &(relative * poses[0].instances[j].1),
-            );
-        if deforming[j] || flattened || coarse {
-            let per_step = poses
-                .iter()
-                .map(|posed| deform_instance(&scene, posed, node, &posed.instances[j].1, &relative))
-                .collect();
-            let mut d = DeformedMesh::new(mesh, &scene.meshes[mesh as usize], per_step);
-            // Skinned vertices are placed by their joints; the others by the node, whose
-            // mirror glTF's winding rule follows.
-            let n = &scene.nodes[node as usize];
-            let skinned = n.skin.is_some()
-                && scene.meshes[mesh as usize]
-                    .primitives
-                    .iter()
-                    .any(|p| !p.joint_sets.is_empty());
-            d.mirrored = !skinned && DMat3::from_mat4(poses[0].instances[j].1).determinant() < 0.0;
-            let index = (scene.meshes.len() + deformed.len()) as u32;
-            instances.push(Instance::new(index, Affine3A::IDENTITY, &d.bvh.bounds()));
-            deformed.push(d);
-        } else {
-            let bounds = scene.meshes[mesh as usize].bvh.bounds();
-            let worlds: Vec<DMat4> = poses.iter().map(|p| relative * p.instances[j].1).collect();
-            instances.push(if worlds.len() == 1 {
-                Instance::new(mesh, to_f32_affine(&worlds[0]), &bounds)
-            } else {
-                Instance::moving(mesh, &worlds, &bounds)
-            });
-        }
-    }
+    let (instances, deformed) = place_instances(&scene, &poses, &deforming, &relative);
 
     // Punctual lights sit where the middle step puts them: they light the frame but do not
     // blur inside the shutter.
@@ -427,9 +367,127 @@ pub fn prepare_frame(
     crate::bsdf::precompute_tables(scene.features.transmission);
     let material_bsdfs = material_bsdfs(&scene);
     let mut features = scene.features;
-    let environment = match (&options.environment, &scene.environment) {
+    let environment = frame_environment(options, &scene, punctual.is_empty(), &mut warnings);
+    features.environment = !matches!(environment, Environment::Black);
+    let lights = LightSet::new(punctual, triangles, environment, bvh.bounds());
+    let motion = bvh.has_motion() || camera.motion.is_some();
+    features.animation = motion;
+
+    let (hit_filter, filtered_instances) = hit_filters(&scene, &bvh, &deformed);
+    let any_hit_filter = filtered_instances.contains(&true);
+
+    Ok(PreparedFrame {
+        scene,
+        frame: options.frame,
+        width: options.width,
+        height: options.height,
+        camera,
+        camera_origin,
+        bvh,
+        deformed,
+        motion_steps: steps,
+        motion,
+        lights,
+        hit_filter,
+        filtered_instances,
+        any_hit_filter,
+        material_bsdfs,
+        features,
+        warnings,
+    })
+}
+
+/// The frame options' numbers, checked before any work.
+fn check_options(options: &FrameOptions) -> Result<(), RenderError> {
+    if options.width == 0 || options.height == 0 {
+        return Err(RenderError::EmptyImage(options.width, options.height));
+    }
+    if !(options.fps.is_finite() && options.fps > 0.0) {
+        return Err(RenderError::Time(format!(
+            "fps {} must be a positive number",
+            options.fps
+        )));
+    }
+    options.shutter.validate().map_err(RenderError::Time)?;
+    if let Some(n) = options.motion_steps {
+        if !(1..=MAX_MOTION_STEPS).contains(&n) {
+            return Err(RenderError::Time(format!(
+                "motion steps {n} must be between 1 and {MAX_MOTION_STEPS}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The frame's instances: rigid ones with one transform per step (`relative` moves the
+/// world so the camera sits at the origin), deformed ones (`deforming[j]` for pose
+/// instance `j`) as per-frame meshes, which the second list holds.
+fn place_instances(
+    scene: &Scene,
+    poses: &[Posed],
+    deforming: &[bool],
+    relative: &DMat4,
+) -> (Vec<Instance>, Vec<DeformedMesh>) {
+    let mut instances = Vec::new();
+    let mut deformed = Vec::new();
+    for (j, &(node, _)) in poses[0].instances.iter().enumerate() {
+        let Some(mesh) = scene.nodes[node as usize].mesh else {
+            continue;
+        };
+        // Rays cannot enter a placement that has no inverse (a zero scale on one axis): bake
+        // its vertices into the frame, as for a deformed mesh, so that a mesh flattened onto
+        // a plane draws as that plane (the limit of ever thinner scales). A zero scale on
+        // every axis leaves only zero-area triangles, which draw nothing.
+        let flattened = poses.len() == 1 && has_no_inverse(&(*relative * poses[0].instances[j].1));
+        // So is a mesh that its placement would resolve far too coarsely near the camera.
+        let coarse = poses.len() == 1
+            && coarse_placement(
+                &scene.meshes[mesh as usize],
+                &(*relative * poses[0].instances[j].1),
+            );
+        if deforming[j] || flattened || coarse {
+            let per_step = poses
+                .iter()
+                .map(|posed| deform_instance(scene, posed, node, &posed.instances[j].1, relative))
+                .collect();
+            let mut d = DeformedMesh::new(mesh, &scene.meshes[mesh as usize], per_step);
+            // Skinned vertices are placed by their joints; the others by the node, whose
+            // mirror glTF's winding rule follows.
+            let n = &scene.nodes[node as usize];
+            let skinned = n.skin.is_some()
+                && scene.meshes[mesh as usize]
+                    .primitives
+                    .iter()
+                    .any(|p| !p.joint_sets.is_empty());
+            d.mirrored = !skinned && DMat3::from_mat4(poses[0].instances[j].1).determinant() < 0.0;
+            let index = (scene.meshes.len() + deformed.len()) as u32;
+            instances.push(Instance::new(index, Affine3A::IDENTITY, &d.bvh.bounds()));
+            deformed.push(d);
+        } else {
+            let bounds = scene.meshes[mesh as usize].bvh.bounds();
+            let worlds: Vec<DMat4> = poses.iter().map(|p| *relative * p.instances[j].1).collect();
+            instances.push(if worlds.len() == 1 {
+                Instance::new(mesh, to_f32_affine(&worlds[0]), &bounds)
+            } else {
+                Instance::moving(mesh, &worlds, &bounds)
+            });
+        }
+    }
+    (instances, deformed)
+}
+
+/// The environment the frame is lit by: the options', else the scene's; a scene with
+/// neither and no punctual light gets a uniform white one (and a warning), since it would
+/// otherwise render black.
+fn frame_environment(
+    options: &FrameOptions,
+    scene: &Scene,
+    no_punctual: bool,
+    warnings: &mut Vec<String>,
+) -> Environment {
+    match (&options.environment, &scene.environment) {
         (Some(env), _) | (None, Some(env)) => env.clone(),
-        (None, None) if punctual.is_empty() => {
+        (None, None) if no_punctual => {
             warnings.push(
                 "the scene defines no environment and no punctual light: using a uniform white \
                  environment of radiance 1"
@@ -438,12 +496,18 @@ pub fn prepare_frame(
             Environment::Constant(Vec3::ONE)
         }
         (None, None) => Environment::Black,
-    };
-    features.environment = !matches!(environment, Environment::Black);
-    let lights = LightSet::new(punctual, triangles, environment, bvh.bounds());
-    let motion = bvh.has_motion() || camera.motion.is_some();
-    features.animation = motion;
+    }
+}
 
+/// Per scene mesh and primitive, whether a hit needs [`PreparedFrame::accepts`] (alpha
+/// cut-outs, single-sided back faces); and per instance, whether its mesh has any such
+/// primitive.
+fn hit_filters(
+    scene: &Scene,
+    bvh: &SceneBvh,
+    deformed: &[DeformedMesh],
+) -> (Vec<Vec<bool>>, Vec<bool>) {
+    let n_scene_meshes = scene.meshes.len();
     let hit_filter: Vec<Vec<bool>> = scene
         .meshes
         .iter()
@@ -471,27 +535,7 @@ pub fn prepare_frame(
             hit_filter[source].contains(&true)
         })
         .collect();
-    let any_hit_filter = filtered_instances.contains(&true);
-
-    Ok(PreparedFrame {
-        scene,
-        frame: options.frame,
-        width: options.width,
-        height: options.height,
-        camera,
-        camera_origin,
-        bvh,
-        deformed,
-        motion_steps: steps,
-        motion,
-        lights,
-        hit_filter,
-        filtered_instances,
-        any_hit_filter,
-        material_bsdfs,
-        features,
-        warnings,
-    })
+    (hit_filter, filtered_instances)
 }
 
 /// Poses sampled over the animations' time range to bound where the scene goes.

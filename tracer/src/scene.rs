@@ -1,6 +1,6 @@
 //! The loaded scene: glTF's node graph, meshes, materials, textures, cameras and lights,
 //! converted once into the tracer's own types. A [`Scene`] is independent of time and
-//! camera; [`crate::render::PreparedFrame`] flattens it for one frame.
+//! camera; [`crate::frame::PreparedFrame`] flattens it for one frame.
 
 use glam::{DMat4, DQuat, DVec3, Vec2, Vec3, Vec4};
 
@@ -33,7 +33,7 @@ pub struct Scene {
     pub lights: Vec<PunctualLight>,
     /// Light arriving from infinitely far away, when the scene defines it. glTF has no
     /// environment, so loaded scenes leave this `None` and the renderer picks a default
-    /// (see [`crate::render::FrameOptions::environment`]); built-in scenes set it.
+    /// (see [`crate::settings::FrameOptions::environment`]); built-in scenes set it.
     pub environment: Option<Environment>,
     /// glTF animations (node transforms and morph weights over time), in document order.
     pub animations: Vec<Animation>,

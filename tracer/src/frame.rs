@@ -1,0 +1,271 @@
+//! A scene prepared for one frame ([`PreparedFrame`], made by
+//! [`prepare_frame`](crate::prepare::prepare_frame)) and its ray queries: the closest hit,
+//! occlusion, and the triangle a hit landed on at the ray's time.
+
+use std::sync::Arc;
+
+use glam::{Affine3A, DVec3, Mat3A, Vec3, Vec4};
+
+use crate::bvh::{Instance, MeshBvh, Placement, SceneBvh};
+use crate::camera::Camera;
+use crate::geometry::Ray;
+use crate::light::LightSet;
+use crate::material::AlphaMode;
+use crate::motion::DeformedMesh;
+use crate::sampler::hash_combine;
+use crate::scene::{Features, Mesh, Primitive, Scene};
+
+/// A scene flattened for one frame: instances in camera-relative world space, their BVH,
+/// the camera and the lights.
+pub struct PreparedFrame {
+    /// The scene (meshes, materials and textures are shared, not copied).
+    pub scene: Arc<Scene>,
+    /// Frame number (it keys the random numbers).
+    pub frame: i32,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// The camera, at the origin of the prepared space.
+    pub camera: Camera,
+    /// Where the camera sits in the scene's world space.
+    pub camera_origin: DVec3,
+    /// Top-level BVH over the instances. An instance's `mesh` below the scene's mesh count
+    /// names a scene mesh; above it, an entry of `deformed`.
+    pub bvh: SceneBvh,
+    /// Meshes that skinning or morphing deforms in this frame.
+    pub deformed: Vec<DeformedMesh>,
+    /// Motion steps over the shutter (1: the static path).
+    pub motion_steps: u32,
+    /// Whether anything (camera or geometry) moves inside the shutter, so rays need times.
+    pub motion: bool,
+    /// Lights for next-event estimation.
+    pub lights: LightSet,
+    /// Per scene mesh, per primitive: whether a hit must be checked by [`PreparedFrame::accepts`]
+    /// (alpha cut-outs, single-sided back faces). Meshes that need none pay nothing.
+    pub(crate) hit_filter: Vec<Vec<bool>>,
+    /// Per instance, whether its mesh has a primitive that needs the hit filter: a hit on
+    /// any other instance is accepted without looking its triangle up.
+    pub(crate) filtered_instances: Vec<bool>,
+    /// Whether any instance needs the hit filter.
+    pub(crate) any_hit_filter: bool,
+    /// Per scene material, its BSDF where every texture and the vertex colour are white
+    /// (with the albedo curve of rough glass).
+    pub(crate) material_bsdfs: Vec<crate::bsdf::Bsdf>,
+    /// What the frame uses.
+    pub features: Features,
+    /// Remarks for the user (for example, the default environment was used).
+    pub warnings: Vec<String>,
+}
+
+/// One triangle of an instance at a ray's time: where its data lives, its vertex
+/// positions in object space (world space for deformed meshes), and the instance's
+/// transforms at that time.
+pub(crate) struct TriangleAt<'a> {
+    /// The primitive holding it (texture coordinates, colours, material).
+    pub prim: &'a Primitive,
+    /// Index of that primitive in its mesh.
+    pub prim_index: usize,
+    /// The triangle's index inside the primitive.
+    pub t: usize,
+    /// Its vertex indices.
+    pub v: [usize; 3],
+    /// Vertex positions (object space).
+    pub positions: [Vec3; 3],
+    /// The deformed mesh it belongs to, if any.
+    pub deformed: Option<&'a DeformedMesh>,
+    /// The instance.
+    inst: &'a Instance,
+    /// Its transforms at the ray's time when it moves; a still instance's are its own
+    /// (not copied: this is on every hit's path).
+    moved: Option<Placement>,
+    /// The ray's shutter time.
+    pub time: f32,
+}
+
+impl TriangleAt<'_> {
+    /// Object space to world space.
+    #[inline(always)]
+    pub fn to_world(&self) -> &Affine3A {
+        self.moved
+            .as_ref()
+            .map_or(&self.inst.to_world, |p| &p.to_world)
+    }
+
+    /// World space to object space.
+    #[inline(always)]
+    pub fn to_object(&self) -> &Affine3A {
+        self.moved
+            .as_ref()
+            .map_or(&self.inst.to_object, |p| &p.to_object)
+    }
+
+    /// The normal matrix (inverse transpose of `to_world`'s linear part).
+    #[inline(always)]
+    pub fn normal_to_world(&self) -> &Mat3A {
+        self.moved
+            .as_ref()
+            .map_or(&self.inst.normal_to_world, |p| &p.normal_to_world)
+    }
+
+    /// Object-space geometric normal by the winding (not normalised), turned for the baked
+    /// vertices of a mirrored node (a still instance's mirror is in its normal matrix).
+    pub fn face_normal(&self) -> Vec3 {
+        let [a, b, c] = self.positions;
+        let n = (b - a).cross(c - a);
+        if self.deformed.is_some_and(|d| d.mirrored) {
+            -n
+        } else {
+            n
+        }
+    }
+
+    /// World-space unit normal of the front face. The inverse transpose keeps the front
+    /// face right for mirrored instances too (glTF flips the winding when the determinant
+    /// is negative). Zero for a degenerate triangle.
+    pub fn front_normal(&self) -> Vec3 {
+        (*self.normal_to_world() * self.face_normal()).normalize_or_zero()
+    }
+
+    /// Object-space vertex normals, or `None` when the primitive has none.
+    pub fn normals(&self) -> Option<[Vec3; 3]> {
+        match self.deformed {
+            Some(d) => d.normals(self.prim_index, self.v, self.time),
+            None => (!self.prim.normals.is_empty()).then(|| self.v.map(|i| self.prim.normals[i])),
+        }
+    }
+
+    /// Object-space vertex tangents, or `None` when the primitive has none.
+    pub fn tangents(&self) -> Option<[Vec4; 3]> {
+        match self.deformed {
+            Some(d) => d.tangents(self.prim_index, self.v, self.time),
+            None => (!self.prim.tangents.is_empty()).then(|| self.v.map(|i| self.prim.tangents[i])),
+        }
+    }
+}
+
+impl PreparedFrame {
+    /// The deformed mesh behind instance mesh index `mesh`, if it is one.
+    #[inline]
+    pub(crate) fn deformed_mesh(&self, mesh: u32) -> Option<&DeformedMesh> {
+        (mesh as usize)
+            .checked_sub(self.scene.meshes.len())
+            .map(|k| &self.deformed[k])
+    }
+
+    /// The scene mesh drawn by instance mesh index `mesh` (the source of a deformed one).
+    #[inline]
+    pub(crate) fn source_mesh(&self, mesh: u32) -> &Mesh {
+        let source = self.deformed_mesh(mesh).map_or(mesh, |d| d.source);
+        &self.scene.meshes[source as usize]
+    }
+
+    /// The BVH of instance mesh index `mesh`.
+    #[inline]
+    pub(crate) fn mesh_bvh(&self, mesh: u32) -> &MeshBvh {
+        match self.deformed_mesh(mesh) {
+            Some(d) => &d.bvh,
+            None => &self.scene.meshes[mesh as usize].bvh,
+        }
+    }
+
+    /// Triangle `triangle` of instance `instance` at shutter time `time`.
+    #[inline(always)]
+    pub(crate) fn triangle_at(&self, instance: u32, triangle: u32, time: f32) -> TriangleAt<'_> {
+        let inst = &self.bvh.instances()[instance as usize];
+        let mesh = self.source_mesh(inst.mesh);
+        let (prim_index, t) = mesh.locate(triangle);
+        let prim = &mesh.primitives[prim_index];
+        let v = prim.triangle(t);
+        let deformed = self.deformed_mesh(inst.mesh);
+        let positions = match deformed {
+            Some(d) => d.positions(prim_index, v, time),
+            None => v.map(|i| prim.positions[i]),
+        };
+        TriangleAt {
+            prim,
+            prim_index,
+            t,
+            v,
+            positions,
+            deformed,
+            inst,
+            moved: inst.motion.is_some().then(|| inst.placement(time)),
+            time,
+        }
+    }
+
+    /// Whether a candidate hit counts: alpha-masked or blended surfaces cut away where
+    /// their coverage says so, and a single-sided opaque surface is invisible from behind
+    /// (glTF's back-face culling; transmissive surfaces keep both sides, since refracted
+    /// rays must find the inside of the object).
+    pub(crate) fn accepts(
+        &self,
+        ray: &Ray,
+        instance: u32,
+        triangle: u32,
+        b1: f32,
+        b2: f32,
+    ) -> bool {
+        let inst = &self.bvh.instances()[instance as usize];
+        let mesh = self.source_mesh(inst.mesh);
+        let (p, t) = mesh.locate(triangle);
+        let source = self
+            .deformed_mesh(inst.mesh)
+            .map_or(inst.mesh, |d| d.source);
+        if !self.hit_filter[source as usize][p] {
+            return true;
+        }
+        let prim = &mesh.primitives[p];
+        let mat = &self.scene.materials[prim.material as usize];
+        if !mat.double_sided && mat.transmission == 0.0 {
+            let tri = self.triangle_at(instance, triangle, ray.time);
+            let facing = tri
+                .face_normal()
+                .dot(tri.to_object().transform_vector3(ray.dir));
+            if facing > 0.0 {
+                return false;
+            }
+        }
+        if mat.alpha_mode == AlphaMode::Opaque {
+            return true;
+        }
+        let (uvs, color) = (prim.uvs_at(t, b1, b2), prim.color_at(t, b1, b2));
+        let alpha = mat.alpha(&self.scene.textures, uvs, color);
+        // Stochastic coverage for blended surfaces, keyed by the ray and the triangle so
+        // the result is a pure function of the sample.
+        let key = hash_combine(
+            hash_combine(
+                ray.origin.x.to_bits() ^ ray.dir.y.to_bits(),
+                ray.dir.x.to_bits(),
+            ),
+            triangle ^ (instance << 20),
+        );
+        let u = (key >> 8) as f32 / (1u32 << 24) as f32;
+        !mat.cuts_away(alpha, u)
+    }
+
+    /// The closest accepted hit along `ray` before `t_max`.
+    pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<crate::geometry::Hit> {
+        let meshes = |m| self.mesh_bvh(m);
+        if self.any_hit_filter {
+            self.bvh.intersect(meshes, ray, t_max, |i, t, b1, b2| {
+                !self.filtered_instances[i as usize] || self.accepts(ray, i, t, b1, b2)
+            })
+        } else {
+            self.bvh.intersect(meshes, ray, t_max, |_, _, _, _| true)
+        }
+    }
+
+    /// Whether anything accepted blocks `ray` before `t_max`.
+    pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        let meshes = |m| self.mesh_bvh(m);
+        if self.any_hit_filter {
+            self.bvh.occluded(meshes, ray, t_max, |i, t, b1, b2| {
+                !self.filtered_instances[i as usize] || self.accepts(ray, i, t, b1, b2)
+            })
+        } else {
+            self.bvh.occluded(meshes, ray, t_max, |_, _, _, _| true)
+        }
+    }
+}
