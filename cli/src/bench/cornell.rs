@@ -9,7 +9,8 @@ use serde::Serialize;
 
 use tracer::render::{prepare_frame, FrameOptions, RenderSettings};
 
-use super::{mse, render, share_of_worst_pixels, REFERENCE_SEED, SEED};
+use super::scenes::{mse, render, share_of_worst_pixels};
+use super::{REFERENCE_SEED, SEED};
 
 #[derive(Args)]
 pub struct CornellArgs {
