@@ -67,30 +67,27 @@ impl Rng {
 
 /// Rays per second of `query` over `rays`, on one thread and on every thread; each ray
 /// set is traced several times so that a run takes long enough to time.
-fn rates<Q>(kind: &str, rays: &[(Ray, f32)], query: Q) -> anyhow::Result<RayRate>
+fn rates<Q>(kind: &str, rays: &[(Ray, f32)], query: Q) -> RayRate
 where
     Q: Fn(&Ray, f32) -> bool + Sync,
 {
-    let time = |passes: usize| {
-        let start = Instant::now();
-        let hits: usize = (0..passes)
-            .map(|_| rays.par_iter().filter(|(r, t)| query(r, *t)).count())
-            .sum();
-        std::hint::black_box(hits);
-        (rays.len() * passes) as f64 / start.elapsed().as_secs_f64()
-    };
-    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
-    Ok(RayRate {
+    let passes = 4;
+    let start = Instant::now();
+    let hits: usize = (0..passes)
+        .map(|_| rays.par_iter().filter(|(r, t)| query(r, *t)).count())
+        .sum();
+    std::hint::black_box(hits);
+    RayRate {
         kind: kind.into(),
-        one_thread: one.install(|| time(2)),
-        all_threads: time(4),
-    })
+        one_thread: one_thread_rate(rays, &query),
+        all_threads: (rays.len() * passes) as f64 / start.elapsed().as_secs_f64(),
+    }
 }
 
 /// Camera rays through every pixel centre, then from their hits: shadow rays to another
 /// pixel's hit (any hit, stopping short of it) and bounce rays in random directions on the
 /// side the camera ray came from.
-pub fn scene_rates(frame: &PreparedFrame) -> anyhow::Result<Vec<RayRate>> {
+pub fn scene_rates(frame: &PreparedFrame) -> Vec<RayRate> {
     let (w, h) = (frame.width, frame.height);
     let camera: Vec<(Ray, f32)> = (0..w * h)
         .map(|i| {
@@ -127,15 +124,15 @@ pub fn scene_rates(frame: &PreparedFrame) -> anyhow::Result<Vec<RayRate>> {
             (Ray::new(from, d), f32::INFINITY)
         })
         .collect();
-    Ok(vec![
+    vec![
         rates("camera (closest hit)", &camera, |r, t| {
             frame.intersect(r, t).is_some()
-        })?,
-        rates("shadow (any hit)", &shadow, |r, t| frame.occluded(r, t))?,
+        }),
+        rates("shadow (any hit)", &shadow, |r, t| frame.occluded(r, t)),
         rates("bounce (closest hit, incoherent)", &bounce, |r, t| {
             frame.intersect(r, t).is_some()
-        })?,
-    ])
+        }),
+    ]
 }
 
 /// The three ray sets traced through a mesh, made from its bounding box `b`: coherent
@@ -229,7 +226,7 @@ pub fn big_mesh(n: usize) -> anyhow::Result<BigMesh> {
                 })
             }
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect();
     Ok(BigMesh {
         triangles: tris.len(),
         build_seconds_one_thread,
@@ -276,8 +273,8 @@ pub fn world_triangles(scene: &Scene) -> Vec<[Vec3; 3]> {
     out
 }
 
-/// One thread's rays per second of `query` over `rays`, the fastest of `rounds` (each at
-/// least a second's worth of passes is not needed: 65,536 rays twice).
+/// Rays per second of `query` over `rays` on the calling thread alone: the set traced
+/// twice, so that a run takes long enough to time.
 fn one_thread_rate(rays: &[(Ray, f32)], query: impl Fn(&Ray, f32) -> bool) -> f64 {
     let start = Instant::now();
     let mut hits = 0usize;

@@ -267,7 +267,7 @@ pub(super) fn measure_scene(
         reference_spp,
     );
 
-    let rays = rays::scene_rates(&frame)?;
+    let rays = rays::scene_rates(&frame);
     let (_, path_rays, seconds) = render(&frame, settings, 16);
     let paths = f64::from(frame.width * frame.height) * 16.0;
 
