@@ -53,7 +53,7 @@ pub struct Camera {
 pub struct RigidStep {
     /// Position in the prepared frame.
     pub position: Vec3,
-    /// Orientation.
+    /// Orientation, a unit quaternion on the same hemisphere as the previous step's.
     pub rotation: Quat,
 }
 
@@ -73,14 +73,8 @@ impl Camera {
             Some(steps @ [_, _, ..]) => {
                 let s = Segment::new(time, steps.len());
                 let (a, b) = (&steps[s.index], &steps[s.index + 1]);
-                // The shorter arc: q and -q are the same rotation.
-                let b_rotation = if a.rotation.dot(b.rotation) < 0.0 {
-                    -b.rotation
-                } else {
-                    b.rotation
-                };
                 Affine3A::from_rotation_translation(
-                    math::slerp(a.rotation, b_rotation, s.w1),
+                    math::slerp(a.rotation, b.rotation, s.w1),
                     s.lerp(a.position, b.position),
                 )
             }

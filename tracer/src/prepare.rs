@@ -317,16 +317,21 @@ pub fn prepare_frame(
     }
     let mid = &poses[poses.len() / 2];
 
-    let camera_steps: Vec<RigidStep> = poses
-        .iter()
-        .map(|posed| {
-            let (position, rotation) = camera_at(posed);
-            RigidStep {
-                position: position.as_vec3(),
-                rotation: rotation.as_quat().normalize(),
-            }
-        })
-        .collect();
+    let mut camera_steps: Vec<RigidStep> = Vec::with_capacity(poses.len());
+    for posed in &poses {
+        let (position, rotation) = camera_at(posed);
+        let rotation = rotation.as_quat().normalize();
+        // Same hemisphere as the previous step (q and -q are the same rotation), so that
+        // slerp between steps takes the shorter arc.
+        let rotation = match camera_steps.last() {
+            Some(prev) if prev.rotation.dot(rotation) < 0.0 => -rotation,
+            _ => rotation,
+        };
+        camera_steps.push(RigidStep {
+            position: position.as_vec3(),
+            rotation,
+        });
+    }
     let camera_moves = camera_steps.iter().any(|s| *s != camera_steps[0]);
     let camera = Camera {
         projection,
