@@ -6,14 +6,14 @@
 //! |---|---|
 //! | `build` | the binned SAH builder shared by both levels (Wald 2007) |
 //! | `node` | the 32-byte node, per-step boxes, the slab test (Ize 2013), the traversal |
-//! | `wide` | the binary tree collapsed four-wide, its slab test in SIMD lanes, its traversal |
+//! | `wide` | the binary tree collapsed eight-wide, its slab test in SIMD lanes, its traversal |
 //! | `mesh` | [`MeshBvh`]: object-space triangles in the BVH's own order, at 1..S steps |
 //! | `instance` | [`Instance`], [`Placement`], [`SceneBvh`]: placed meshes, the BVH over them |
 //! | `motion` | the shutter-time convention; [`MotionTransform`] (lerp, slerp, lerp) |
 //!
 //! Both levels are built as binary trees in one flat layout, a node's two children adjacent
-//! and stored after it, and queried as those trees collapsed four-wide: one slab test in
-//! SIMD lanes checks four children.
+//! and stored after it, and queried as those trees collapsed eight-wide: slab tests in
+//! SIMD lanes check a node's eight children.
 //!
 //! Motion blur: time is the normalised shutter position in [0, 1], and motion is given at
 //! `S` evenly spaced steps (step `k` at `k / (S - 1)`).

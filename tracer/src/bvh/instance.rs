@@ -240,7 +240,7 @@ pub(super) fn transform_bounds(m: &Affine3A, b: &Aabb) -> Aabb {
 #[derive(Clone, Default)]
 pub struct SceneBvh {
     instances: Vec<Instance>,
-    /// The four-wide tree over the instances' bounds.
+    /// The eight-wide tree over the instances' bounds.
     nodes: Vec<WideNode>,
     /// Instance indices in leaf order.
     order: Vec<u32>,

@@ -26,7 +26,7 @@ const PARAMS: BuildParams = BuildParams {
 /// contiguous: traversal reads nodes and positions only, never an index buffer. Triangles
 /// are reported by their index in the slice given to [`MeshBvh::build`].
 ///
-/// Static queries run on four-wide nodes (`WideNode`, the SAH tree collapsed). A deforming
+/// Static queries run on eight-wide nodes (`WideNode`, the SAH tree collapsed). A deforming
 /// mesh ([`MeshBvh::build_motion`]) keeps its positions at each of `S` motion steps,
 /// step-major (all triangles at step 0, then all at step 1, ...), so that step 0 reads
 /// exactly like a static BVH; it also keeps the binary tree, whose 32-byte `Node`s hold
@@ -35,7 +35,7 @@ const PARAMS: BuildParams = BuildParams {
 /// interpolated linearly between the two bracketing steps.
 #[derive(Clone, Default)]
 pub struct MeshBvh {
-    /// The four-wide tree, for static queries (boxes over every step).
+    /// The eight-wide tree, for static queries (boxes over every step).
     wide: Vec<WideNode>,
     /// The binary tree, for queries at a time; empty for a static mesh.
     nodes: Vec<Node>,
@@ -172,7 +172,7 @@ impl MeshBvh {
         self.ids.len()
     }
 
-    /// Number of nodes: four-wide ones, and binary ones for a deforming mesh.
+    /// Number of nodes: eight-wide ones, and binary ones for a deforming mesh.
     pub fn node_count(&self) -> usize {
         self.wide.len() + self.nodes.len()
     }
@@ -230,7 +230,7 @@ impl MeshBvh {
     /// The closest accepted hit, or with `ANY_HIT` the first one found (traversal stops
     /// there). With `MOTION`, a deforming mesh is searched at `ray.time`; without, or for a
     /// static mesh, the static loop runs (on a deforming mesh it would find the mesh at
-    /// time 0: step 0 comes first and the four-wide boxes span every step). Const parameters,
+    /// time 0: step 0 comes first and the eight-wide boxes span every step). Const parameters,
     /// so each query compiles to its own loop and a static scene pays nothing for motion.
     #[inline(always)]
     pub(super) fn search<const ANY_HIT: bool, const MOTION: bool>(

@@ -1,6 +1,6 @@
 //! The flat binary BVH node, the robust ray/box slab test and the ordered stack traversal
 //! of deforming meshes, whose boxes move over the shutter (static queries run on the same
-//! trees collapsed four-wide, in `wide`), and the traversal stack both share.
+//! trees collapsed eight-wide, in `wide`), and the traversal stack both share.
 
 use std::cell::RefCell;
 
@@ -66,7 +66,7 @@ impl BoxRay {
     }
 
     /// Distance at which the ray enters `node`'s box, if it does so within `[0, t_max]`.
-    /// (Static queries run four-wide; this is their reference in tests.)
+    /// (Static queries run eight-wide; this is their reference in tests.)
     #[cfg(test)]
     pub fn entry(&self, node: &Node, t_max: f32) -> Option<f32> {
         self.entry_box(node.min, node.max, t_max)
@@ -127,7 +127,7 @@ pub(super) trait NodeBoxes {
     fn entry(&self, ray: &BoxRay, node: &Node, index: usize, t_max: f32) -> Option<f32>;
 }
 
-/// The node's own box: the reference for the four-wide traversal in tests.
+/// The node's own box: the reference for the eight-wide traversal in tests.
 #[cfg(test)]
 pub(super) struct StaticBoxes;
 
