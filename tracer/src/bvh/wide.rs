@@ -156,7 +156,14 @@ impl WideRay {
     fn enter(&self, node: &WideNode, t_max: f32) -> ([f32; WIDTH], u32) {
         let mut entry = [0.0; WIDTH];
         let mut hits = 0;
-        for h in 0..WIDTH / LANES {
+        // Lanes are filled in order, so a node whose fifth lane is unused (no child node
+        // there, nor a leaf) has four children at most: small trees test one half.
+        let halves = if node.start[LANES] | node.count[LANES] == 0 {
+            1
+        } else {
+            WIDTH / LANES
+        };
+        for h in 0..halves {
             let mut t0 = Vec4::ZERO;
             let mut t1 = Vec4::splat(t_max);
             for axis in 0..3 {
@@ -373,6 +380,12 @@ mod tests {
                     max: binary[0].max
                 }
             );
+            // Lanes are used in order: `enter` tests one half of a node whose fifth is free.
+            for node in &wide {
+                let used = (0..WIDTH).filter(|&l| !node.lane_box(l).is_empty()).count();
+                assert!((0..used).all(|l| node.start[l] | node.count[l] != 0 || l == 0));
+                assert!((used..WIDTH).all(|l| node.start[l] | node.count[l] == 0));
+            }
             // Half as deep: at most about a third as many nodes as the binary tree.
             assert!(
                 wide.len() <= binary.len().div_ceil(2),
