@@ -218,10 +218,12 @@ pub(super) fn prefetch<T>(item: &T) {
     {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
         let p = (item as *const T).cast::<i8>();
-        // SAFETY: a prefetch is a hint; it reads nothing and cannot fault.
+        // SAFETY: a prefetch is a hint; it reads nothing and cannot fault. The second
+        // address may lie past the end of `item`'s allocation: `wrapping_add` computes it
+        // without the in-bounds promise that `add` makes.
         unsafe {
             _mm_prefetch::<_MM_HINT_T0>(p);
-            _mm_prefetch::<_MM_HINT_T0>(p.add(64));
+            _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64));
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
