@@ -123,6 +123,16 @@ pub fn slerp(a: Quat, b: Quat, u: f32) -> Quat {
     (a * wa + b * wb).normalize()
 }
 
+/// `q` or `-q` (the same rotation), whichever lies on `previous`'s hemisphere, so that
+/// [`slerp`] from `previous` takes the shorter arc; `q` itself when there is no previous.
+/// Motion steps are aligned with this once, when prepared, rather than per ray.
+pub fn same_hemisphere(previous: Option<Quat>, q: Quat) -> Quat {
+    match previous {
+        Some(p) if p.dot(q) < 0.0 => -q,
+        _ => q,
+    }
+}
+
 /// A rotation by `angle` radians about the y axis (`glam`'s own computes its sine with
 /// the C library).
 pub fn rotation_y(angle: f32) -> Quat {

@@ -320,13 +320,10 @@ pub fn prepare_frame(
     let mut camera_steps: Vec<RigidStep> = Vec::with_capacity(poses.len());
     for posed in &poses {
         let (position, rotation) = camera_at(posed);
-        let rotation = rotation.as_quat().normalize();
-        // Same hemisphere as the previous step (q and -q are the same rotation), so that
-        // slerp between steps takes the shorter arc.
-        let rotation = match camera_steps.last() {
-            Some(prev) if prev.rotation.dot(rotation) < 0.0 => -rotation,
-            _ => rotation,
-        };
+        let rotation = crate::math::same_hemisphere(
+            camera_steps.last().map(|prev| prev.rotation),
+            rotation.as_quat().normalize(),
+        );
         camera_steps.push(RigidStep {
             position: position.as_vec3(),
             rotation,

@@ -172,11 +172,8 @@ impl MotionTransform {
                     (rotation, DMat3::from_quat(rotation).transpose() * linear)
                 }
             };
-            let mut rotation = rotation.as_quat();
-            // Same hemisphere as the previous step: slerp then takes the shortest path.
-            if out.last().is_some_and(|p| p.rotation.dot(rotation) < 0.0) {
-                rotation = -rotation;
-            }
+            let rotation =
+                crate::math::same_hemisphere(out.last().map(|p| p.rotation), rotation.as_quat());
             out.push(Step {
                 translation: m.w_axis.truncate().as_vec3().into(),
                 rotation,

@@ -264,6 +264,7 @@ pub(super) fn traverse_wide(
                 // miss, and misses issued together overlap.
                 let start = node.start[lane as usize];
                 if node.count[lane as usize] == 0 {
+                    // Its four lines: 0 and 1 from the start, 2 and 3 from byte 128.
                     let child = &nodes[start as usize];
                     prefetch(child);
                     prefetch(&child.bounds[1][1]);
