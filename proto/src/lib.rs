@@ -35,6 +35,21 @@ pub use worker::{
 /// Every path of the API starts with this.
 pub const API_PREFIX: &str = "/api/v1";
 
+/// The largest id of a job, task or worker: ids are the server's SQLite row ids.
+pub const MAX_ID: u64 = i64::MAX as u64;
+
+/// Reads an id, refusing one past [`MAX_ID`] (it can name nothing) with a message that
+/// says so, for `#[serde(deserialize_with)]`.
+pub fn deserialize_id<'de, D: serde::Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+    let id = <u64 as serde::Deserialize>::deserialize(d)?;
+    if id > MAX_ID {
+        return Err(serde::de::Error::custom(format!(
+            "id {id} is past the largest id, {MAX_ID}"
+        )));
+    }
+    Ok(id)
+}
+
 /// The answer of `GET /healthz`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]

@@ -98,6 +98,7 @@ pub struct LeaseRequest {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct TaskToken {
     /// The task's id.
+    #[serde(deserialize_with = "crate::deserialize_id")]
     pub task_id: u64,
     /// The attempt (1 for the first lease).
     pub attempt: u32,

@@ -154,6 +154,11 @@ impl<S: Send + Sync, T: DeserializeOwned + Send> FromRequestParts<S> for PathPar
     }
 }
 
+/// A job, task or worker id in the URL path; one past [`proto::MAX_ID`] is refused (400)
+/// before it reaches the database, which could not bind it.
+#[derive(Clone, Copy, Debug, serde::Deserialize)]
+pub struct Id(#[serde(deserialize_with = "proto::deserialize_id")] pub u64);
+
 /// Reads a whole raw body of at most `limit` bytes; `what` names it in the error: over
 /// the limit (413), cut short by a client that hung up mid-body, or otherwise unreadable.
 pub async fn read_body(

@@ -6,7 +6,7 @@ use axum::response::{IntoResponse, Response};
 use axum::Json;
 use proto::{FrameList, FrameState};
 
-use super::error::PathParams;
+use super::error::{Id, PathParams};
 use crate::app::AppState;
 use crate::error::{Error, Result};
 use crate::status;
@@ -22,7 +22,7 @@ use crate::status;
 )]
 pub async fn list(
     State(app): State<AppState>,
-    PathParams(id): PathParams<u64>,
+    PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<FrameList>> {
     Ok(Json(app.db.run(move |c| status::frames(c, id)).await?))
 }
@@ -68,9 +68,9 @@ async fn file(
 )]
 pub async fn exr(
     State(app): State<AppState>,
-    PathParams((id, frame)): PathParams<(u64, i32)>,
+    PathParams((id, frame)): PathParams<(Id, i32)>,
 ) -> Result<Response> {
-    file(&app, id, frame, "exr", "image/x-exr").await
+    file(&app, id.0, frame, "exr", "image/x-exr").await
 }
 
 /// The PNG preview of a frame: final once the frame is done, progressive (the sample
@@ -85,7 +85,7 @@ pub async fn exr(
 )]
 pub async fn png(
     State(app): State<AppState>,
-    PathParams((id, frame)): PathParams<(u64, i32)>,
+    PathParams((id, frame)): PathParams<(Id, i32)>,
 ) -> Result<Response> {
-    file(&app, id, frame, "png", "image/png").await
+    file(&app, id.0, frame, "png", "image/png").await
 }

@@ -6,7 +6,7 @@ use axum::Json;
 use proto::{JobList, JobSpec, JobStatus, SceneInfo};
 use rusqlite::OptionalExtension;
 
-use super::error::{JsonBody, PathParams};
+use super::error::{Id, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
 use crate::{assembly, scheduler, spec, status};
@@ -86,7 +86,7 @@ pub async fn list(State(app): State<AppState>) -> Result<Json<JobList>> {
 )]
 pub async fn get(
     State(app): State<AppState>,
-    PathParams(id): PathParams<u64>,
+    PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
     let now = now_ms();
     Ok(Json(
@@ -126,7 +126,7 @@ async fn control(
 )]
 pub async fn cancel(
     State(app): State<AppState>,
-    PathParams(id): PathParams<u64>,
+    PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
     control(app, id, scheduler::cancel).await
 }
@@ -143,7 +143,7 @@ pub async fn cancel(
 )]
 pub async fn pause(
     State(app): State<AppState>,
-    PathParams(id): PathParams<u64>,
+    PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
     control(app, id, scheduler::pause).await
 }
@@ -159,7 +159,7 @@ pub async fn pause(
 )]
 pub async fn resume(
     State(app): State<AppState>,
-    PathParams(id): PathParams<u64>,
+    PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
     control(app, id, scheduler::resume).await
 }
@@ -176,7 +176,7 @@ pub async fn resume(
 )]
 pub async fn retry(
     State(app): State<AppState>,
-    PathParams(id): PathParams<u64>,
+    PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
     control(app, id, |c, id, now| {
         scheduler::retry(c, id, now).map(|_| ())
@@ -195,7 +195,7 @@ pub async fn retry(
 )]
 pub async fn delete(
     State(app): State<AppState>,
-    PathParams(id): PathParams<u64>,
+    PathParams(Id(id)): PathParams<Id>,
 ) -> Result<StatusCode> {
     let now = now_ms();
     app.db

@@ -12,7 +12,7 @@ use proto::{
     ResultMetadata, TaskToken, WorkerLeft, WorkerList, WorkerRegistered, WorkerRegistration,
 };
 
-use super::error::{read_body, JsonBody, PathParams};
+use super::error::{read_body, Id, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
 use crate::limits::{MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
@@ -92,7 +92,7 @@ pub async fn list(State(app): State<AppState>) -> Result<Json<WorkerList>> {
 )]
 pub async fn lease(
     State(app): State<AppState>,
-    PathParams(worker): PathParams<u64>,
+    PathParams(Id(worker)): PathParams<Id>,
     JsonBody(req): JsonBody<LeaseRequest>,
 ) -> Result<Response> {
     let started = Instant::now();
@@ -140,7 +140,7 @@ pub async fn lease(
 )]
 pub async fn heartbeat(
     State(app): State<AppState>,
-    PathParams(worker): PathParams<u64>,
+    PathParams(Id(worker)): PathParams<Id>,
     JsonBody(hb): JsonBody<Heartbeat>,
 ) -> Result<Json<HeartbeatAck>> {
     let (now, timing) = (now_ms(), app.timing());
@@ -165,7 +165,7 @@ pub async fn heartbeat(
 )]
 pub async fn leave(
     State(app): State<AppState>,
-    PathParams(worker): PathParams<u64>,
+    PathParams(Id(worker)): PathParams<Id>,
 ) -> Result<Json<WorkerLeft>> {
     let now = now_ms();
     let jobs = app
@@ -212,13 +212,14 @@ pub async fn leave(
     ),
     security(("worker_token" = []))
 )]
-#[tracing::instrument(name = "task", skip_all, fields(id = task, worker = worker))]
+#[tracing::instrument(name = "task", skip_all, fields(id = task.0, worker = worker.0))]
 pub async fn result(
     State(app): State<AppState>,
-    PathParams((worker, task)): PathParams<(u64, u64)>,
+    PathParams((worker, task)): PathParams<(Id, Id)>,
     headers: HeaderMap,
     body: Body,
 ) -> Result<Json<ResultAck>> {
+    let (worker, task) = (worker.0, task.0);
     let meta = ResultMetadata::from_headers(|name| headers.get(name).and_then(|v| v.to_str().ok()))
         .map_err(|(field, message)| Error::Invalid {
             field: field.into(),
@@ -260,13 +261,14 @@ pub async fn result(
 #[tracing::instrument(
     name = "task",
     skip_all,
-    fields(id = task, worker = worker, attempt = report.attempt)
+    fields(id = task.0, worker = worker.0, attempt = report.attempt)
 )]
 pub async fn failure(
     State(app): State<AppState>,
-    PathParams((worker, task)): PathParams<(u64, u64)>,
+    PathParams((worker, task)): PathParams<(Id, Id)>,
     JsonBody(report): JsonBody<FailureReport>,
 ) -> Result<Json<FailureAck>> {
+    let (worker, task) = (worker.0, task.0);
     let mut message = report.message;
     if message.len() > MAX_FAILURE_MESSAGE_BYTES {
         let mut cut = MAX_FAILURE_MESSAGE_BYTES;
@@ -303,7 +305,7 @@ pub async fn failure(
 )]
 pub async fn clear(
     State(app): State<AppState>,
-    PathParams(worker): PathParams<u64>,
+    PathParams(Id(worker)): PathParams<Id>,
 ) -> Result<Json<proto::WorkerInfo>> {
     let (now, lease) = (now_ms(), app.config.lease_ms());
     let info = app

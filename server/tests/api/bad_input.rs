@@ -397,3 +397,71 @@ async fn a_job_too_wide_to_assemble_within_the_memory_budget_is_refused() {
     (spec.width, spec.tile_size) = (2_048, Some(256));
     create_job(&s, &c, &spec).await;
 }
+
+/// Ids are SQLite row ids: one past `i64::MAX` names nothing and is answered as a client
+/// error on every route that takes one, in the path or in a lease token, never a 500.
+#[tokio::test(flavor = "multi_thread")]
+async fn ids_past_the_largest_row_id_are_client_errors_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let w = SimWorker::register(&s, "w").await;
+    let me = w.id;
+    for id in [i64::MAX as u64 + 1, 9_945_769_785_826_205_696, u64::MAX] {
+        let routes = [
+            ("GET", format!("/jobs/{id}")),
+            ("DELETE", format!("/jobs/{id}")),
+            ("POST", format!("/jobs/{id}/cancel")),
+            ("POST", format!("/jobs/{id}/pause")),
+            ("POST", format!("/jobs/{id}/resume")),
+            ("POST", format!("/jobs/{id}/retry")),
+            ("GET", format!("/jobs/{id}/frames")),
+            ("GET", format!("/jobs/{id}/frames/1/exr")),
+            ("GET", format!("/jobs/{id}/frames/1/png")),
+            ("POST", format!("/workers/{id}/clear")),
+            ("POST", format!("/workers/{id}/lease")),
+            ("POST", format!("/workers/{id}/heartbeat")),
+            ("POST", format!("/workers/{id}/leave")),
+            ("POST", format!("/workers/{id}/tasks/1/failure")),
+            ("POST", format!("/workers/{me}/tasks/{id}/failure")),
+            ("POST", format!("/workers/{id}/tasks/1/result")),
+            ("POST", format!("/workers/{me}/tasks/{id}/result")),
+        ];
+        for (method, path) in routes {
+            let req = c.request(method.parse().unwrap(), s.url(&path));
+            let req = match path.rsplit('/').next().unwrap() {
+                "lease" => req.json(&proto::LeaseRequest::default()),
+                "heartbeat" => req.json(&proto::Heartbeat { token: None }),
+                "failure" => req.json(&proto::FailureReport {
+                    attempt: 1,
+                    message: "x".into(),
+                }),
+                "result" => req
+                    .header(ResultMetadata::ATTEMPT, "1")
+                    .header(ResultMetadata::SHA256, "00")
+                    .header(ResultMetadata::SAMPLES, "1")
+                    .body(vec![0u8; 4]),
+                _ => req,
+            };
+            let res = req.send().await.unwrap();
+            let status = res.status();
+            let body = res.text().await.unwrap();
+            assert!(status.is_client_error(), "{method} {path}: {status} {body}");
+            assert!(body.contains(&id.to_string()), "{method} {path}: {body}");
+        }
+        // A heartbeat whose lease token names such a task.
+        let res = c
+            .post(s.url(&format!("/workers/{me}/heartbeat")))
+            .json(&serde_json::json!({ "token": { "task_id": id, "attempt": 1 } }))
+            .send()
+            .await
+            .unwrap();
+        let err = error_body(res, StatusCode::UNPROCESSABLE_ENTITY).await;
+        assert_eq!(
+            err.field.as_deref(),
+            Some("token.task_id"),
+            "{}",
+            err.message
+        );
+    }
+}
