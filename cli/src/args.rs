@@ -2,15 +2,12 @@
 
 use anyhow::{bail, Context};
 
+use server::limits::MAX_FRAMES;
 use tracer::animation::AnimationChoice;
 use tracer::film::TileRect;
+use tracer::limits::MAX_RESOLUTION;
 use tracer::motion::Shutter;
 use tracer::render::CameraChoice;
-
-/// Largest image side we accept, as the farm does.
-pub const MAX_SIDE: u32 = 16384;
-/// Most frames one sequence may hold, as the farm accepts.
-pub const MAX_FRAMES: usize = 100_000;
 
 /// Frames `start..=end` every `step`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -37,8 +34,8 @@ pub fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
         .context("expected WIDTHxHEIGHT, e.g. 640x360")?;
     let w: u32 = w.trim().parse().context("width is not a whole number")?;
     let h: u32 = h.trim().parse().context("height is not a whole number")?;
-    if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
-        bail!("size {w}x{h}: each side must be 1..={MAX_SIDE}");
+    if w == 0 || h == 0 || w > MAX_RESOLUTION || h > MAX_RESOLUTION {
+        bail!("size {w}x{h}: each side must be 1..={MAX_RESOLUTION}");
     }
     Ok((w, h))
 }
@@ -94,7 +91,7 @@ pub fn parse_frames(s: &str) -> anyhow::Result<FrameRange> {
         bail!("frames {s}: the range ends before it starts");
     }
     let range = FrameRange { start, end, step };
-    if range.len() > MAX_FRAMES {
+    if range.len() as u64 > MAX_FRAMES {
         bail!("frames {s}: {} frames, at most {MAX_FRAMES}", range.len());
     }
     Ok(range)

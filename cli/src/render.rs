@@ -13,6 +13,7 @@ use proto::job::{Quality, DEFAULT_MIN_SPP};
 use tracer::animation::AnimationChoice;
 use tracer::film::{SampleRange, TileRect};
 use tracer::light::{Environment, EnvironmentMap};
+use tracer::limits::{MAX_DEPTH, MAX_FPS, MAX_MOTION_STEPS, MAX_SPP};
 use tracer::motion::Shutter;
 use tracer::output::{self, ExrMetadata};
 use tracer::render::{
@@ -24,11 +25,6 @@ use crate::args::{
     parse_animation, parse_camera, parse_frames, parse_region, parse_shutter, parse_size,
     FrameRange,
 };
-
-/// Most samples per pixel a single render accepts.
-const MAX_SPP: u32 = 1_000_000;
-/// Deepest path we accept.
-const MAX_DEPTH: u32 = 1024;
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -184,15 +180,12 @@ fn sampling(args: &RenderArgs) -> anyhow::Result<(u32, RenderSettings)> {
 
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let (spp, settings) = sampling(&args)?;
-    if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
-        bail!("--fps {}: must be in (0, 1000]", args.fps);
+    if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= MAX_FPS) {
+        bail!("--fps {}: must be in (0, {MAX_FPS}]", args.fps);
     }
     if let Some(n) = args.motion_steps {
-        if !(1..=tracer::motion::MAX_MOTION_STEPS).contains(&n) {
-            bail!(
-                "--motion-steps {n}: must be 1..={}",
-                tracer::motion::MAX_MOTION_STEPS
-            );
+        if !(1..=MAX_MOTION_STEPS).contains(&n) {
+            bail!("--motion-steps {n}: must be 1..={MAX_MOTION_STEPS}");
         }
     }
     if let Some(n) = args.threads {

@@ -1,18 +1,16 @@
 //! Every bound the server enforces, in one place. The job-spec bounds are checked in
 //! `spec.rs`, each error naming the field; the byte limits are per-route body limits.
+//! The bounds of the render itself are the tracer's own ([`tracer::limits`]), so a job
+//! the tracer would refuse is refused here, at submission.
 
-/// Longest side of a frame, pixels.
-pub const MAX_RESOLUTION: u32 = 16_384;
-/// Samples per pixel.
-pub const MAX_SPP: u32 = 1_000_000;
+pub use tracer::limits::{
+    MAX_DEPTH, MAX_FPS, MAX_MOTION_STEPS, MAX_RESOLUTION, MAX_SHUTTER_FRAMES, MAX_SPP,
+};
+
 /// Frames per job.
 pub const MAX_FRAMES: u64 = 100_000;
 /// Largest frame number (file names stay readable; the tracer keys frames by `i32`).
 pub const MAX_FRAME_NUMBER: i32 = 9_999_999;
-/// Frames per second.
-pub const MAX_FPS: f64 = 1_000.0;
-/// Bounces.
-pub const MAX_DEPTH: u32 = 1_024;
 /// Smallest and largest tile side, pixels.
 pub const MIN_TILE_SIZE: u32 = 8;
 /// Largest tile side: a 1024² tile is 46 MB of f32 channels, under [`MAX_TILE_BYTES`].
@@ -23,10 +21,6 @@ pub const MAX_SAMPLE_PASSES: u32 = 256;
 pub const MAX_PRIORITY: i32 = 1_000;
 /// Attempts per task.
 pub const MAX_ATTEMPTS: u32 = 100;
-/// Shutter open/close, in frames either side of the frame.
-pub const MAX_SHUTTER_FRAMES: f64 = 10.0;
-/// Motion steps across the shutter.
-pub const MAX_MOTION_STEPS: u32 = 256;
 /// A job's time budget, seconds (30 days).
 pub const MAX_TIME_BUDGET_SECONDS: f64 = 30.0 * 24.0 * 3600.0;
 /// Length of a job name, bytes.

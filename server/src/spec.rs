@@ -716,6 +716,45 @@ mod tests {
         plan(s, &scene(), 1_000_000).unwrap();
     }
 
+    /// The render bounds are the tracer's own: a spec at every one of them is accepted
+    /// here and its frame options pass the tracer's check; one past fails both.
+    #[test]
+    fn a_spec_at_the_tracers_bounds_is_one_the_tracer_renders() {
+        let options = |p: &JobSpec| tracer::render::FrameOptions {
+            fps: p.fps,
+            shutter: tracer::motion::Shutter {
+                open: p.shutter[0],
+                close: p.shutter[1],
+            },
+            motion_steps: p.motion_steps,
+            width: p.width,
+            height: p.height,
+            ..Default::default()
+        };
+        let mut s = spec();
+        (s.width, s.height) = (MAX_RESOLUTION, MAX_RESOLUTION);
+        s.fps = MAX_FPS;
+        s.shutter = [-MAX_SHUTTER_FRAMES, MAX_SHUTTER_FRAMES];
+        s.motion_steps = Some(MAX_MOTION_STEPS);
+        let p = plan(s.clone(), &scene(), u64::MAX).unwrap();
+        assert_eq!(options(&p.spec).check(), Ok(()));
+        type Change = fn(&mut JobSpec);
+        let past: [(&str, Change); 4] = [
+            ("width", |s| s.width += 1),
+            ("fps", |s| s.fps *= 1.5),
+            ("shutter", |s| s.shutter[1] *= 1.5),
+            ("motion_steps", |s| {
+                s.motion_steps = Some(MAX_MOTION_STEPS + 1)
+            }),
+        ];
+        for (field, change) in past {
+            let mut s = s.clone();
+            change(&mut s);
+            assert!(options(&s).check().is_err(), "{field}");
+            assert_eq!(field_of(s), field);
+        }
+    }
+
     /// A time budget starts with one pass of min_spp (default 4) per tile; the rest is
     /// planned as the job runs.
     #[test]

@@ -22,6 +22,7 @@
 //! | [`integrator`] | unidirectional path tracing with NEE and MIS |
 //! | [`film`] | tile buffers: beauty, albedo, normal, depth |
 //! | [`motion`] | the shutter, motion steps, meshes deformed for one frame |
+//! | [`limits`] | the bounds of a render request: image size, samples, depth, fps, motion |
 //! | [`settings`] | what a render is asked for: frame options, sampling settings, noise target |
 //! | `prepare` | [`render::prepare_frame`]: the scene posed, placed and built for one frame |
 //! | [`frame`] | the prepared frame and its ray queries (closest hit, occlusion, the triangle hit) |
@@ -52,6 +53,7 @@ pub mod frame;
 pub mod geometry;
 pub mod integrator;
 pub mod light;
+pub mod limits;
 pub mod loader;
 pub mod material;
 pub mod math;

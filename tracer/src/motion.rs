@@ -11,10 +11,8 @@ use glam::{DMat3, DMat4, DVec3, Vec3, Vec4};
 
 use crate::bvh::{MeshBvh, Segment};
 use crate::deform::Deformed;
+use crate::limits::MAX_SHUTTER_FRAMES;
 use crate::scene::Mesh;
-
-/// Most motion steps a frame may ask for.
-pub const MAX_MOTION_STEPS: u32 = 64;
 
 /// The step counts the automatic choice tries, fewest first. Each divides the probe grid
 /// ([`PROBES`] times over the shutter) evenly, so its steps fall on probe times.
@@ -41,10 +39,6 @@ impl Default for Shutter {
         }
     }
 }
-
-/// Largest |open| or |close| accepted, in frames: a shutter spanning more than this is a
-/// mistake, not a look.
-pub const MAX_SHUTTER_FRAMES: f64 = 1.0e4;
 
 impl Shutter {
     /// Checks the numbers: finite, `open <= close`, within [`MAX_SHUTTER_FRAMES`].

@@ -22,9 +22,7 @@ use crate::geometry::Aabb;
 use crate::light::{EmissiveTriangle, Environment, LightSet};
 use crate::loader::{framing_camera, mesh_bounds, scene_bounds};
 use crate::material::AlphaMode;
-use crate::motion::{
-    auto_steps, place, step_positions, DeformedMesh, PixelFootprint, MAX_MOTION_STEPS, PROBES,
-};
+use crate::motion::{auto_steps, place, step_positions, DeformedMesh, PixelFootprint, PROBES};
 use crate::scene::{Node, Scene};
 use crate::settings::{CameraChoice, FrameOptions, RenderError};
 
@@ -249,7 +247,7 @@ pub fn prepare_frame(
     scene: Arc<Scene>,
     options: &FrameOptions,
 ) -> Result<PreparedFrame, RenderError> {
-    check_options(options)?;
+    options.check()?;
     let animations = options
         .animation
         .resolve(&scene)
@@ -397,28 +395,6 @@ pub fn prepare_frame(
         features,
         warnings,
     })
-}
-
-/// The frame options' numbers, checked before any work.
-fn check_options(options: &FrameOptions) -> Result<(), RenderError> {
-    if options.width == 0 || options.height == 0 {
-        return Err(RenderError::EmptyImage(options.width, options.height));
-    }
-    if !(options.fps.is_finite() && options.fps > 0.0) {
-        return Err(RenderError::Time(format!(
-            "fps {} must be a positive number",
-            options.fps
-        )));
-    }
-    options.shutter.validate().map_err(RenderError::Time)?;
-    if let Some(n) = options.motion_steps {
-        if !(1..=MAX_MOTION_STEPS).contains(&n) {
-            return Err(RenderError::Time(format!(
-                "motion steps {n} must be between 1 and {MAX_MOTION_STEPS}"
-            )));
-        }
-    }
-    Ok(())
 }
 
 /// The frame's instances: rigid ones with one transform per step (`relative` moves the

@@ -4,6 +4,7 @@
 
 use crate::animation::AnimationChoice;
 use crate::light::Environment;
+use crate::limits::{MAX_FPS, MAX_MOTION_STEPS, MAX_RESOLUTION};
 use crate::motion::Shutter;
 
 /// Which camera renders the frame.
@@ -42,6 +43,31 @@ pub struct FrameOptions {
     /// none (every glTF file) gets a uniform white environment of radiance 1 when it has no
     /// punctual light, so a bare model is lit as in a viewer, and darkness otherwise.
     pub environment: Option<Environment>,
+}
+
+impl FrameOptions {
+    /// Checks the numbers against [`crate::limits`] before any work.
+    pub fn check(&self) -> Result<(), RenderError> {
+        let side = 1..=MAX_RESOLUTION;
+        if !side.contains(&self.width) || !side.contains(&self.height) {
+            return Err(RenderError::ImageSize(self.width, self.height));
+        }
+        if !(self.fps.is_finite() && self.fps > 0.0 && self.fps <= MAX_FPS) {
+            return Err(RenderError::Time(format!(
+                "fps {} must be above 0 and at most {MAX_FPS}",
+                self.fps
+            )));
+        }
+        self.shutter.validate().map_err(RenderError::Time)?;
+        if let Some(n) = self.motion_steps {
+            if !(1..=MAX_MOTION_STEPS).contains(&n) {
+                return Err(RenderError::Time(format!(
+                    "motion steps {n} must be between 1 and {MAX_MOTION_STEPS}"
+                )));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for FrameOptions {
@@ -138,9 +164,9 @@ pub enum RenderError {
     /// The camera asked for does not exist or is not placed in the scene.
     #[error("camera {0}")]
     Camera(String),
-    /// The image size is zero.
-    #[error("image size {0}x{1} is empty")]
-    EmptyImage(u32, u32),
+    /// A side of the image is zero or past [`MAX_RESOLUTION`].
+    #[error("image size {0}x{1}: each side must be 1 to {MAX_RESOLUTION} pixels")]
+    ImageSize(u32, u32),
     /// The frame rate, shutter or motion steps are unusable.
     #[error("{0}")]
     Time(String),
