@@ -177,9 +177,9 @@ impl PassSums {
     }
 }
 
-/// The accepted tile of a task, as stored.
-pub fn read_tile(store: &Store, job: u64, task: u64) -> Result<Layers> {
-    let image = output::read_exr(&store.tile(job, task))
+/// The tile of a task's `attempt`, as stored.
+pub fn read_tile(store: &Store, job: u64, task: u64, attempt: u32) -> Result<Layers> {
+    let image = output::read_exr(&store.tile(job, task, attempt))
         .map_err(|e| Error::Internal(format!("reading the accepted tile of task {task}: {e}")))?;
     Ok(image.layers)
 }
@@ -336,7 +336,7 @@ impl<'a> FrameSource<'a> {
                 merge.add(out.crop(sub));
             }
             for t in group {
-                let path = self.store.tile(t.job_id, t.id);
+                let path = self.store.tile(t.job_id, t.id, t.attempt);
                 let part = output::read_exr_rows(&path, top..bottom)
                     .map_err(|e| {
                         Error::BadFrame(format!("reading the tile of task {}: {e}", t.id))
@@ -554,7 +554,7 @@ mod tests {
     fn put(store: &Store, size: (u32, u32), t: &TaskRow, layers: &Layers) {
         let bytes = output::encode_exr(size, layers, &ExrMetadata::new()).unwrap();
         std::fs::create_dir_all(store.tile_dir(1)).unwrap();
-        std::fs::write(store.tile(1, t.id), bytes).unwrap();
+        std::fs::write(store.tile(1, t.id, t.attempt), bytes).unwrap();
     }
 
     /// A time-budget frame: its first pass is merged and kept, the tiles go, the next pass
@@ -575,7 +575,7 @@ mod tests {
         assert_eq!(source.passes(), 1);
         source.write_merged().unwrap();
         for t in &first {
-            std::fs::remove_file(store.tile(1, t.id)).unwrap();
+            std::fs::remove_file(store.tile(1, t.id, t.attempt)).unwrap();
         }
         // The next pass covers the left tile: 4 samples of 3.0 join 4 of 1.0 there.
         let second = task(12, 0, 1, left);
@@ -587,7 +587,7 @@ mod tests {
         let at = |b: &Layers, x: usize| (b.beauty[x].x, b.samples[x]);
         assert_eq!((at(&built, 0), at(&built, 3)), ((2.0, 8.0), (1.0, 4.0)));
         source.write_merged().unwrap();
-        std::fs::remove_file(store.tile(1, second.id)).unwrap();
+        std::fs::remove_file(store.tile(1, second.id, second.attempt)).unwrap();
         let again = FrameSource::new(&store, &spec, 1, 3, &all, 1 << 30).unwrap();
         assert_eq!((again.passes(), again.band(whole).unwrap()), (2, built));
     }

@@ -3,6 +3,7 @@
 //! task done (one transaction), then assemble the frame or write a progressive preview.
 //! A check task's tile is first compared with the tiles it repeats (see [`verify`]).
 
+use std::collections::HashSet;
 use std::time::Instant;
 
 use proto::{ResultMetadata, TaskToken};
@@ -59,21 +60,15 @@ pub fn receive(
         Some(original) => Some(judge(app, &task, original, &layers, bytes)?),
         None => None,
     };
-    write_atomic(&app.store.tile(task.job_id, task.id), bytes)?;
-    let (now, timing) = (now_ms(), app.timing());
-    let accepted = app.db.with(|c| {
-        scheduler::accept(
-            c,
-            worker,
-            token,
-            meta.rays,
-            meta.render_ms,
-            verdict.as_ref(),
-            now,
-            timing,
-        )
-    })?;
-    match accepted {
+    match store_and_commit(
+        app,
+        worker,
+        token,
+        task.job_id,
+        meta,
+        verdict.as_ref(),
+        bytes,
+    )? {
         Accepted::Duplicate => Ok(Received {
             accepted: false,
             job: task.job_id,
@@ -103,6 +98,52 @@ pub fn receive(
     }
 }
 
+/// Writes the tile to its attempt's own file, then commits it under the fencing token.
+/// The file comes first, so a crash in between leaves a done task with its tile; the
+/// attempt in its name means a stale upload racing the current one writes beside the
+/// accepted bytes, never over them, and the commit decides which file counts. A file the
+/// commit did not accept is removed.
+pub fn store_and_commit(
+    app: &App,
+    worker: u64,
+    token: TaskToken,
+    job: u64,
+    meta: &ResultMetadata,
+    verdict: Option<&Verdict>,
+    bytes: &[u8],
+) -> Result<Accepted> {
+    let path = app.store.tile(job, token.task_id, token.attempt);
+    write_atomic(&path, bytes)?;
+    let (now, timing) = (now_ms(), app.timing());
+    let accepted = app.db.with(|c| -> Result<_> {
+        let accepted = scheduler::accept(
+            c,
+            worker,
+            token,
+            meta.rays,
+            meta.render_ms,
+            verdict,
+            now,
+            timing,
+        );
+        // Whose tile counts: the task's done attempt (a duplicate of the same attempt
+        // wrote the same path, and that file is the accepted one).
+        let counts = match &accepted {
+            Ok(Accepted::New { .. }) => true,
+            Ok(Accepted::Duplicate) => {
+                scheduler::load_task(c, token.task_id)?.is_some_and(|t| t.attempt == token.attempt)
+            }
+            Err(_) => false,
+        };
+        Ok((accepted, counts))
+    });
+    let (accepted, counts) = accepted?;
+    if !counts {
+        let _ = std::fs::remove_file(&path);
+    }
+    accepted
+}
+
 /// The verdict on a check's tile, compared bit for bit with every finished render of its
 /// group. When the task's own tile is found wrong, the check's tile takes its place now,
 /// before the check is accepted, so the frame can never be assembled from the wrong one.
@@ -116,14 +157,20 @@ fn judge(
     let group = app.db.with(|c| verify::group(c, original))?;
     let mut matching = Vec::new();
     for render in &group {
-        let stored = assembly::read_tile(&app.store, check.job_id, render.task)?;
+        let stored = assembly::read_tile(&app.store, check.job_id, render.task, render.attempt)?;
         if verify::identical(&stored, layers) {
             matching.push(render.task);
         }
     }
     let verdict = Verdict::new(&group, &matching);
     if verdict.replaces(original) {
-        write_atomic(&app.store.tile(check.job_id, original), bytes)?;
+        let wrong = group.iter().find(|r| r.task == original).ok_or_else(|| {
+            Error::Internal(format!("task {original} is not among its own renders"))
+        })?;
+        write_atomic(
+            &app.store.tile(check.job_id, original, wrong.attempt),
+            bytes,
+        )?;
     }
     if verdict != Verdict::Agrees(vec![original]) {
         tracing::warn!(
@@ -184,7 +231,7 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     let started = Instant::now();
     let tile_bytes: u64 = tasks
         .iter()
-        .filter_map(|t| std::fs::metadata(app.store.tile(job, t.id)).ok())
+        .filter_map(|t| std::fs::metadata(app.store.tile(job, t.id, t.attempt)).ok())
         .map(|m| m.len())
         .sum();
     let mut source =
@@ -209,10 +256,8 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     let checks = app
         .db
         .with(|c| scheduler::done_checks_of_frame(c, job, frame))?;
-    for id in tasks.iter().map(|t| t.id).chain(checks) {
-        // The frame holds them now; a leftover tile only costs disk.
-        let _ = std::fs::remove_file(app.store.tile(job, id));
-    }
+    let done: HashSet<u64> = tasks.iter().map(|t| t.id).chain(checks).collect();
+    app.store.remove_tiles(job, &done);
     if spec.time_budget.is_some() {
         // Passes planned just now are waiting to be leased.
         app.work.notify_waiters();
@@ -253,4 +298,69 @@ pub fn preview_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     let budget = app.config.assembly_memory;
     let source = FrameSource::new(&app.store, &spec, job, frame, &tasks, budget)?;
     source.write_preview()
+}
+
+#[cfg(test)]
+mod tests {
+    use proto::{JobSpec, SceneInfo};
+
+    use super::*;
+    use crate::Config;
+
+    fn meta() -> ResultMetadata {
+        ResultMetadata {
+            attempt: 0,
+            sha256: String::new(),
+            samples: 1,
+            rays: 1,
+            render_ms: 1,
+        }
+    }
+
+    /// The race the attempt in a tile's name closes: worker a's upload passed its
+    /// precheck while its lease was current, then stalled; the lease expired, b took the
+    /// task and its tile was accepted; a's write and commit come last. a's tile is
+    /// ignored as a duplicate, its file goes, and b's accepted bytes are untouched.
+    #[test]
+    fn a_stale_upload_racing_the_current_one_cannot_replace_the_accepted_tile() {
+        let dir = tempfile::tempdir().unwrap();
+        let app = crate::open(Config::new(dir.path().join("data"))).unwrap();
+        let scene = SceneInfo {
+            digest: "a".repeat(64),
+            ..Default::default()
+        };
+        let mut spec = JobSpec::new(scene.digest.clone());
+        (spec.width, spec.height, spec.tile_size) = (8, 8, Some(8));
+        let timing = app.timing();
+        let (job, a, b, first, second) = app.db.with(|c| {
+            c.execute(
+                "INSERT INTO scenes (digest, size, info, created_ms) VALUES (?1, 1, '{}', 0)",
+                [&scene.digest],
+            )
+            .unwrap();
+            let plan = crate::spec::plan(spec, &scene, 10).unwrap();
+            let job = scheduler::create_job(c, &plan, 0).unwrap();
+            let a = scheduler::register_worker(c, "a", 1, "t", 0).unwrap();
+            let b = scheduler::register_worker(c, "b", 1, "t", 0).unwrap();
+            let first = scheduler::lease(c, a, 0, timing).unwrap().unwrap();
+            let late = timing.lease_ms + 1;
+            scheduler::expire(c, late, timing).unwrap();
+            let second = scheduler::lease(c, b, late, timing).unwrap().unwrap();
+            (job, a, b, first.token, second.token)
+        });
+        assert_eq!((first.attempt, second.attempt), (1, 2));
+
+        let current = store_and_commit(&app, b, second, job, &meta(), None, b"b's tile").unwrap();
+        assert!(matches!(current, Accepted::New { .. }));
+        let stale = store_and_commit(&app, a, first, job, &meta(), None, b"a's tile");
+        assert!(matches!(stale, Ok(Accepted::Duplicate)), "{stale:?}");
+
+        let accepted = app.store.tile(job, second.task_id, second.attempt);
+        assert_eq!(std::fs::read(accepted).unwrap(), b"b's tile");
+        assert!(!app.store.tile(job, first.task_id, first.attempt).exists());
+        // A second upload of the accepted attempt is a duplicate and keeps the file.
+        let again = store_and_commit(&app, b, second, job, &meta(), None, b"b's tile").unwrap();
+        assert!(matches!(again, Accepted::Duplicate));
+        assert!(app.store.tile(job, second.task_id, second.attempt).exists());
+    }
 }

@@ -103,6 +103,12 @@ pub fn open(config: Config) -> Result<AppState, StartError> {
         tracing::info!("removed {removed} temp files of writes cut short by the last stop");
     }
     let db = db::Db::open(&store.database())?;
+    let renamed = db.with(|c| {
+        store.name_tiles_by_attempt(|task| Ok(scheduler::load_task(c, task)?.map(|t| t.attempt)))
+    })?;
+    if renamed > 0 {
+        tracing::info!("named {renamed} tiles by their accepted attempt");
+    }
     let app = Arc::new(App {
         config,
         db,

@@ -4,10 +4,11 @@
 //! ```text
 //! data/tessera.db            SQLite (WAL)
 //! data/scenes/<sha256>.glb
-//! data/tiles/<job>/<task>.exr
+//! data/tiles/<job>/<task>.<attempt>.exr
 //! data/jobs/<job>/frame_0001.exr, frame_0001.png
 //! ```
 
+use std::collections::HashSet;
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -71,12 +72,66 @@ impl Store {
         self.root.join("scenes").join(format!("{digest}.glb"))
     }
 
-    /// The accepted tile of a task.
-    pub fn tile(&self, job: u64, task: u64) -> PathBuf {
-        self.root
-            .join("tiles")
-            .join(job.to_string())
-            .join(format!("{task}.exr"))
+    /// The tile one attempt at a task uploaded. Each attempt has its own file, so a stale
+    /// upload cannot overwrite the accepted one; the task's done attempt names the tile
+    /// that counts.
+    pub fn tile(&self, job: u64, task: u64, attempt: u32) -> PathBuf {
+        self.tile_dir(job).join(format!("{task}.{attempt}.exr"))
+    }
+
+    /// Renames the tiles of a data folder written before tiles were named by attempt
+    /// (`<task>.exr`) to their task's current attempt, which for a done task is the
+    /// accepted one; a tile whose task is gone is removed. `attempt_of` reads the
+    /// database. Returns how many were renamed.
+    pub fn name_tiles_by_attempt(
+        &self,
+        mut attempt_of: impl FnMut(u64) -> crate::error::Result<Option<u32>>,
+    ) -> crate::error::Result<usize> {
+        let mut renamed = 0;
+        for job in fs::read_dir(self.root.join("tiles"))? {
+            let job = job?.path();
+            let Some(job_id) = job
+                .file_name()
+                .and_then(|n| n.to_str()?.parse::<u64>().ok())
+            else {
+                continue;
+            };
+            for entry in fs::read_dir(&job)? {
+                let entry = entry?;
+                let name = entry.file_name();
+                let Some(task) = name
+                    .to_str()
+                    .and_then(|n| n.strip_suffix(".exr")?.parse().ok())
+                else {
+                    continue;
+                };
+                match attempt_of(task)? {
+                    Some(attempt) => {
+                        fs::rename(entry.path(), self.tile(job_id, task, attempt))?;
+                        renamed += 1;
+                    }
+                    None => fs::remove_file(entry.path())?,
+                }
+            }
+        }
+        Ok(renamed)
+    }
+
+    /// Removes the tile files of `tasks` in a job's tile folder, of every attempt.
+    pub fn remove_tiles(&self, job: u64, tasks: &HashSet<u64>) {
+        let Ok(entries) = fs::read_dir(self.tile_dir(job)) else {
+            return;
+        };
+        for entry in entries.flatten() {
+            let name = entry.file_name();
+            let task = name
+                .to_str()
+                .and_then(|n| n.split_once('.')?.0.parse().ok());
+            if task.is_some_and(|t| tasks.contains(&t)) {
+                // The frame holds them now; a leftover tile only costs disk.
+                let _ = fs::remove_file(entry.path());
+            }
+        }
     }
 
     /// Every layer of a time-budget job's frame as assembled so far, with the passes it
@@ -154,11 +209,34 @@ mod tests {
         fs::write(&frame, b"frame").unwrap();
         let temp = frame.with_file_name(".frame_0001.exr.tmp-123-0");
         fs::write(&temp, b"half a frame").unwrap();
-        let tile = store.tile(3, 9).with_file_name(".9.exr.123.0.tmp");
+        let tile = store.tile(3, 9, 1).with_file_name(".9.1.exr.123.0.tmp");
         fs::create_dir_all(tile.parent().unwrap()).unwrap();
         fs::write(&tile, b"half a tile").unwrap();
         assert_eq!(store.remove_temp_files().unwrap(), 2);
         assert!(frame.is_file() && !temp.exists() && !tile.exists());
+    }
+
+    #[test]
+    fn tiles_named_before_attempts_take_their_tasks_attempt() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(dir.path()).unwrap();
+        let folder = store.tile_dir(4);
+        fs::create_dir_all(&folder).unwrap();
+        for name in ["7.exr", "8.exr", "9.2.exr", "frame_0001.merged.exr"] {
+            fs::write(folder.join(name), name).unwrap();
+        }
+        // Task 7 is at attempt 3; task 8 is gone.
+        let attempt_of = |task| Ok((task == 7).then_some(3));
+        assert_eq!(store.name_tiles_by_attempt(attempt_of).unwrap(), 1);
+        assert_eq!(fs::read(store.tile(4, 7, 3)).unwrap(), b"7.exr");
+        let mut left: Vec<_> = fs::read_dir(&folder)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["7.3.exr", "9.2.exr", "frame_0001.merged.exr"]);
+        store.remove_tiles(4, &HashSet::from([7, 9]));
+        assert_eq!(fs::read_dir(&folder).unwrap().count(), 1);
     }
 
     #[test]

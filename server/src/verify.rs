@@ -65,6 +65,8 @@ pub fn identical(a: &Layers, b: &Layers) -> bool {
 pub struct Render {
     /// Its task id.
     pub task: u64,
+    /// The attempt whose tile was accepted.
+    pub attempt: u32,
     /// The worker that rendered it.
     pub worker: u64,
     /// That worker is quarantined.
@@ -109,7 +111,7 @@ impl Verdict {
 /// The finished renders of the task `original` and its checks.
 pub fn group(conn: &Connection, original: u64) -> Result<Vec<Render>> {
     let mut stmt = conn.prepare_cached(
-        "SELECT t.id, t.worker_id, w.quarantined_ms IS NOT NULL
+        "SELECT t.id, t.attempt, t.worker_id, w.quarantined_ms IS NOT NULL
          FROM tasks t JOIN workers w ON w.id = t.worker_id
          WHERE (t.id = ?1 OR t.check_of = ?1) AND t.state = 'done'
          ORDER BY t.id",
@@ -117,8 +119,9 @@ pub fn group(conn: &Connection, original: u64) -> Result<Vec<Render>> {
     let rows = stmt.query_map([original], |r| {
         Ok(Render {
             task: r.get(0)?,
-            worker: r.get(1)?,
-            quarantined: r.get(2)?,
+            attempt: r.get(1)?,
+            worker: r.get(2)?,
+            quarantined: r.get(3)?,
         })
     })?;
     Ok(rows.collect::<rusqlite::Result<_>>()?)
@@ -382,6 +385,7 @@ mod tests {
     fn verdicts_from_agreement_and_quarantine() {
         let r = |task, worker, quarantined| Render {
             task,
+            attempt: 1,
             worker,
             quarantined,
         };

@@ -113,9 +113,11 @@ async fn crash_before_assembly(cfg: &server::Config) -> (JobStatus, std::path::P
         assert_eq!(w.upload(&s, &lease, exr).await.status(), StatusCode::OK);
     }
     s.crash();
-    let tile = cfg
-        .data_dir
-        .join(format!("tiles/{}/{}.exr", job.id, last.token.task_id));
+    let tile = server::store::Store::unopened(&cfg.data_dir).tile(
+        job.id,
+        last.token.task_id,
+        last.token.attempt,
+    );
     std::fs::write(&tile, &last_exr).unwrap();
     let db = rusqlite::Connection::open(cfg.data_dir.join("tessera.db")).unwrap();
     db.execute(
