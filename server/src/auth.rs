@@ -60,13 +60,20 @@ fn token_of(req: &Request) -> Option<String> {
             .map(|t| t.trim().to_string());
     }
     if req.method() == Method::GET {
-        return req.uri().query().and_then(|q| {
-            q.split('&')
-                .find_map(|kv| kv.strip_prefix("access_token="))
-                .map(|t| t.to_string())
-        });
+        return query_token(req.uri());
     }
     None
+}
+
+/// The `access_token` query value, percent-decoded (the dashboard encodes it with
+/// `encodeURIComponent`, so a token with `+`, `&` or `%` in it arrives encoded).
+fn query_token(uri: &axum::http::Uri) -> Option<String> {
+    #[derive(serde::Deserialize)]
+    struct Query {
+        access_token: Option<String>,
+    }
+    let Query { access_token } = axum::extract::Query::try_from_uri(uri).ok()?.0;
+    access_token
 }
 
 /// Middleware: lets the request through if its token fits `role`, else answers 401.
@@ -114,6 +121,21 @@ mod tests {
         assert!(!allowed(Role::Client, None, c, w));
         // A role with no token configured is open.
         assert!(allowed(Role::Client, None, None, w));
+    }
+
+    #[test]
+    fn the_query_token_is_percent_decoded() {
+        let token = |uri: &str| query_token(&uri.parse().unwrap());
+        assert_eq!(
+            token("/events?x=1&access_token=a%2Bb%26c%25d%20e").as_deref(),
+            Some("a+b&c%d e")
+        );
+        assert_eq!(
+            token("/events?access_token=plain").as_deref(),
+            Some("plain")
+        );
+        assert_eq!(token("/events?other=1"), None);
+        assert_eq!(token("/events"), None);
     }
 
     #[test]
