@@ -2,30 +2,13 @@
 
 use anyhow::{bail, Context};
 
+pub use proto::FrameRange;
 use server::limits::MAX_FRAMES;
 use tracer::animation::AnimationChoice;
 use tracer::film::TileRect;
 use tracer::limits::MAX_RESOLUTION;
 use tracer::motion::Shutter;
 use tracer::render::CameraChoice;
-
-/// Frames `start..=end` every `step`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FrameRange {
-    pub start: i32,
-    pub end: i32,
-    pub step: u32,
-}
-
-impl FrameRange {
-    pub fn frames(&self) -> impl Iterator<Item = i32> {
-        (self.start..=self.end).step_by(self.step as usize)
-    }
-
-    pub fn len(&self) -> usize {
-        ((self.end - self.start) as usize) / self.step as usize + 1
-    }
-}
 
 /// `WxH`, e.g. `1280x720`.
 pub fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
@@ -91,8 +74,8 @@ pub fn parse_frames(s: &str) -> anyhow::Result<FrameRange> {
         bail!("frames {s}: the range ends before it starts");
     }
     let range = FrameRange { start, end, step };
-    if range.len() as u64 > MAX_FRAMES {
-        bail!("frames {s}: {} frames, at most {MAX_FRAMES}", range.len());
+    if range.count() > MAX_FRAMES {
+        bail!("frames {s}: {} frames, at most {MAX_FRAMES}", range.count());
     }
     Ok(range)
 }
@@ -151,12 +134,12 @@ mod tests {
     #[test]
     fn frame_ranges_and_shutters_parse_with_limits() {
         let r = parse_frames("1-48").unwrap();
-        assert_eq!((r.start, r.end, r.step, r.len()), (1, 48, 1, 48));
+        assert_eq!((r.start, r.end, r.step, r.count()), (1, 48, 1, 48));
         let r = parse_frames("0-10:5").unwrap();
         assert_eq!(r.frames().collect::<Vec<_>>(), [0, 5, 10]);
         let r = parse_frames("-5--3").unwrap();
         assert_eq!(r.frames().collect::<Vec<_>>(), [-5, -4, -3]);
-        assert_eq!(parse_frames("7").unwrap().len(), 1);
+        assert_eq!(parse_frames("7").unwrap().count(), 1);
         for bad in ["5-1", "1-4:0", "a-b", "1-200000", ""] {
             assert!(parse_frames(bad).is_err(), "{bad}");
         }

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use proto::{FrameState, JobState, JobStatus};
+use proto::{FrameState, FrameStatus, JobState, JobStatus};
 
 use crate::client::{Client, ClientError, FrameFile};
 
@@ -204,11 +204,10 @@ pub async fn watch(
 /// `frame_0001.exr` and `frame_0001.png`.
 pub async fn download_frames(client: &Client, id: u64, dir: &Path) -> anyhow::Result<Downloaded> {
     let frames = client.frames(id).await?;
-    let done: Vec<i32> = frames
+    let done: Vec<&FrameStatus> = frames
         .frames
         .iter()
         .filter(|f| f.state == FrameState::Done)
-        .map(|f| f.frame)
         .collect();
     let mut downloaded = Downloaded {
         dir: dir.to_path_buf(),
@@ -224,7 +223,8 @@ pub async fn download_frames(client: &Client, id: u64, dir: &Path) -> anyhow::Re
             .expect("the template is valid")
             .progress_chars("=> "),
     );
-    for frame in done {
+    for status in done {
+        let frame = status.frame;
         for file in [FrameFile::Exr, FrameFile::Png] {
             let bytes = match client.frame_file(id, frame, file).await {
                 Ok(bytes) => bytes,
@@ -238,7 +238,8 @@ pub async fn download_frames(client: &Client, id: u64, dir: &Path) -> anyhow::Re
                     return Err(e).with_context(|| format!("downloading frame {frame}"));
                 }
             };
-            let path = dir.join(proto::job::frame_file_name(frame, file.extension()));
+            // The server's name: as wide as the job's last frame, so the files sort.
+            let path = dir.join(Path::new(&status.file).with_extension(file.extension()));
             std::fs::write(&path, &bytes).with_context(|| format!("writing {}", path.display()))?;
             downloaded.bytes += bytes.len() as u64;
         }

@@ -1,7 +1,7 @@
 //! `tessera render`: a frame or a sequence of a scene, straight from the tracer to EXRs and
 //! PNG previews, without the farm.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -97,11 +97,6 @@ pub struct RenderArgs {
     /// the folder to write the sequence into.
     #[arg(long)]
     out: Option<PathBuf>,
-}
-
-/// Name of frame `frame`'s file in a sequence folder: four digits, zero padded.
-pub fn frame_file(dir: &Path, frame: i32, extension: &str) -> PathBuf {
-    dir.join(format!("frame_{frame:04}.{extension}"))
 }
 
 /// Parses `--environment`.
@@ -204,7 +199,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             let dir = args.out.clone().unwrap_or_else(|| PathBuf::from("out"));
             std::fs::create_dir_all(&dir)
                 .with_context(|| format!("creating the output folder {}", dir.display()))?;
-            (range.frames().collect(), Output::Folder(dir))
+            (range.frames().collect(), Output::Folder(dir, range))
         }
         None => (
             vec![args.frame],
@@ -294,7 +289,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         }
         let exr = match &out {
             Output::File(path) => path.clone(),
-            Output::Folder(dir) => frame_file(dir, frame_number, "exr"),
+            Output::Folder(dir, range) => dir.join(range.file_name(frame_number, "exr")),
         };
         output::write_exr(&exr, (width, height), &layers, &meta)
             .with_context(|| format!("writing {}", exr.display()))?;
@@ -329,7 +324,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         }
     }
     bar.finish_and_clear();
-    if let Output::Folder(dir) = &out {
+    if let Output::Folder(dir, _) = &out {
         println!(
             "wrote {} frame(s) to {} in {:.2} s (scene loaded in {:.2} s)",
             frames.len(),
@@ -344,7 +339,8 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
 /// Where the EXRs go.
 enum Output {
     File(PathBuf),
-    Folder(PathBuf),
+    /// A sequence's folder, and the sequence (its file names are as wide as its last frame).
+    Folder(PathBuf, FrameRange),
 }
 
 #[cfg(test)]

@@ -92,11 +92,7 @@ impl JobArgs {
     pub fn to_spec(&self, scene: &SceneInfo) -> anyhow::Result<JobSpec> {
         let mut spec = JobSpec::new(scene.digest.clone());
         spec.name = self.name.clone();
-        spec.frames = self.frames.map(|r| proto::FrameRange {
-            start: r.start,
-            end: r.end,
-            step: r.step,
-        });
+        spec.frames = self.frames;
         if let Some(fps) = self.fps {
             spec.fps = fps;
         }

@@ -44,6 +44,16 @@ impl FrameRange {
         }
         (self.end as i64 - self.start as i64) as u64 / self.step.max(1) as u64 + 1
     }
+
+    /// The last frame rendered: `end`, or the last step before it.
+    pub fn last(&self) -> i32 {
+        (self.start as i64 + (self.count().max(1) as i64 - 1) * self.step.max(1) as i64) as i32
+    }
+
+    /// The file name of `frame` in this sequence ([`frame_file_name`]).
+    pub fn file_name(&self, frame: i32, extension: &str) -> String {
+        frame_file_name(frame, self.last(), extension)
+    }
 }
 
 /// A named quality preset: the settings `--quality` stands for, each of which an explicit
@@ -449,9 +459,17 @@ pub struct FrameList {
     pub frames: Vec<FrameStatus>,
 }
 
-/// The file name of frame `frame`: four digits, zero padded (`frame_0001.exr`).
-pub fn frame_file_name(frame: i32, extension: &str) -> String {
-    format!("frame_{frame:04}.{extension}")
+/// The file name of frame `frame` of a sequence whose last frame is `last`: zero padded to
+/// four digits, or to as many as `last` has, so the names of a sequence all have one width
+/// and sort in frame order (`frame_0001.exr`; `frame_00001.exr` in a sequence that reaches
+/// frame 10000).
+pub fn frame_file_name(frame: i32, last: i32, extension: &str) -> String {
+    let digits = last
+        .unsigned_abs()
+        .checked_ilog10()
+        .map_or(1, |d| d as usize + 1);
+    let width = digits.max(4);
+    format!("frame_{frame:0width$}.{extension}")
 }
 
 #[cfg(test)]
@@ -502,8 +520,32 @@ mod tests {
     }
 
     #[test]
-    fn frame_files_have_four_digits() {
-        assert_eq!(frame_file_name(1, "exr"), "frame_0001.exr");
-        assert_eq!(frame_file_name(12345, "png"), "frame_12345.png");
+    fn frame_files_of_a_sequence_sort_in_frame_order() {
+        assert_eq!(frame_file_name(1, 48, "exr"), "frame_0001.exr");
+        assert_eq!(frame_file_name(9999, 9999, "exr"), "frame_9999.exr");
+        assert_eq!(frame_file_name(12345, 12345, "png"), "frame_12345.png");
+        let range = FrameRange {
+            start: 9_990,
+            end: 10_010,
+            step: 3,
+        };
+        assert_eq!(range.last(), 10_008);
+        let names: Vec<String> = range.frames().map(|f| range.file_name(f, "exr")).collect();
+        assert_eq!(names[0], "frame_09990.exr");
+        let mut sorted = names.clone();
+        sorted.sort();
+        assert_eq!(sorted, names);
+        let big = FrameRange {
+            start: 0,
+            end: 9_999_999,
+            step: 1,
+        };
+        assert_eq!(big.file_name(7, "png"), "frame_0000007.png");
+        let one = FrameRange {
+            start: 5,
+            end: 5,
+            step: 1,
+        };
+        assert_eq!(one.last(), 5);
     }
 }

@@ -422,6 +422,11 @@ impl FrameSource<'_> {
             .map_err(|e| e.context(format!("writing the merged frame {}", self.frame_no)))
     }
 
+    /// The job's last frame, which sets how wide its frame numbers are written.
+    fn last_frame(&self) -> i32 {
+        self.spec.frames.map_or(self.frame_no, |f| f.last())
+    }
+
     /// Writes the final frame: `frame_NNNN.exr` with the job's layers and
     /// `frame_NNNN.png`, both atomically, in one pass over the frame's bands. The EXR's
     /// header says how it was rendered: the settings, the samples and estimated error
@@ -440,7 +445,7 @@ impl FrameSource<'_> {
             .with(ExrMetadata::SETTINGS, serde_json::to_string(spec)?)
             .with("tessera/job", job.to_string())
             .with("tessera/frame", frame_no.to_string());
-        let exr = self.store.frame(job, frame_no, "exr");
+        let exr = self.store.frame(job, frame_no, self.last_frame(), "exr");
         let layers = image_layers(&spec.layers);
         let target = ExrTarget {
             path: &exr,
@@ -461,7 +466,9 @@ impl FrameSource<'_> {
     /// [`output::write_frame_in_bands`] of this frame: `exr` if given, and the frame's
     /// PNG preview (in the job's output folder, with the final EXR) if `preview`.
     fn write_bands(&self, exr: Option<ExrTarget>, preview: bool) -> Result<()> {
-        let png = self.store.frame(self.job, self.frame_no, "png");
+        let png = self
+            .store
+            .frame(self.job, self.frame_no, self.last_frame(), "png");
         if preview {
             std::fs::create_dir_all(self.store.job_dir(self.job))?;
         }
@@ -633,13 +640,13 @@ mod tests {
         assert_eq!(facts.reached, expected.sampling());
         source.write_frame(&facts).unwrap();
 
-        let image = output::read_exr(&store.frame(1, 3, "exr")).unwrap();
+        let image = output::read_exr(&store.frame(1, 3, 3, "exr")).unwrap();
         assert_eq!(image.layers.beauty, expected.beauty);
         assert_eq!(image.layers.depth, expected.depth);
         // Albedo was not asked for: the reader fills it with black.
         assert!(image.layers.albedo.iter().all(|a| *a == Vec3::ZERO));
         assert_eq!(image.attribute("tessera/frame"), Some("3"));
-        let png = std::fs::read(store.frame(1, 3, "png")).unwrap();
+        let png = std::fs::read(store.frame(1, 3, 3, "png")).unwrap();
         assert_eq!(
             png,
             output::encode_preview_png(size, &expected, 0.0).unwrap()

@@ -178,7 +178,8 @@ const FRAME_QUERY: &str = "SELECT f.frame, f.tasks_total, f.tasks_done, f.assemb
            AND t.state = 'failed'),
         (SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id AND t.frame = f.frame
            AND t.state = 'leased'),
-        j.control, f.failure
+        j.control, f.failure,
+        (SELECT max(frame) FROM frames WHERE job_id = f.job_id)
      FROM frames f JOIN jobs j ON j.id = f.job_id";
 
 fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
@@ -209,7 +210,7 @@ fn frame_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
         tasks_done: done,
         spp_mean,
         noise,
-        file: proto::job::frame_file_name(frame, "exr"),
+        file: proto::job::frame_file_name(frame, r.get(10)?, "exr"),
         failure,
     })
 }

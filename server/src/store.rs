@@ -138,7 +138,7 @@ impl Store {
     /// holds: the next pass of the frame merges into it (its tiles are gone by then).
     pub fn merged_frame(&self, job: u64, frame: i32) -> PathBuf {
         self.tile_dir(job)
-            .join(proto::job::frame_file_name(frame, "merged.exr"))
+            .join(proto::job::frame_file_name(frame, frame, "merged.exr"))
     }
 
     /// The folder holding a job's accepted tiles.
@@ -151,10 +151,11 @@ impl Store {
         self.root.join("jobs").join(job.to_string())
     }
 
-    /// A frame file of a job (`frame_0001.exr`, `frame_0001.png`).
-    pub fn frame(&self, job: u64, frame: i32, extension: &str) -> PathBuf {
+    /// A frame file of a job whose last frame is `last` (`frame_0001.exr`,
+    /// `frame_0001.png`: [`proto::job::frame_file_name`]).
+    pub fn frame(&self, job: u64, frame: i32, last: i32, extension: &str) -> PathBuf {
         self.job_dir(job)
-            .join(proto::job::frame_file_name(frame, extension))
+            .join(proto::job::frame_file_name(frame, last, extension))
     }
 }
 
@@ -204,7 +205,7 @@ mod tests {
     fn temp_files_left_by_a_crash_are_removed() {
         let dir = tempfile::tempdir().unwrap();
         let store = Store::open(dir.path()).unwrap();
-        let frame = store.frame(3, 1, "exr");
+        let frame = store.frame(3, 1, 1, "exr");
         fs::create_dir_all(frame.parent().unwrap()).unwrap();
         fs::write(&frame, b"frame").unwrap();
         let temp = frame.with_file_name(".frame_0001.exr.tmp-123-0");

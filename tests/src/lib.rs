@@ -637,11 +637,16 @@ impl Farm {
 
     /// The frame the server assembled for `job`, read from its data folder.
     pub fn server_frame(&self, job: u64, frame: i32) -> Layers {
+        let frames = self
+            .job(job)
+            .spec
+            .frames
+            .expect("a planned job names its frames");
         let path = self
             .data_dir()
             .join("jobs")
             .join(job.to_string())
-            .join(proto::job::frame_file_name(frame, "exr"));
+            .join(frames.file_name(frame, "exr"));
         read_exr(&path)
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
             .layers

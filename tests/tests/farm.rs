@@ -66,7 +66,7 @@ fn two_workers_render_every_frame_as_tessera_render_does() {
 
     for frame in 1..=4 {
         let direct = render_directly(Path::new(scene), frame, "4", farm.path());
-        let name = proto::job::frame_file_name(frame, "exr");
+        let name = proto::job::frame_file_name(frame, 4, "exr");
         let tiled = read_exr(&farm.path().join("tiles").join(&name)).unwrap();
         assert_eq!(tiled.frame_size, (32, 24));
         assert!(
@@ -81,7 +81,7 @@ fn two_workers_render_every_frame_as_tessera_render_does() {
         assert!(
             farm.path()
                 .join("passes")
-                .join(proto::job::frame_file_name(frame, "png"))
+                .join(proto::job::frame_file_name(frame, 4, "png"))
                 .exists(),
             "the PNG preview of frame {frame} was downloaded"
         );
@@ -213,10 +213,10 @@ fn tessera_demo_runs_a_farm_and_leaves_frames_and_nothing_running() {
     );
     let frames = dir.path().join("demo").join("frames");
     for frame in 1..=2 {
-        let exr = read_exr(&frames.join(proto::job::frame_file_name(frame, "exr"))).unwrap();
+        let exr = read_exr(&frames.join(proto::job::frame_file_name(frame, 2, "exr"))).unwrap();
         assert_eq!(exr.frame_size, (32, 24));
         assert!(frames
-            .join(proto::job::frame_file_name(frame, "png"))
+            .join(proto::job::frame_file_name(frame, 2, "png"))
             .exists());
     }
     // Both workers were stopped by the demo and said goodbye to the server.

@@ -34,25 +34,26 @@ async fn file(
     ext: &str,
     content_type: &'static str,
 ) -> Result<Response> {
-    let path = app.store.frame(job, frame, ext);
+    let f = app
+        .db
+        .run(move |c| status::frame_status(c, job, frame))
+        .await?;
+    let path = app
+        .store
+        .job_dir(job)
+        .join(std::path::Path::new(&f.file).with_extension(ext));
     match tokio::fs::read(&path).await {
         Ok(bytes) => Ok(([(header::CONTENT_TYPE, content_type)], bytes).into_response()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            let f = app
-                .db
-                .run(move |c| status::frame_status(c, job, frame))
-                .await?;
-            Err(Error::NotFound(format!(
-                "frame {frame} of job {job} has no {ext} yet (it is {})",
-                match f.state {
-                    FrameState::Queued => "queued",
-                    FrameState::Rendering => "rendering",
-                    FrameState::Failed => "failed",
-                    FrameState::Cancelled => "cancelled",
-                    FrameState::Done => "done",
-                }
-            )))
-        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(Error::NotFound(format!(
+            "frame {frame} of job {job} has no {ext} yet (it is {})",
+            match f.state {
+                FrameState::Queued => "queued",
+                FrameState::Rendering => "rendering",
+                FrameState::Failed => "failed",
+                FrameState::Cancelled => "cancelled",
+                FrameState::Done => "done",
+            }
+        ))),
         Err(e) => Err(e.into()),
     }
 }

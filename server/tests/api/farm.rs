@@ -340,3 +340,36 @@ async fn a_noise_threshold_job_stops_pixels_early_and_reports_what_it_reached() 
         );
     }
 }
+
+/// Frame files are as wide as the job's last frame, so a sequence that crosses frame 9999
+/// still sorts in frame order: `frame_09999` before `frame_10000`, on disk and in the API.
+#[tokio::test(flavor = "multi_thread")]
+async fn frame_names_of_a_sequence_past_9999_sort_in_frame_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let mut job = spec(&scene.digest, 1);
+    job.frames = Some(FrameRange {
+        start: 9_999,
+        end: 10_000,
+        step: 1,
+    });
+    job.spp = 1;
+    let job = create_job(&s, &c, &job).await;
+    SimWorker::register(&s, "w").await.work_until_idle(&s).await;
+    let frames: FrameList = get_json(&s, &c, &format!("/jobs/{}/frames", job.id)).await;
+    let names: Vec<&str> = frames.frames.iter().map(|f| f.file.as_str()).collect();
+    assert_eq!(names, ["frame_09999.exr", "frame_10000.exr"]);
+    for f in &frames.frames {
+        assert_eq!(f.state, FrameState::Done);
+        let on_disk = s.data.join("jobs").join(job.id.to_string()).join(&f.file);
+        assert!(on_disk.is_file(), "{}", on_disk.display());
+        let png = c
+            .get(s.url(&format!("/jobs/{}/frames/{}/png", job.id, f.frame)))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(png.status(), StatusCode::OK);
+    }
+}
