@@ -207,6 +207,30 @@ fn withdraw_unstarted_pass(tx: &Transaction, job: u64, frame_pixels: f64) -> Res
     Ok(true)
 }
 
+/// The tasks time-budget jobs could run now beyond those queued and leased: a budget job
+/// keeps only about [`QUEUE_PER_WORKER`] tasks per live worker queued, however much work
+/// it has left, so its queue says nothing about how many workers it could use. Each of its
+/// frames still under the job's spp with no pass open could run a pass of one task per
+/// tile now, had it the workers. Counts active jobs before their deadline.
+pub fn waiting_passes(conn: &rusqlite::Connection, now: i64) -> Result<u64> {
+    Ok(conn.row(
+        "SELECT coalesce(sum((SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id
+                                AND t.frame = f.frame AND t.pass = 0
+                                AND t.check_of IS NULL)), 0)
+         FROM frames f JOIN jobs j ON j.id = f.job_id
+         WHERE j.control = 'active'
+           AND json_extract(j.spec, '$.time_budget') IS NOT NULL
+           AND j.created_ms + json_extract(j.spec, '$.time_budget') * 1000 > ?1
+           AND (SELECT max(t.sample_end) FROM tasks t WHERE t.job_id = f.job_id
+                  AND t.frame = f.frame AND t.check_of IS NULL)
+               < json_extract(j.spec, '$.spp')
+           AND NOT EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = f.job_id
+                             AND t.frame = f.frame AND t.state IN ('queued', 'leased'))",
+        [now],
+        |r| r.get(0),
+    )?)
+}
+
 /// Plans a time-budget job again at `now` (see the module documentation): adds the passes
 /// that fit and stores the plan for the job's status. Workers seen since `live_since` count
 /// as live; the job holds at most `max_tasks` tasks. Does nothing for other jobs.

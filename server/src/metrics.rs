@@ -21,8 +21,89 @@ impl Default for Metrics {
     fn default() -> Self {
         let recorder = PrometheusBuilder::new().build_recorder();
         let handle = recorder.handle();
-        Metrics { recorder, handle }
+        let metrics = Metrics { recorder, handle };
+        metrics.record(describe);
+        metrics
     }
+}
+
+/// Every series' `# HELP` text and unit.
+fn describe() {
+    use metrics::{describe_counter, describe_gauge, describe_histogram, Unit};
+    describe_counter!(
+        "tessera_tiles_received_total",
+        Unit::Count,
+        "Tiles accepted (first upload of a task; duplicates are not counted)."
+    );
+    describe_counter!(
+        "tessera_tile_bytes_received_total",
+        Unit::Bytes,
+        "Bytes of the accepted tiles' EXR files."
+    );
+    describe_counter!(
+        "tessera_tiles_refused_total",
+        Unit::Count,
+        "Tile uploads refused: bad checksum, size, channels or values."
+    );
+    describe_counter!(
+        "tessera_scene_bytes_received_total",
+        Unit::Bytes,
+        "Bytes of the scenes stored."
+    );
+    describe_counter!(
+        "tessera_leases_total",
+        Unit::Count,
+        "Lease requests answered with a task."
+    );
+    describe_histogram!(
+        "tessera_lease_latency_seconds",
+        Unit::Seconds,
+        "Time from a lease request to the task it got, waiting for work included."
+    );
+    describe_histogram!(
+        "tessera_upload_seconds",
+        Unit::Seconds,
+        "Time to take a tile upload answered 200: reading, checking, storing and \
+         committing it, and assembling the frame when it was the last tile."
+    );
+    describe_counter!(
+        "tessera_frames_assembled_total",
+        Unit::Count,
+        "Frames assembled."
+    );
+    describe_counter!(
+        "tessera_frame_assembly_tile_bytes_total",
+        Unit::Bytes,
+        "Bytes of the tile files read to assemble frames."
+    );
+    describe_histogram!(
+        "tessera_frame_assembly_seconds",
+        Unit::Seconds,
+        "Time to assemble a frame: tiles read and merged, EXR and PNG written."
+    );
+    describe_counter!(
+        "tessera_leases_expired_total",
+        Unit::Count,
+        "Leases that ran out without a heartbeat; their tasks were queued again."
+    );
+    describe_gauge!("tessera_jobs", Unit::Count, "Jobs by state.");
+    describe_gauge!("tessera_tasks", Unit::Count, "Tasks by state.");
+    describe_gauge!(
+        "tessera_workers",
+        Unit::Count,
+        "Workers online (seen within two lease periods, not gone) and offline."
+    );
+    describe_gauge!(
+        "tessera_event_listeners",
+        Unit::Count,
+        "Open server-sent event streams."
+    );
+    describe_gauge!(
+        "tessera_demand_tasks",
+        Unit::Count,
+        "Tasks that want a worker now, for autoscalers: queued and leased tasks of jobs \
+         that are not paused, plus the passes time-budget jobs could run now."
+    );
 }
 
 /// Gauges read from the database.
@@ -32,6 +113,8 @@ pub struct Snapshot {
     tasks: Vec<(String, u64)>,
     workers_online: u64,
     workers_total: u64,
+    /// Tasks that want a worker now (see [`snapshot`]).
+    pub demand: u64,
     /// Open server-sent event streams.
     pub listeners: usize,
 }
@@ -47,6 +130,11 @@ impl Metrics {
             metrics::counter!("tessera_tiles_received_total").increment(1);
             metrics::counter!("tessera_tile_bytes_received_total").increment(bytes as u64);
         });
+    }
+
+    /// A tile upload was answered after `seconds`.
+    pub fn upload_taken(&self, seconds: f64) {
+        self.record(|| metrics::histogram!("tessera_upload_seconds").record(seconds));
     }
 
     /// A tile was refused (bad checksum, size, channels, values).
@@ -98,13 +186,16 @@ impl Metrics {
             metrics::gauge!("tessera_workers", "state" => "offline")
                 .set((snapshot.workers_total - snapshot.workers_online) as f64);
             metrics::gauge!("tessera_event_listeners").set(snapshot.listeners as f64);
+            metrics::gauge!("tessera_demand_tasks").set(snapshot.demand as f64);
         });
         self.handle.render()
     }
 }
 
 /// Reads the gauges: jobs by state, tasks by state, workers online (seen within two lease
-/// periods) and offline.
+/// periods) and offline, and the demand an autoscaler sizes the pool by: the queued and
+/// leased tasks of jobs that are not paused, plus the passes time-budget jobs could run
+/// now ([`crate::budget::waiting_passes`]).
 pub fn snapshot(conn: &Connection, now: i64, lease_ms: i64) -> Result<Snapshot> {
     let mut jobs: Vec<(String, u64)> =
         ["queued", "running", "paused", "cancelled", "failed", "done"]
@@ -137,11 +228,18 @@ pub fn snapshot(conn: &Connection, now: i64, lease_ms: i64) -> Result<Snapshot> 
         [now - 2 * lease_ms],
         |r| Ok((r.get(0)?, r.get(1)?)),
     )?;
+    let open: u64 = conn.query_row(
+        "SELECT count(*) FROM tasks t JOIN jobs j ON j.id = t.job_id
+         WHERE j.control = 'active' AND t.state IN ('queued', 'leased')",
+        [],
+        |r| r.get(0),
+    )?;
     Ok(Snapshot {
         jobs,
         tasks,
         workers_online,
         workers_total,
+        demand: open + crate::budget::waiting_passes(conn, now)?,
         listeners: 0,
     })
 }

@@ -880,3 +880,40 @@ fn a_worker_joining_or_leaving_changes_the_plan_not_the_deadline() {
     let open = status.tasks.queued + status.tasks.leased;
     assert_eq!(status.tasks.done + open, status.tasks.total());
 }
+
+/// The demand an autoscaler reads: a paused job's queued tasks want no worker; a time
+/// budget job wants a worker for every tile of each frame it could refine now, not only
+/// for the two tasks per worker it keeps queued.
+#[test]
+fn the_demand_counts_active_jobs_and_what_a_time_budget_could_run() {
+    let mut c = db();
+    let demand = |c: &Connection, now| crate::metrics::snapshot(c, now, LEASE_MS).unwrap().demand;
+    let plain = job(&mut c, 1, 0, 3, 0);
+    assert_eq!(demand(&c, 0), 4);
+    pause(&mut c, plain, 0).unwrap();
+    assert_eq!(demand(&c, 0), 0);
+
+    let j = budget_job(&mut c, 3, 8, 60.0, 0);
+    assert_eq!(demand(&c, 0), 12, "the first pass: 3 frames of 4 tiles");
+    let w = worker(&mut c, "w", 0);
+    let mut t = 0;
+    let error = |frame, _| if frame == 2 { 0.3 } else { 0.1 };
+    for _ in 0..12 {
+        render_one(&mut c, w, &mut t, 100, &error).unwrap();
+    }
+    // One worker: one pass of frame 2 is queued (4 tasks); frames 1 and 3 could each run
+    // a pass of 4 tiles too, had they workers.
+    let queued: u64 = c
+        .query_row(
+            "SELECT count(*) FROM tasks WHERE job_id = ?1 AND state = 'queued'",
+            [j],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(queued, 4);
+    assert_eq!(demand(&c, t), 12);
+    // Past its deadline a budget job plans nothing more: only its queue counts.
+    assert_eq!(demand(&c, 60_000), 4);
+    resume(&mut c, plain, t).unwrap();
+    assert_eq!(demand(&c, 60_000), 8);
+}

@@ -220,6 +220,7 @@ pub async fn result(
     body: Body,
 ) -> Result<Json<ResultAck>> {
     let (worker, task) = (worker.0, task.0);
+    let started = Instant::now();
     let meta = ResultMetadata::from_headers(|name| headers.get(name).and_then(|v| v.to_str().ok()))
         .map_err(|(field, message)| Error::Invalid {
             field: field.into(),
@@ -236,6 +237,7 @@ pub async fn result(
     })
     .await
     .map_err(|e| Error::Internal(format!("tile intake panicked: {e}")))??;
+    app.metrics.upload_taken(started.elapsed().as_secs_f64());
     if received.accepted {
         app.publish_frame(received.job, received.frame).await;
         app.publish_job(received.job).await;

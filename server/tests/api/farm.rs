@@ -170,6 +170,32 @@ async fn single_pass_frames_equal_the_direct_render_bit_for_bit() {
         metrics.contains("tessera_frame_assembly_seconds_count 2\n"),
         "{metrics}"
     );
+    assert!(
+        metrics.contains("tessera_upload_seconds_count 12\n"),
+        "{metrics}"
+    );
+    assert!(metrics.contains("tessera_demand_tasks 0\n"), "{metrics}");
+    // Every series says what it is: a `# HELP` line for its family.
+    let families: Vec<&str> = metrics
+        .lines()
+        .filter_map(|l| l.strip_prefix("# HELP "))
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    for line in metrics
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.is_empty())
+    {
+        let name = line.split(['{', ' ']).next().unwrap();
+        let family = ["_sum", "_count", "_bucket"]
+            .iter()
+            .find_map(|s| name.strip_suffix(s))
+            .filter(|f| families.contains(f))
+            .unwrap_or(name);
+        assert!(
+            families.contains(&family),
+            "no # HELP for {name}:\n{metrics}"
+        );
+    }
     let tile_bytes: u64 = metrics
         .lines()
         .find_map(|l| l.strip_prefix("tessera_frame_assembly_tile_bytes_total "))
