@@ -27,6 +27,10 @@ pub struct ServerArgs {
     /// Bearer token clients must present (default: client routes are open).
     #[arg(long, env = "TESSERA_CLIENT_TOKEN", hide_env_values = true)]
     pub client_token: Option<String>,
+    /// Listen beyond loopback without both tokens. Refused by default: anyone who can reach
+    /// the address could use the open routes.
+    #[arg(long, env = "TESSERA_INSECURE_NO_AUTH")]
+    pub insecure_no_auth: bool,
     /// Seconds a lease lasts without a heartbeat.
     #[arg(long, env = "TESSERA_LEASE_SECONDS", default_value_t = 60,
           value_parser = clap::value_parser!(u64).range(5..=86_400))]
@@ -80,18 +84,21 @@ pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
     config.listen = args.listen;
     config.worker_token = args.worker_token;
     config.client_token = args.client_token;
+    config.insecure_no_auth = args.insecure_no_auth;
     config.lease = Duration::from_secs(args.lease_seconds);
     config.max_tasks_per_job = args.max_tasks_per_job;
     config.verify_fraction = args.verify_fraction;
     config.max_tile_bytes = args.max_tile_bytes as usize;
     config.assembly_memory = args.assembly_memory << 20;
-    if !args.listen.ip().is_loopback()
-        && (config.worker_token.is_none() || config.client_token.is_none())
-    {
+    // Refused before binding, so the message comes first; `serve` checks again.
+    config
+        .check_exposure(config.listen)
+        .map_err(anyhow::Error::msg)?;
+    if config.insecure_no_auth && !config.listen.ip().is_loopback() {
         tracing::warn!(
-            "listening on {} without both --worker-token and --client-token: anyone who can \
-             reach this address can use the open routes",
-            args.listen
+            "listening on {} with --insecure-no-auth: the routes without a token are open \
+             to anyone who can reach it",
+            config.listen
         );
     }
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;

@@ -17,6 +17,9 @@ pub struct Config {
     pub worker_token: Option<String>,
     /// Bearer token clients (CLI, dashboard) must present; `None` leaves them open.
     pub client_token: Option<String>,
+    /// Serve beyond loopback with a role's routes open (a token missing): refused unless
+    /// set, see [`Config::check_exposure`].
+    pub insecure_no_auth: bool,
     /// How long a lease lasts without a heartbeat.
     pub lease: Duration,
     /// How often the server looks for expired leases.
@@ -47,6 +50,7 @@ impl Config {
             data_dir: data_dir.into(),
             worker_token: None,
             client_token: None,
+            insecure_no_auth: false,
             lease: Duration::from_secs(60),
             sweep_interval: Duration::from_secs(2),
             max_lease_wait: Duration::from_secs(30),
@@ -57,6 +61,31 @@ impl Config {
             max_tile_bytes: limits::MAX_TILE_BYTES,
             assembly_memory: limits::DEFAULT_ASSEMBLY_MEMORY,
         }
+    }
+
+    /// Whether serving on `addr` is safe by default: on loopback, or with both tokens. A
+    /// server reachable from the network with a role's routes open lets anyone there submit
+    /// and delete jobs, read scenes and frames, or act as a worker; that takes
+    /// [`Config::insecure_no_auth`].
+    pub fn check_exposure(&self, addr: SocketAddr) -> Result<(), String> {
+        let open: Vec<&str> = [
+            ("--worker-token", &self.worker_token),
+            ("--client-token", &self.client_token),
+        ]
+        .iter()
+        .filter(|(_, token)| token.is_none())
+        .map(|(flag, _)| *flag)
+        .collect();
+        if addr.ip().is_loopback() || open.is_empty() || self.insecure_no_auth {
+            return Ok(());
+        }
+        Err(format!(
+            "refusing to listen on {addr} without {}: anyone who can reach it could submit \
+             and delete jobs, read scenes and frames, or act as a worker. Set both tokens \
+             (TESSERA_WORKER_TOKEN, TESSERA_CLIENT_TOKEN), listen on loopback, or pass \
+             --insecure-no-auth on a network where everyone may do that",
+            open.join(" and ")
+        ))
     }
 
     /// Lease length in milliseconds.

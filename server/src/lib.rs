@@ -80,6 +80,10 @@ pub enum StartError {
     /// Serving failed.
     #[error("serving: {0}")]
     Serve(#[source] std::io::Error),
+    /// The address is reachable from the network and a role's routes would be open
+    /// ([`Config::check_exposure`]).
+    #[error("{0}")]
+    Exposed(String),
 }
 
 /// Opens the data folder and the database, and recovers from the previous run: temp files
@@ -251,6 +255,8 @@ pub async fn serve(
     config: Config,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), StartError> {
+    let addr = listener.local_addr().map_err(StartError::Serve)?;
+    config.check_exposure(addr).map_err(StartError::Exposed)?;
     let app = tokio::task::spawn_blocking(move || open(config))
         .await
         .map_err(|e| StartError::Serve(std::io::Error::other(e.to_string())))??;

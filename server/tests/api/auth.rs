@@ -112,3 +112,43 @@ async fn tokens_open_only_their_own_routes() {
         assert_eq!(res.status(), StatusCode::OK, "{path}");
     }
 }
+
+/// Beyond loopback the server serves only with both tokens, or when told it may serve
+/// open routes there (`insecure_no_auth`); the refusal names the missing token.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_server_reachable_from_the_network_needs_both_tokens() {
+    let dir = tempfile::tempdir().unwrap();
+    let serve = |cfg: server::Config| async move {
+        let listener = tokio::net::TcpListener::bind("0.0.0.0:0").await.unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let task = tokio::spawn(server::serve(listener, cfg, async {
+            let _ = stopped.await;
+        }));
+        // Either it refuses at once, or it serves: ask its health on loopback.
+        let health = client()
+            .get(format!("http://127.0.0.1:{port}/healthz"))
+            .send()
+            .await;
+        let _ = stop.send(());
+        (health.map(|r| r.status()).ok(), task.await.unwrap())
+    };
+    let mut cfg = config(dir.path());
+    cfg.worker_token = Some("w".into());
+    let (health, result) = serve(cfg.clone()).await;
+    let refused = result.unwrap_err().to_string();
+    assert_eq!(health, None);
+    assert!(
+        refused.starts_with("refusing to listen on 0.0.0.0:")
+            && refused.contains("without --client-token:")
+            && refused.contains("--insecure-no-auth"),
+        "{refused}"
+    );
+    cfg.insecure_no_auth = true;
+    let (health, result) = serve(cfg.clone()).await;
+    assert_eq!((health, result.is_ok()), (Some(StatusCode::OK), true));
+    cfg.insecure_no_auth = false;
+    cfg.client_token = Some("c".into());
+    let (health, result) = serve(cfg).await;
+    assert_eq!((health, result.is_ok()), (Some(StatusCode::OK), true));
+}
