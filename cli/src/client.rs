@@ -5,6 +5,7 @@
 //! `tessera server` when nothing answers.
 
 use std::fmt;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use proto::{ErrorBody, FrameList, JobList, JobSpec, JobStatus, SceneInfo, WorkerInfo, WorkerList};
@@ -14,8 +15,6 @@ use serde::de::DeserializeOwned;
 /// Where `submit`, `status` and the rest look for the server when not told.
 pub const DEFAULT_SERVER: &str = "http://127.0.0.1:8700";
 
-/// How long to wait for a TCP connection before calling the server unreachable.
-const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 /// The longest a JSON request may take. Uploads and downloads have no total limit: a
 /// large scene on a slow link may take minutes, and the connection itself reports death.
 const JSON_TIMEOUT: Duration = Duration::from_secs(60);
@@ -119,12 +118,16 @@ pub struct ServerOpts {
     /// The server's client token (its --client-token), sent as a bearer token.
     #[arg(long, env = "TESSERA_CLIENT_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
+    /// A PEM file of certificate authorities to trust besides the public ones: the
+    /// private CA that signed an https:// server's certificate.
+    #[arg(long, env = "TESSERA_CA")]
+    pub ca: Option<PathBuf>,
 }
 
 impl ServerOpts {
     /// A client of that server.
     pub fn client(&self) -> anyhow::Result<Client> {
-        Client::new(&self.server, self.token.clone())
+        Client::with_ca(&self.server, self.token.clone(), self.ca.as_deref())
     }
 }
 
@@ -184,6 +187,12 @@ pub struct Client {
 impl Client {
     /// A client of the server at `base` (`http://host:port`; a missing scheme means http).
     pub fn new(base: &str, token: Option<String>) -> anyhow::Result<Client> {
+        Self::with_ca(base, token, None)
+    }
+
+    /// [`Client::new`], trusting the certificates in the PEM file `ca` besides the public
+    /// roots.
+    pub fn with_ca(base: &str, token: Option<String>, ca: Option<&Path>) -> anyhow::Result<Client> {
         let base = base.trim();
         if base.is_empty() {
             anyhow::bail!("--server is empty; give the server's URL, e.g. {DEFAULT_SERVER}");
@@ -199,11 +208,7 @@ impl Client {
             anyhow::bail!("--server {base}: expected http://HOST:PORT, e.g. {DEFAULT_SERVER}");
         }
         let base = base.trim_end_matches('/').to_string();
-        let http = reqwest::Client::builder()
-            .connect_timeout(CONNECT_TIMEOUT)
-            .user_agent(concat!("tessera-cli/", env!("CARGO_PKG_VERSION")))
-            .build()
-            .map_err(|e| anyhow::anyhow!("setting up the HTTP client: {e}"))?;
+        let http = worker::http_client(concat!("tessera-cli/", env!("CARGO_PKG_VERSION")), ca)?;
         Ok(Client {
             http,
             base,
@@ -238,15 +243,19 @@ impl Client {
         what: &str,
     ) -> Result<reqwest::Response, ClientError> {
         let answer = req.send().await.map_err(|e| {
+            let mut detail = root_cause(&e);
+            if let Some(hint) = worker::tls_hint(&self.base, &detail) {
+                detail = format!("{detail}; {hint}");
+            }
             if e.is_connect() || (e.is_timeout() && e.status().is_none()) {
                 ClientError::Unreachable {
                     server: self.base.clone(),
-                    detail: root_cause(&e),
+                    detail,
                 }
             } else {
                 ClientError::Transport {
                     request: what.to_string(),
-                    detail: root_cause(&e),
+                    detail,
                 }
             }
         })?;

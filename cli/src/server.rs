@@ -27,9 +27,17 @@ pub struct ServerArgs {
     /// Bearer token clients must present (default: client routes are open).
     #[arg(long, env = "TESSERA_CLIENT_TOKEN", hide_env_values = true)]
     pub client_token: Option<String>,
+    /// Serve HTTPS with this PEM certificate chain (leaf first; with --tls-key). Clients
+    /// and workers then use https:// URLs, and --ca for a private CA's certificate.
+    #[arg(long, env = "TESSERA_TLS_CERT", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// The PEM private key of --tls-cert.
+    #[arg(long, env = "TESSERA_TLS_KEY", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
     /// Listen beyond loopback without both tokens. Refused by default: anyone who can reach
     /// the address could use the open routes.
-    #[arg(long, env = "TESSERA_INSECURE_NO_AUTH")]
+    #[arg(long, env = "TESSERA_INSECURE_NO_AUTH", default_value_t = false,
+          action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true")]
     pub insecure_no_auth: bool,
     /// Seconds a lease lasts without a heartbeat.
     #[arg(long, env = "TESSERA_LEASE_SECONDS", default_value_t = 60,
@@ -85,6 +93,10 @@ pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
     config.worker_token = args.worker_token;
     config.client_token = args.client_token;
     config.insecure_no_auth = args.insecure_no_auth;
+    config.tls = match (args.tls_cert, args.tls_key) {
+        (Some(cert), Some(key)) => Some(server::tls::TlsFiles { cert, key }),
+        _ => None,
+    };
     config.lease = Duration::from_secs(args.lease_seconds);
     config.max_tasks_per_job = args.max_tasks_per_job;
     config.verify_fraction = args.verify_fraction;
@@ -107,7 +119,12 @@ pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
             .await
             .with_context(|| format!("listening on {}", config.listen))?;
         tracing::info!(
-            "Tessera farm on http://{} (data in {})",
+            "Tessera farm on {}://{} (data in {})",
+            if config.tls.is_some() {
+                "https"
+            } else {
+                "http"
+            },
             listener.local_addr()?,
             config.data_dir.display()
         );

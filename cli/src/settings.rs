@@ -501,6 +501,6 @@ mod tests {
             let config = sc.get_arguments().find(|a| a.get_id() == CONFIG).unwrap();
             assert_eq!(config.get_env().unwrap(), "TESSERA_CONFIG");
         }
-        assert_eq!(seen, 10 + 8);
+        assert_eq!(seen, 13 + 9);
     }
 }

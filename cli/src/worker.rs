@@ -19,6 +19,10 @@ pub struct WorkerArgs {
     /// The server's worker token (its --worker-token; default: none).
     #[arg(long, env = "TESSERA_WORKER_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
+    /// A PEM file of certificate authorities to trust besides the public ones: the
+    /// private CA that signed an https:// server's certificate.
+    #[arg(long, env = "TESSERA_CA")]
+    pub ca: Option<PathBuf>,
     /// Render threads (default: every core).
     #[arg(long, env = "TESSERA_THREADS", value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub threads: Option<u32>,
@@ -68,6 +72,7 @@ pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
     let config = worker::WorkerConfig {
         server: args.server,
         token: args.token,
+        ca: args.ca,
         threads: threads as usize,
         cache_dir: cache,
         cache_limit_bytes: args.cache_limit_mb << 20,

@@ -17,6 +17,8 @@ pub struct Config {
     pub worker_token: Option<String>,
     /// Bearer token clients (CLI, dashboard) must present; `None` leaves them open.
     pub client_token: Option<String>,
+    /// Serve HTTPS with this certificate and key; plain HTTP when `None`.
+    pub tls: Option<crate::tls::TlsFiles>,
     /// Serve beyond loopback with a role's routes open (a token missing): refused unless
     /// set, see [`Config::check_exposure`].
     pub insecure_no_auth: bool,
@@ -50,6 +52,7 @@ impl Config {
             data_dir: data_dir.into(),
             worker_token: None,
             client_token: None,
+            tls: None,
             insecure_no_auth: false,
             lease: Duration::from_secs(60),
             sweep_interval: Duration::from_secs(2),

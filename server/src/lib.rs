@@ -42,6 +42,7 @@ pub mod spec;
 pub mod state;
 pub mod status;
 pub mod store;
+pub mod tls;
 pub mod verify;
 
 use std::future::Future;
@@ -80,6 +81,9 @@ pub enum StartError {
     /// Serving failed.
     #[error("serving: {0}")]
     Serve(#[source] std::io::Error),
+    /// The TLS certificate or key could not be used.
+    #[error("{0}")]
+    Tls(String),
     /// The address is reachable from the network and a role's routes would be open
     /// ([`Config::check_exposure`]).
     #[error("{0}")]
@@ -257,18 +261,33 @@ pub async fn serve(
 ) -> Result<(), StartError> {
     let addr = listener.local_addr().map_err(StartError::Serve)?;
     config.check_exposure(addr).map_err(StartError::Exposed)?;
+    // Read before anything else starts, so a bad file stops the server at once.
+    let tls = match &config.tls {
+        Some(files) => Some(files.load().map_err(StartError::Tls)?),
+        None => None,
+    };
     let app = tokio::task::spawn_blocking(move || open(config))
         .await
         .map_err(|e| StartError::Serve(std::io::Error::other(e.to_string())))??;
-    serve_app(listener, app, shutdown).await
+    match tls {
+        Some(tls) => {
+            let listener = tls::TlsListener::new(listener, tls).map_err(StartError::Serve)?;
+            serve_app(listener, app, shutdown).await
+        }
+        None => serve_app(listener, app, shutdown).await,
+    }
 }
 
-/// [`serve`] with an already opened state.
-pub async fn serve_app(
-    listener: TcpListener,
+/// [`serve`] with an already opened state, on a TCP or a TLS listener.
+pub async fn serve_app<L>(
+    listener: L,
     app: AppState,
     shutdown: impl Future<Output = ()> + Send + 'static,
-) -> Result<(), StartError> {
+) -> Result<(), StartError>
+where
+    L: axum::serve::Listener,
+    L::Addr: std::fmt::Debug,
+{
     let sweeper = tokio::spawn(sweep(app.clone()));
     let result = axum::serve(listener, router(app))
         .with_graceful_shutdown(shutdown)

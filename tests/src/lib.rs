@@ -148,6 +148,13 @@ fn ephemeral_ports_start() -> u32 {
         .min(u32::from(u16::MAX))
 }
 
+/// A file of the test certificates (`tests/fixtures/tls/`).
+pub fn tls_fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/tls")
+        .join(name)
+}
+
 /// Runs `tessera args` in `dir` to completion.
 pub fn tessera(args: &[&str], dir: &Path) -> Output {
     Command::new(tessera_bin())
@@ -317,6 +324,9 @@ pub struct Farm {
     pub workers: Vec<Process>,
     /// The client token the farm's client commands send, when the server wants one.
     pub client_token: Option<String>,
+    /// The CA that signed the server's certificate, when it serves HTTPS
+    /// ([`Farm::start_tls_server`]): the URL is https:// and clients and workers get `--ca`.
+    pub tls_ca: Option<PathBuf>,
     servers_started: usize,
     /// The server's data folder lies on a small disk of its own (a tmpfs in its mount
     /// namespace): see [`Farm::start_server_on_small_disk`].
@@ -338,6 +348,7 @@ impl Farm {
             server: None,
             workers: vec![],
             client_token: None,
+            tls_ca: None,
             servers_started: 0,
             small_disk: false,
         }
@@ -350,7 +361,33 @@ impl Farm {
 
     /// The server's base URL.
     pub fn url(&self) -> String {
-        format!("http://127.0.0.1:{}", self.port)
+        let scheme = if self.tls_ca.is_some() {
+            "https"
+        } else {
+            "http"
+        };
+        format!("{scheme}://127.0.0.1:{}", self.port)
+    }
+
+    /// [`Farm::start_server_with`] serving HTTPS with the test certificate of
+    /// `tests/fixtures/tls` (signed by its CA for 127.0.0.1 and localhost).
+    pub fn start_tls_server(&mut self, lease_seconds: u64, extra: &[&str]) {
+        let tls = tls_fixture("");
+        let (cert, key) = (tls_fixture("server.pem"), tls_fixture("server.key"));
+        assert!(
+            tls.is_dir(),
+            "{} holds the test certificates",
+            tls.display()
+        );
+        self.tls_ca = Some(tls_fixture("ca.pem"));
+        let mut args = vec![
+            "--tls-cert",
+            cert.to_str().expect("a UTF-8 path"),
+            "--tls-key",
+            key.to_str().expect("a UTF-8 path"),
+        ];
+        args.extend(extra);
+        self.start_server_with(lease_seconds, &args);
     }
 
     /// Starts `tessera server` (data in `data/`, leases of `lease_seconds`) and waits until
@@ -517,10 +554,13 @@ impl Farm {
         }
     }
 
-    /// `args` with `--server` and, when set, `--token`.
+    /// `args` with `--server` and, when set, `--token` and `--ca`.
     fn client_args(&self, args: &[&str]) -> Vec<String> {
         let mut all: Vec<String> = args.iter().map(|a| a.to_string()).collect();
         all.extend(["--server".into(), self.url()]);
+        if let Some(ca) = &self.tls_ca {
+            all.extend(["--ca".into(), ca.display().to_string()]);
+        }
         if let Some(t) = &self.client_token {
             all.extend(["--token".into(), t.clone()]);
         }
@@ -538,6 +578,7 @@ impl Farm {
         let url = self.url();
         let threads = threads.to_string();
         let cache = format!("cache-{name}");
+        let ca = self.tls_ca.as_ref().map(|ca| ca.display().to_string());
         let mut args = vec![
             "worker",
             "--server",
@@ -549,6 +590,9 @@ impl Farm {
             "--name",
             name,
         ];
+        if let Some(ca) = &ca {
+            args.extend(["--ca", ca]);
+        }
         args.extend(extra);
         let worker = Process::start(name, &args, self.path());
         self.workers.push(worker);

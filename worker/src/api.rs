@@ -9,9 +9,11 @@
 
 use std::error::Error as _;
 use std::future::Future;
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
+use anyhow::Context;
 use proto::{
     ErrorBody, FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, ResultAck,
     ResultMetadata, TaskToken, WorkerLeft, WorkerRegistered, WorkerRegistration,
@@ -146,13 +148,39 @@ pub struct Api {
     token: Option<Arc<str>>,
 }
 
+/// An HTTP client for a farm server that says it is `user_agent`. An https:// server's
+/// certificate must chain to a public root (Mozilla's, built in) or to a certificate in
+/// `ca`, a PEM file: the private CA that signed the server's own certificate.
+pub fn http_client(user_agent: &str, ca: Option<&Path>) -> anyhow::Result<reqwest::Client> {
+    let mut builder = reqwest::Client::builder()
+        .connect_timeout(CONNECT_TIMEOUT)
+        .user_agent(user_agent);
+    if let Some(ca) = ca {
+        let pem = std::fs::read(ca).with_context(|| format!("--ca {}", ca.display()))?;
+        let certs = reqwest::Certificate::from_pem_bundle(&pem)
+            .with_context(|| format!("--ca {}: not PEM certificates", ca.display()))?;
+        anyhow::ensure!(
+            !certs.is_empty(),
+            "--ca {}: no PEM certificate in it",
+            ca.display()
+        );
+        for cert in certs {
+            builder = builder.add_root_certificate(cert);
+        }
+    }
+    builder.build().context("setting up the HTTP client")
+}
+
 impl Api {
-    /// A client for `server` (base URL) whose API lives at `api_base`.
-    pub fn new(server: &str, api_base: &str, token: Option<&str>) -> reqwest::Result<Api> {
-        let http = reqwest::Client::builder()
-            .connect_timeout(CONNECT_TIMEOUT)
-            .user_agent(concat!("tessera-worker/", env!("CARGO_PKG_VERSION")))
-            .build()?;
+    /// A client for `server` (base URL) whose API lives at `api_base`, trusting the
+    /// certificates in `ca` besides the public roots ([`http_client`]).
+    pub fn new(
+        server: &str,
+        api_base: &str,
+        token: Option<&str>,
+        ca: Option<&Path>,
+    ) -> anyhow::Result<Api> {
+        let http = http_client(concat!("tessera-worker/", env!("CARGO_PKG_VERSION")), ca)?;
         Ok(Api {
             http,
             base: api_base.into(),
@@ -205,7 +233,7 @@ impl Api {
     fn unreachable(&self, e: &reqwest::Error) -> ApiError {
         ApiError::Unreachable {
             server: self.server.to_string(),
-            cause: cause(e),
+            cause: explained(&self.server, e),
         }
     }
 
@@ -448,6 +476,30 @@ async fn unexpected(what: &'static str, status: StatusCode, res: Response) -> Ap
 
 /// A short cause for a failed request: `connection refused`, `timed out`, or the
 /// innermost error's words.
+/// What to do about a connection that failed with `cause` on the way to `server`, when it
+/// is a TLS mix-up: an untrusted certificate, or plain HTTP spoken to an HTTPS port.
+pub fn tls_hint(server: &str, cause: &str) -> Option<&'static str> {
+    if cause.contains("certificate") {
+        Some(
+            "the server's certificate is not trusted here: if a private CA signed it, pass \
+             that CA's certificate with --ca (or TESSERA_CA)",
+        )
+    } else if server.starts_with("http://") && cause.contains("invalid HTTP version") {
+        Some("the server may be serving HTTPS (--tls-cert): use an https:// URL")
+    } else {
+        None
+    }
+}
+
+/// [`cause`] with its [`tls_hint`], if any.
+fn explained(server: &str, e: &reqwest::Error) -> String {
+    let cause = cause(e);
+    match tls_hint(server, &cause) {
+        Some(hint) => format!("{cause}; {hint}"),
+        None => cause,
+    }
+}
+
 fn cause(e: &reqwest::Error) -> String {
     if e.is_timeout() {
         return "timed out".into();

@@ -16,6 +16,9 @@ pub struct WorkerConfig {
     pub server: String,
     /// Bearer token for the worker routes, when the server requires one.
     pub token: Option<String>,
+    /// A PEM file of certificate authorities trusted besides the public ones: the private
+    /// CA that signed an https:// server's certificate.
+    pub ca: Option<PathBuf>,
     /// Render threads (the rayon pool's size); at least 1.
     pub threads: usize,
     /// Folder for downloaded scenes (`<digest>.glb`), created when missing.
@@ -134,6 +137,7 @@ mod tests {
         WorkerConfig {
             server: server.into(),
             token: None,
+            ca: None,
             threads: 1,
             cache_dir: PathBuf::from("cache"),
             cache_limit_bytes: u64::MAX,

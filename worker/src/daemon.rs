@@ -92,8 +92,12 @@ pub async fn run(
         .thread_name(|i| format!("tessera-render-{i}"))
         .build()
         .context("starting the render threads")?;
-    let api = Api::new(&config.server, &config.api_base(), config.token.as_deref())
-        .context("setting up the HTTP client")?;
+    let api = Api::new(
+        &config.server,
+        &config.api_base(),
+        config.token.as_deref(),
+        config.ca.as_deref(),
+    )?;
     let (set_stop, stop) = Stop::new();
     let watcher = tokio::spawn(async move {
         shutdown.await;

@@ -24,5 +24,6 @@ mod daemon;
 pub mod render;
 mod stop;
 
+pub use api::{http_client, tls_hint};
 pub use config::{Fault, UploadCompression, WorkerConfig};
 pub use daemon::{run, RunSummary};

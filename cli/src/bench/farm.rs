@@ -719,7 +719,7 @@ async fn load(
     let api_base = format!("{}{}", server.url, proto::API_PREFIX);
     let mut registering = JoinSet::new();
     for k in 1..=args.workers {
-        let api = Api::new(&server.url, &api_base, None).context("setting up an HTTP client")?;
+        let api = Api::new(&server.url, &api_base, None, None)?;
         registering.spawn(async move {
             let reg = WorkerRegistration {
                 name: format!("bench-{k}"),

@@ -110,6 +110,7 @@ pub fn worker_config(server: &str, cache: &Path) -> WorkerConfig {
     WorkerConfig {
         server: server.to_string(),
         token: None,
+        ca: None,
         threads: 2,
         cache_dir: cache.to_path_buf(),
         cache_limit_bytes: u64::MAX,
