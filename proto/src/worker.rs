@@ -24,6 +24,11 @@ pub struct WorkerRegistration {
     pub threads: u32,
     /// Its Tessera version.
     pub version: String,
+    /// The credential an earlier registration answered, kept on the worker's disk: with
+    /// it the worker is that worker again (its quarantine, job blocks and history stay).
+    /// Without it, a name no live worker holds takes over the worker that last had it.
+    #[serde(default)]
+    pub credential: Option<String>,
 }
 
 /// The answer to a registration: the worker's id and the timing it must keep.
@@ -32,6 +37,9 @@ pub struct WorkerRegistration {
 pub struct WorkerRegistered {
     /// Id to use in every later call.
     pub worker_id: u64,
+    /// This worker's own secret: the bearer token of every later call on its routes (the
+    /// join token only registers). Keep it to come back as the same worker.
+    pub credential: String,
     /// A lease lasts this long unless a heartbeat extends it.
     pub lease_seconds: u64,
     /// Send a heartbeat at least this often while rendering.

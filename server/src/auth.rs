@@ -1,6 +1,9 @@
-//! Bearer tokens: one for workers, one for clients. A worker token cannot create jobs and
-//! a client token cannot lease. Tokens are compared in constant time (over their SHA-256
-//! digests, so the length does not leak either); a refusal is a bare 401.
+//! Bearer tokens: the client token, the worker (join) token, and each worker's own
+//! credential. The join token only registers a worker, which answers with the worker's
+//! credential; every call on a worker's own routes (`/workers/{id}/...`) must carry that
+//! worker's credential, so a worker can act only for itself. A worker token cannot create
+//! jobs and a client token cannot lease. Tokens are compared in constant time (over their
+//! SHA-256 digests, so the length does not leak either); a refusal is a bare 401.
 
 use axum::extract::{Request, State};
 use axum::http::{header, Method, StatusCode};
@@ -8,16 +11,23 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use sha2::{Digest, Sha256};
 
+use std::collections::HashMap;
+
+use axum::extract::FromRequestParts;
+
 use crate::app::AppState;
+use crate::error::Error;
+use crate::scheduler;
 
 /// Who a route is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Role {
     /// CLI and dashboard: scenes, jobs, frames, events.
     Client,
-    /// Worker daemons: register, lease, heartbeat, upload.
+    /// Worker daemons joining the farm: register (the join token).
     Worker,
-    /// Either (workers download scenes by digest; clients may too).
+    /// Either (workers download scenes by digest, with their credential or the join
+    /// token; clients may too).
     Either,
 }
 
@@ -83,26 +93,89 @@ pub async fn require(
     next: Next,
 ) -> Response {
     let token = token_of(&req);
-    let ok = allowed(
+    let mut ok = allowed(
         role,
         token.as_deref(),
         app.config.client_token.as_deref(),
         app.config.worker_token.as_deref(),
     );
+    if !ok && role == Role::Either {
+        if let Some(t) = token.clone() {
+            match app
+                .db
+                .run(move |c| scheduler::worker_of_credential(c, &t))
+                .await
+            {
+                Ok(worker) => ok = worker.is_some(),
+                Err(e) => return e.into_response(),
+            }
+        }
+    }
     if ok {
         next.run(req).await
     } else {
-        (
-            StatusCode::UNAUTHORIZED,
-            [(header::WWW_AUTHENTICATE, "Bearer")],
-            axum::Json(proto::ErrorBody {
-                error: "unauthorized".into(),
-                message: "unauthorized".into(),
-                field: None,
-            }),
-        )
-            .into_response()
+        unauthorized()
     }
+}
+
+/// A bare 401.
+fn unauthorized() -> Response {
+    (
+        StatusCode::UNAUTHORIZED,
+        [(header::WWW_AUTHENTICATE, "Bearer")],
+        axum::Json(proto::ErrorBody {
+            error: "unauthorized".into(),
+            message: "unauthorized".into(),
+            field: None,
+        }),
+    )
+        .into_response()
+}
+
+/// Middleware of a worker's own routes (`/workers/{id}/...`): the bearer token must be the
+/// credential worker `id` was given when it joined. 404 when there is no such worker (or
+/// it joined before workers had credentials: it registers again), 401 without a token or
+/// with one that is no worker's, 403 with another worker's. An `id` that is not an id is
+/// left to the handler's 400.
+pub async fn require_worker(State(app): State<AppState>, req: Request, next: Next) -> Response {
+    let (mut parts, body) = req.into_parts();
+    let id = axum::extract::Path::<HashMap<String, String>>::from_request_parts(&mut parts, &app)
+        .await
+        .ok()
+        .and_then(|p| p.0.get("id")?.parse::<u64>().ok())
+        .filter(|&id| id <= proto::MAX_ID);
+    let req = Request::from_parts(parts, body);
+    let Some(id) = id else {
+        return next.run(req).await;
+    };
+    let token = token_of(&req);
+    let presented = token.clone();
+    let found = app
+        .db
+        .run(move |c| -> crate::error::Result<_> {
+            let stored = scheduler::worker_credential(c, id)?;
+            let owner = match &presented {
+                Some(t) => scheduler::worker_of_credential(c, t)?,
+                None => None,
+            };
+            Ok((stored, owner))
+        })
+        .await;
+    let refusal = match found {
+        Err(e) => e,
+        Ok((None, _)) => Error::NotFound(format!(
+            "no worker {id} here: register (POST {}/workers) and use the id and credential \
+             it answers",
+            proto::API_PREFIX
+        )),
+        Ok((Some(_), Some(owner))) if owner == id => return next.run(req).await,
+        Ok((Some(_), Some(owner))) => Error::Forbidden(format!(
+            "this is worker {owner}'s credential, not worker {id}'s: a worker acts only for \
+             itself"
+        )),
+        Ok((Some(_), None)) => return unauthorized(),
+    };
+    refusal.into_response()
 }
 
 #[cfg(test)]

@@ -28,6 +28,10 @@ pub enum Error {
     /// The request body is over the route's limit (413).
     #[error("{0}")]
     TooLarge(String),
+    /// The caller proved who it is, and it is not who may do this (403): a worker acting
+    /// for another.
+    #[error("{0}")]
+    Forbidden(String),
     /// The request conflicts with the resource's state (409): cancel a finished job, ...
     #[error("{0}")]
     Conflict(String),
@@ -147,6 +151,7 @@ impl Error {
             Error::BadScene(m) => Error::BadScene(format!("{what}: {m}")),
             Error::BadTile(m) => Error::BadTile(format!("{what}: {m}")),
             Error::TooLarge(m) => Error::TooLarge(format!("{what}: {m}")),
+            Error::Forbidden(m) => Error::Forbidden(format!("{what}: {m}")),
             Error::Conflict(m) => Error::Conflict(format!("{what}: {m}")),
             Error::LeaseGone(m) => Error::LeaseGone(format!("{what}: {m}")),
             Error::Storage { problem, detail } => Error::Storage {

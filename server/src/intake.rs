@@ -340,8 +340,14 @@ mod tests {
             .unwrap();
             let plan = crate::spec::plan(spec, &scene, 10).unwrap();
             let job = scheduler::create_job(c, &plan, 0).unwrap();
-            let a = scheduler::register_worker(c, "a", 1, "t", 0).unwrap();
-            let b = scheduler::register_worker(c, "b", 1, "t", 0).unwrap();
+            let joining = |name| scheduler::Joining {
+                name,
+                threads: 1,
+                version: "t",
+                credential: None,
+            };
+            let a = scheduler::join(c, &joining("a"), 0, 0).unwrap().id;
+            let b = scheduler::join(c, &joining("b"), 0, 0).unwrap().id;
             let first = scheduler::lease(c, a, 0, timing).unwrap().unwrap();
             let late = timing.lease_ms + 1;
             scheduler::expire(c, late, timing).unwrap();

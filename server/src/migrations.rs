@@ -117,6 +117,14 @@ const MIGRATIONS: &[&str] = &[
     // 6: a frame whose assembly failed (a tile unreadable, too large for this server) says
     // why, and is not assembled again until the job is retried.
     "ALTER TABLE frames ADD COLUMN failure TEXT;",
+    // 7: worker identity. Each registration gets its own credential (its SHA-256 is kept);
+    // a worker that comes back with it, or under the name of a worker that is gone, is
+    // that worker again (quarantine, job blocks and history stay with it).
+    r#"
+    ALTER TABLE workers ADD COLUMN credential TEXT;
+    CREATE UNIQUE INDEX workers_by_credential ON workers (credential);
+    CREATE INDEX workers_by_name ON workers (name);
+    "#,
 ];
 
 /// The schema version this build writes.

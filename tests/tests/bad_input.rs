@@ -161,6 +161,8 @@ fn bad_tokens_scenes_and_specs_are_refused_and_the_farm_goes_on() {
 struct Rogue {
     port: u16,
     id: u64,
+    /// The join token, then the credential its registration answered.
+    token: String,
 }
 
 impl Rogue {
@@ -169,14 +171,17 @@ impl Rogue {
             name: "rogue".into(),
             threads: 1,
             version: "test".into(),
+            credential: None,
         };
         let mut rogue = Rogue {
             port: farm.port,
             id: 0,
+            token: WORKER_TOKEN.into(),
         };
         let answer = rogue.post_json("/api/v1/workers", &reg);
         assert_eq!(answer.status, 201, "{}", answer.text());
-        rogue.id = answer.json::<WorkerRegistered>().worker_id;
+        let registered = answer.json::<WorkerRegistered>();
+        (rogue.id, rogue.token) = (registered.worker_id, registered.credential);
         rogue
     }
 
@@ -184,7 +189,7 @@ impl Rogue {
         Request {
             method: "POST",
             path,
-            headers: vec![("Authorization".into(), format!("Bearer {WORKER_TOKEN}"))],
+            headers: vec![("Authorization".into(), format!("Bearer {}", self.token))],
             body,
         }
     }

@@ -74,6 +74,13 @@ pub enum ApiError {
         /// The server's base URL.
         server: String,
     },
+    /// 409 on registering: a live worker has this name. Transient: that worker may be
+    /// this machine's previous process, gone silent.
+    #[error("{message}")]
+    NameInUse {
+        /// The server's message.
+        message: String,
+    },
     /// 404 on a worker route: the server does not know this worker id (any more).
     #[error("{message}")]
     UnknownWorker {
@@ -95,7 +102,10 @@ pub enum ApiError {
 impl ApiError {
     /// Whether trying again later may succeed.
     pub fn is_transient(&self) -> bool {
-        matches!(self, ApiError::Unreachable { .. } | ApiError::Server { .. })
+        matches!(
+            self,
+            ApiError::Unreachable { .. } | ApiError::Server { .. } | ApiError::NameInUse { .. }
+        )
     }
 }
 
@@ -145,7 +155,10 @@ pub struct Api {
     base: Arc<str>,
     /// The server's base URL, for messages.
     server: Arc<str>,
+    /// The join token: it registers.
     token: Option<Arc<str>>,
+    /// This worker's own credential, once registered: every other call carries it.
+    credential: Arc<std::sync::RwLock<Option<Arc<str>>>>,
 }
 
 /// An HTTP client for a farm server that says it is `user_agent`. An https:// server's
@@ -186,6 +199,7 @@ impl Api {
             base: api_base.into(),
             server: server.trim_end_matches('/').into(),
             token: token.map(Into::into),
+            credential: Arc::default(),
         })
     }
 
@@ -202,8 +216,14 @@ impl Api {
         )
     }
 
+    /// Adds the worker's credential, or before it has one the join token.
     fn auth(&self, r: RequestBuilder) -> RequestBuilder {
-        match &self.token {
+        let credential = self
+            .credential
+            .read()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
+        match credential.or_else(|| self.token.clone()) {
             Some(t) => r.bearer_auth(t),
             None => r,
         }
@@ -252,13 +272,30 @@ impl Api {
         })
     }
 
-    /// `POST /workers`.
+    /// `POST /workers` with the join token; from then on every call carries the
+    /// credential it answers.
     pub async fn register(&self, reg: &WorkerRegistration) -> Result<WorkerRegistered, ApiError> {
-        let res = self
-            .send(self.post("/workers", CALL_TIMEOUT).json(reg))
-            .await?;
+        let mut req = self
+            .http
+            .post(format!("{}/workers", self.base))
+            .timeout(CALL_TIMEOUT)
+            .json(reg);
+        if let Some(t) = &self.token {
+            req = req.bearer_auth(t);
+        }
+        let res = self.send(req).await?;
         match res.status() {
-            StatusCode::CREATED | StatusCode::OK => self.json("register", res).await,
+            StatusCode::CREATED | StatusCode::OK => {
+                let registered: WorkerRegistered = self.json("register", res).await?;
+                *self.credential.write().unwrap_or_else(|p| p.into_inner()) =
+                    Some(registered.credential.as_str().into());
+                Ok(registered)
+            }
+            // Another live worker has this name: it may be this machine's previous
+            // process, not yet gone; wait for it, saying why.
+            StatusCode::CONFLICT => Err(ApiError::NameInUse {
+                message: message(res).await,
+            }),
             status => Err(unexpected("register", status, res).await),
         }
     }

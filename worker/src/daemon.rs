@@ -48,6 +48,7 @@ use crate::api::{
 use crate::backoff::{jitter, seconds, Backoff, IDLE_PAUSE};
 use crate::cache::{is_digest, sha256_hex, Cached, SceneCache};
 use crate::config::{Fault, WorkerConfig};
+use crate::identity;
 use crate::render::{encode_tile, frame_key, frame_options, render_lease};
 use crate::stop::Stop;
 
@@ -119,7 +120,10 @@ pub async fn run(
             name: config.name.clone(),
             threads: config.threads.min(u32::MAX as usize) as u32,
             version: env!("CARGO_PKG_VERSION").to_string(),
+            credential: identity::load(&config.cache_dir, &config.server, &config.name)
+                .map(|i| i.credential),
         },
+        identity_dir: config.cache_dir.clone(),
         registered: None,
         stop,
         pool: Arc::new(pool),
@@ -138,6 +142,8 @@ pub async fn run(
 
 struct Daemon {
     api: Api,
+    /// Where the identity file is kept ([`identity`]).
+    identity_dir: std::path::PathBuf,
     fault: Option<Fault>,
     registration: WorkerRegistration,
     registered: Option<WorkerRegistered>,
@@ -226,7 +232,19 @@ impl Daemon {
                     // An upload under the forgotten registration fails the same way.
                     self.settle_and_log().await;
                 }
-                Err(e @ ApiError::Unauthorized { .. }) => return Err(e.into()),
+                Err(ApiError::Unauthorized { .. }) => {
+                    // The credential is nobody's now: another process took this worker's
+                    // name over while it was silent. Register again (a wrong join token
+                    // then stops the worker).
+                    tracing::warn!(
+                        "server {} no longer knows this worker's credential; registering \
+                         again",
+                        self.api.server()
+                    );
+                    self.registered = None;
+                    self.registration.credential = None;
+                    self.settle_and_log().await;
+                }
                 Err(e) => {
                     // An answer the protocol does not expect: a bug on one side. Keep
                     // going, slowly, rather than exit a daemon over it.
@@ -340,6 +358,19 @@ impl Daemon {
             .with_context(|| format!("registering with {}", self.api.server()))?;
         if let Some(r) = &answer {
             self.summary.registrations += 1;
+            let kept = identity::Identity {
+                server: self.api.server().to_string(),
+                name: reg.name.clone(),
+                worker_id: r.worker_id,
+                credential: r.credential.clone(),
+            };
+            if let Err(e) = identity::save(&self.identity_dir, &kept) {
+                tracing::warn!(
+                    "could not keep this worker's identity in {} ({e}): after a restart it \
+                     is known by its name only",
+                    self.identity_dir.display()
+                );
+            }
             tracing::info!(
                 "registered with {} as worker {} ({}, {} threads); heartbeat every {} s",
                 self.api.server(),
@@ -348,6 +379,8 @@ impl Daemon {
                 reg.threads,
                 r.heartbeat_seconds
             );
+            // The next registration (the server forgot this worker) comes back as it.
+            self.registration.credential = Some(r.credential.clone());
         }
         Ok(answer)
     }

@@ -9,6 +9,7 @@
 //! | [`api`] | the worker routes as typed calls (one outcome enum per call) and the retry loop |
 //! | [`backoff`] | exponential backoff with jitter, and the wait constants |
 //! | [`cache`] | scenes on disk as `<digest>.glb`: verified on read, written atomically |
+//! | [`identity`] | the credential a registration answered, kept for the next start |
 //! | [`render`] | a [`proto::Lease`] into tracer frame options, a tile render, its EXR bytes |
 //! | `stop` | the shutdown signal every wait listens to |
 //! | `daemon` | [`run`]: the register / lease / render / upload loop |
@@ -21,6 +22,7 @@ pub mod backoff;
 pub mod cache;
 pub mod config;
 mod daemon;
+pub mod identity;
 pub mod render;
 mod stop;
 

@@ -725,6 +725,7 @@ async fn load(
                 name: format!("bench-{k}"),
                 threads: 1,
                 version: env!("CARGO_PKG_VERSION").into(),
+                credential: None,
             };
             let id = api.register(&reg).await?.worker_id;
             Ok::<_, ApiError>((api, id))

@@ -21,6 +21,7 @@ impl Error {
             Error::BadScene(_) => (StatusCode::UNPROCESSABLE_ENTITY, "bad_scene"),
             Error::BadTile(_) => (StatusCode::UNPROCESSABLE_ENTITY, "bad_tile"),
             Error::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too_large"),
+            Error::Forbidden(_) => (StatusCode::FORBIDDEN, "forbidden"),
             Error::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
             Error::LeaseGone(_) => (StatusCode::CONFLICT, "lease_gone"),
             Error::Storage {

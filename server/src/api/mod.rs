@@ -50,7 +50,7 @@ struct Security;
 impl Modify for Security {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
         let components = openapi.components.get_or_insert_with(Default::default);
-        for name in ["client_token", "worker_token"] {
+        for name in ["client_token", "worker_token", "worker_credential"] {
             components.add_security_scheme(
                 name,
                 SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
@@ -87,22 +87,28 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .routes(routes!(scenes::download))
         .routes(routes!(scenes::info))
         .route_layer(guard(Role::Either));
-    let worker = OpenApiRouter::new()
+    let join = OpenApiRouter::new()
         .routes(routes!(workers::register))
+        .layer(json_limit)
+        .route_layer(guard(Role::Worker));
+    // A worker's own routes take its credential, and only its own.
+    let itself = || from_fn_with_state(app.clone(), auth::require_worker);
+    let worker = OpenApiRouter::new()
         .routes(routes!(workers::lease))
         .routes(routes!(workers::heartbeat))
         .routes(routes!(workers::failure))
         .routes(routes!(workers::leave))
         .layer(json_limit)
-        .route_layer(guard(Role::Worker));
+        .route_layer(itself());
     let tile_upload = OpenApiRouter::new()
         .routes(routes!(workers::result))
-        .route_layer(guard(Role::Worker));
+        .route_layer(itself());
 
     let v1 = OpenApiRouter::new()
         .merge(client)
         .merge(scene_upload)
         .merge(shared)
+        .merge(join)
         .merge(worker)
         .merge(tile_upload);
     OpenApiRouter::with_openapi(ApiDoc::openapi())

@@ -90,7 +90,7 @@ fn check_digest(digest: &str) -> Result<()> {
     tag = "scenes",
     params(("digest" = String, Path, description = "SHA-256 of the GLB")),
     responses((status = 200, body = SceneInfo), (status = 404, body = proto::ErrorBody)),
-    security(("client_token" = []), ("worker_token" = []))
+    security(("client_token" = []), ("worker_token" = []), ("worker_credential" = []))
 )]
 pub async fn info(
     State(app): State<AppState>,
@@ -123,7 +123,7 @@ pub async fn info(
         (status = 200, description = "the GLB", content_type = "model/gltf-binary", body = Vec<u8>),
         (status = 404, body = proto::ErrorBody)
     ),
-    security(("client_token" = []), ("worker_token" = []))
+    security(("client_token" = []), ("worker_token" = []), ("worker_credential" = []))
 )]
 pub async fn download(
     State(app): State<AppState>,

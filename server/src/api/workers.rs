@@ -18,13 +18,22 @@ use crate::error::{Error, Result};
 use crate::limits::{MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
 use crate::{intake, scheduler, status, verify};
 
-/// Registers a worker; the answer carries its id and the timing it must keep.
+/// Registers a worker with the join token (the server's worker token); the answer carries
+/// its id, its own credential for every later call, and the timing it must keep. A worker
+/// that presents the credential of an earlier registration, or the name of a worker that
+/// is gone, is that worker again (200): its quarantine and job blocks stay. A name that a
+/// live worker holds is refused (409).
 #[utoipa::path(
     post,
     path = "/workers",
     tag = "workers",
     request_body = WorkerRegistration,
-    responses((status = 201, body = WorkerRegistered), (status = 422, body = proto::ErrorBody)),
+    responses(
+        (status = 201, description = "a new worker", body = WorkerRegistered),
+        (status = 200, description = "an earlier worker, back", body = WorkerRegistered),
+        (status = 409, description = "a live worker has this name", body = proto::ErrorBody),
+        (status = 422, body = proto::ErrorBody),
+    ),
     security(("worker_token" = []))
 )]
 pub async fn register(
@@ -48,21 +57,39 @@ pub async fn register(
             message: format!("must be 1 to 4096, got {}", reg.threads),
         });
     }
-    let now = now_ms();
+    let (now, timing) = (now_ms(), app.timing());
     let who = format!(
         "`{}` ({} threads, version {})",
         reg.name, reg.threads, reg.version
     );
-    let id = app
+    let joined = app
         .db
-        .run(move |c| scheduler::register_worker(c, &reg.name, reg.threads, &reg.version, now))
+        .run(move |c| {
+            let joining = scheduler::Joining {
+                name: &reg.name,
+                threads: reg.threads,
+                version: &reg.version,
+                credential: reg.credential.as_deref(),
+            };
+            scheduler::join(c, &joining, now, scheduler::live_since(now, timing))
+        })
         .await?;
-    tracing::info!(worker = id, "worker {id} registered: {who}");
+    let id = joined.id;
+    let status = if joined.returned {
+        tracing::info!(worker = id, "worker {id} is back: {who}");
+        // Its leases went back to the queue.
+        app.work.notify_waiters();
+        StatusCode::OK
+    } else {
+        tracing::info!(worker = id, "worker {id} registered: {who}");
+        StatusCode::CREATED
+    };
     app.publish_worker(id).await;
     Ok((
-        StatusCode::CREATED,
+        status,
         Json(WorkerRegistered {
             worker_id: id,
+            credential: joined.credential,
             lease_seconds: app.config.lease.as_secs(),
             heartbeat_seconds: app.config.heartbeat_interval().as_secs(),
             max_wait_seconds: app.config.max_lease_wait.as_secs(),
@@ -88,7 +115,7 @@ pub async fn list(State(app): State<AppState>) -> Result<Json<WorkerList>> {
     params(("id" = u64, Path, description = "worker id")),
     request_body = LeaseRequest,
     responses((status = 200, body = Lease), (status = 204, description = "no work now; ask again"), (status = 404, body = proto::ErrorBody)),
-    security(("worker_token" = []))
+    security(("worker_credential" = []))
 )]
 pub async fn lease(
     State(app): State<AppState>,
@@ -131,7 +158,7 @@ pub async fn lease(
     params(("id" = u64, Path, description = "worker id")),
     request_body = Heartbeat,
     responses((status = 200, body = HeartbeatAck), (status = 409, description = "lease gone: stop", body = proto::ErrorBody)),
-    security(("worker_token" = []))
+    security(("worker_credential" = []))
 )]
 #[tracing::instrument(
     name = "task",
@@ -161,7 +188,7 @@ pub async fn heartbeat(
     tag = "workers",
     params(("id" = u64, Path, description = "worker id")),
     responses((status = 200, body = WorkerLeft), (status = 404, body = proto::ErrorBody)),
-    security(("worker_token" = []))
+    security(("worker_credential" = []))
 )]
 pub async fn leave(
     State(app): State<AppState>,
@@ -210,7 +237,7 @@ pub async fn leave(
         (status = 503, description = "the data folder is read-only: nothing stored, send it again later", body = proto::ErrorBody),
         (status = 507, description = "the server's disk is full: nothing stored, send it again later", body = proto::ErrorBody),
     ),
-    security(("worker_token" = []))
+    security(("worker_credential" = []))
 )]
 #[tracing::instrument(name = "task", skip_all, fields(id = task.0, worker = worker.0))]
 pub async fn result(
@@ -258,7 +285,7 @@ pub async fn result(
     params(("id" = u64, Path, description = "worker id"), ("task" = u64, Path, description = "task id")),
     request_body = FailureReport,
     responses((status = 200, body = FailureAck), (status = 409, description = "lease gone", body = proto::ErrorBody)),
-    security(("worker_token" = []))
+    security(("worker_credential" = []))
 )]
 #[tracing::instrument(
     name = "task",

@@ -297,11 +297,10 @@ async fn bad_tiles_are_refused_and_the_lease_stays_good() {
     assert_eq!(err.field.as_deref(), Some(ResultMetadata::SAMPLES));
     // A missing header.
     let res = w
-        .client
-        .post(s.url(&format!(
+        .auth(w.client.post(s.url(&format!(
             "/workers/{}/tasks/{}/result",
             w.id, lease.token.task_id
-        )))
+        ))))
         .header(ResultMetadata::ATTEMPT, "1")
         .body(good.clone())
         .send()
@@ -353,6 +352,7 @@ async fn worker_calls_with_bad_ids_or_fields_are_refused() {
                 name: name.into(),
                 threads,
                 version: "1".into(),
+                credential: None,
             })
             .send()
             .await
@@ -428,7 +428,7 @@ async fn ids_past_the_largest_row_id_are_client_errors_everywhere() {
             ("POST", format!("/workers/{me}/tasks/{id}/result")),
         ];
         for (method, path) in routes {
-            let req = c.request(method.parse().unwrap(), s.url(&path));
+            let req = w.auth(c.request(method.parse().unwrap(), s.url(&path)));
             let req = match path.rsplit('/').next().unwrap() {
                 "lease" => req.json(&proto::LeaseRequest::default()),
                 "heartbeat" => req.json(&proto::Heartbeat { token: None }),
@@ -450,8 +450,8 @@ async fn ids_past_the_largest_row_id_are_client_errors_everywhere() {
             assert!(body.contains(&id.to_string()), "{method} {path}: {body}");
         }
         // A heartbeat whose lease token names such a task.
-        let res = c
-            .post(s.url(&format!("/workers/{me}/heartbeat")))
+        let res = w
+            .auth(c.post(s.url(&format!("/workers/{me}/heartbeat"))))
             .json(&serde_json::json!({ "token": { "task_id": id, "attempt": 1 } }))
             .send()
             .await

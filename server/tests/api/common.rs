@@ -164,7 +164,8 @@ pub async fn create_job(
 pub struct SimWorker {
     pub id: u64,
     pub client: reqwest::Client,
-    pub token: Option<String>,
+    /// Its own credential, from its registration: the bearer token of its calls.
+    pub credential: String,
     scene: Option<(String, Arc<tracer::scene::Scene>)>,
 }
 
@@ -179,6 +180,7 @@ impl SimWorker {
             name: name.into(),
             threads: 2,
             version: "test".into(),
+            credential: None,
         });
         if let Some(t) = token {
             req = req.bearer_auth(t);
@@ -189,16 +191,13 @@ impl SimWorker {
         SimWorker {
             id: reg.worker_id,
             client,
-            token: token.map(str::to_string),
+            credential: reg.credential,
             scene: None,
         }
     }
 
-    fn auth(&self, r: reqwest::RequestBuilder) -> reqwest::RequestBuilder {
-        match &self.token {
-            Some(t) => r.bearer_auth(t),
-            None => r,
-        }
+    pub fn auth(&self, r: reqwest::RequestBuilder) -> reqwest::RequestBuilder {
+        r.bearer_auth(&self.credential)
     }
 
     /// One lease request without waiting: `None` on 204.

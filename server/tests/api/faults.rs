@@ -398,8 +398,11 @@ async fn a_worker_that_leaves_gives_its_lease_back_at_once_without_an_attempt() 
     assert_eq!(status(&s, &c, job.id).await.tasks.leased, 1);
 
     let res = leaving
-        .client
-        .post(s.url(&format!("/workers/{}/leave", leaving.id)))
+        .auth(
+            leaving
+                .client
+                .post(s.url(&format!("/workers/{}/leave", leaving.id))),
+        )
         .send()
         .await
         .unwrap();
@@ -448,9 +451,11 @@ async fn a_waiting_lease_request_wakes_when_a_job_arrives() {
     let w = SimWorker::register(&s, "sim").await;
     assert!(w.lease(&s).await.is_none());
     let url = s.url(&format!("/workers/{}/lease", w.id));
+    let credential = w.credential.clone();
     let waiting = tokio::spawn(async move {
         client()
             .post(url)
+            .bearer_auth(credential)
             .json(&proto::LeaseRequest { wait_seconds: 30 })
             .send()
             .await

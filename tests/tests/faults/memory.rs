@@ -44,6 +44,7 @@ fn tile_colour(rect: TileRect) -> Vec4 {
 struct Painter {
     port: u16,
     id: u64,
+    credential: String,
 }
 
 impl Painter {
@@ -52,19 +53,30 @@ impl Painter {
             name: "painter".into(),
             threads: 1,
             version: "test".into(),
+            credential: None,
         };
-        let answer = post_json(port, "/api/v1/workers", &reg);
+        let answer = post_json(port, "/api/v1/workers", &reg, None);
         assert_eq!(answer.status, 201, "{}", answer.text());
+        let registered = answer.json::<WorkerRegistered>();
         Painter {
             port,
-            id: answer.json::<WorkerRegistered>().worker_id,
+            id: registered.worker_id,
+            credential: registered.credential,
         }
+    }
+
+    fn bearer(&self) -> (String, String) {
+        (
+            "Authorization".into(),
+            format!("Bearer {}", self.credential),
+        )
     }
 
     /// The next task, if any is left.
     fn lease(&self) -> Option<Lease> {
         let path = format!("/api/v1/workers/{}/lease", self.id);
-        let answer = post_json(self.port, &path, &LeaseRequest { wait_seconds: 1 });
+        let wait = LeaseRequest { wait_seconds: 1 };
+        let answer = post_json(self.port, &path, &wait, Some(self.bearer()));
         match answer.status {
             200 => Some(answer.json()),
             204 => None,
@@ -108,18 +120,26 @@ impl Painter {
                 .to_headers()
                 .into_iter()
                 .map(|(n, v)| (n.to_string(), v))
+                .chain([self.bearer()])
                 .collect(),
             body: &exr,
         })
     }
 }
 
-fn post_json(port: u16, path: &str, value: &impl serde::Serialize) -> Answer {
+fn post_json(
+    port: u16,
+    path: &str,
+    value: &impl serde::Serialize,
+    auth: Option<(String, String)>,
+) -> Answer {
     let body = serde_json::to_vec(value).unwrap();
+    let mut headers = vec![("Content-Type".into(), "application/json".into())];
+    headers.extend(auth);
     Request {
         method: "POST",
         path,
-        headers: vec![("Content-Type".into(), "application/json".into())],
+        headers,
         body: &body,
     }
     .send(port)

@@ -77,6 +77,34 @@ fn a_worker_that_perturbs_its_pixels_is_caught_quarantined_and_cleared() {
     );
     assert_eq!((quarantines, after), (1, 0));
 
+    // A restart does not shed the quarantine: killed (no goodbye) and started again with
+    // its name and cache folder (its identity file), without the fault, the machine is the
+    // same worker, still quarantined, and gets no work.
+    farm.workers[0].kill9();
+    let restarted = farm.start_worker("bad", 1);
+    let back = format!("as worker {} ", bad.id);
+    tests::wait_until(
+        "the restarted worker to register",
+        Duration::from_secs(60),
+        || farm.workers[restarted].log().contains(&back),
+        || farm.logs(),
+    );
+    let workers = farm.worker_list().workers;
+    assert_eq!(workers.len(), 3, "no new worker: {workers:?}");
+    let again = worker_named(&workers, "bad");
+    assert_eq!(again.id, bad.id);
+    assert!(again.quarantined.is_some() && again.online, "{again:?}");
+    let mut args = vec![scene.to_str().unwrap(), "--frames", "2-2", "--tile", "16"];
+    args.extend(settings("2"));
+    let during = farm.submit(&args);
+    let st = farm.wait_for_job(during, Duration::from_secs(120));
+    assert_eq!(st.state, JobState::Done, "{st:?}");
+    let again = worker_named(&farm.worker_list().workers, "bad").clone();
+    assert_eq!(
+        again.tasks_done, bad.tasks_done,
+        "a quarantined worker rendered"
+    );
+
     // The operator clears it: alone on the farm now, it renders the next job.
     let done_before = bad.tasks_done;
     let cleared = farm.client(&["workers", "--clear", &bad.id.to_string()]);

@@ -408,8 +408,15 @@ pub fn bind_again(addr: SocketAddr) -> std::net::TcpListener {
 pub fn cache_entries(dir: &Path) -> (Vec<PathBuf>, Vec<PathBuf>) {
     let mut glbs = vec![];
     let mut other = vec![];
+    let identity = worker::identity::path(dir, "", "");
+    let identity = identity.file_name().unwrap().to_str().unwrap();
     for e in std::fs::read_dir(dir).unwrap() {
         let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap();
+        // The worker's identity file (one per server and name) belongs beside the scenes.
+        if name.starts_with("identity-") && name.len() == identity.len() {
+            continue;
+        }
         if p.extension().is_some_and(|x| x == "glb") {
             glbs.push(p);
         } else {
