@@ -562,6 +562,7 @@ mod tests {
             tasks_done: 17,
             suspect: false,
             quarantined: None,
+            platform: None,
         };
         let mut bad = worker(3, "c", true, None, None);
         bad.quarantined = Some("its tile of task 9 differs".into());

@@ -29,6 +29,11 @@ pub struct WorkerRegistration {
     /// Without it, a name no live worker holds takes over the worker that last had it.
     #[serde(default)]
     pub credential: Option<String>,
+    /// The machine and build: architecture, CPU model and features, OS, Tessera version
+    /// and build profile. Kept so that a check that finds two tiles differing says which
+    /// platforms disagreed.
+    #[serde(default)]
+    pub platform: Option<String>,
 }
 
 /// The answer to a registration: the worker's id and the timing it must keep.
@@ -79,6 +84,9 @@ pub struct WorkerInfo {
     /// operator clears it (`POST /workers/{id}/clear`, `tessera workers --clear ID`).
     #[serde(default)]
     pub quarantined: Option<String>,
+    /// The machine and build it registered with ([`WorkerRegistration::platform`]).
+    #[serde(default)]
+    pub platform: Option<String>,
 }
 
 /// `GET /workers`.

@@ -345,6 +345,7 @@ mod tests {
                 threads: 1,
                 version: "t",
                 credential: None,
+                platform: None,
             };
             let a = scheduler::join(c, &joining("a"), 0, 0).unwrap().id;
             let b = scheduler::join(c, &joining("b"), 0, 0).unwrap().id;

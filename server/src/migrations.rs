@@ -125,6 +125,9 @@ const MIGRATIONS: &[&str] = &[
     CREATE UNIQUE INDEX workers_by_credential ON workers (credential);
     CREATE INDEX workers_by_name ON workers (name);
     "#,
+    // 8: the machine and build a worker registered with, for the events of checks that
+    // disagree.
+    "ALTER TABLE workers ADD COLUMN platform TEXT;",
 ];
 
 /// The schema version this build writes.

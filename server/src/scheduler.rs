@@ -259,6 +259,8 @@ pub struct Joining<'a> {
     pub version: &'a str,
     /// The credential it kept from an earlier registration.
     pub credential: Option<&'a str>,
+    /// Its machine and build.
+    pub platform: Option<&'a str>,
 }
 
 /// Who a joining worker turned out to be.
@@ -322,14 +324,15 @@ pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64)
             }
             tx.exec(
                 "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
-                        left_ms = NULL, credential = ?6 WHERE id = ?1",
+                        left_ms = NULL, credential = ?6, platform = ?7 WHERE id = ?1",
                 params![
                     id,
                     joining.name,
                     joining.threads,
                     joining.version,
                     now,
-                    hash
+                    hash,
+                    joining.platform
                 ],
             )?;
             log(
@@ -344,9 +347,16 @@ pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64)
         None => {
             tx.exec(
                 "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms,
-                                      credential)
-                 VALUES (?1, ?2, ?3, ?4, ?4, ?5)",
-                params![joining.name, joining.threads, joining.version, now, hash],
+                                      credential, platform)
+                 VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6)",
+                params![
+                    joining.name,
+                    joining.threads,
+                    joining.version,
+                    now,
+                    hash,
+                    joining.platform
+                ],
             )?;
             let id = tx.last_insert_rowid() as u64;
             log(

@@ -62,6 +62,7 @@ fn worker(c: &mut Connection, name: &str, now: i64) -> u64 {
         threads: 4,
         version: "test",
         credential: None,
+        platform: None,
     };
     join(c, &joining, now, now - 2 * LEASE_MS).unwrap().id
 }
@@ -937,6 +938,7 @@ fn a_worker_that_comes_back_keeps_its_identity_and_a_live_name_is_refused() {
         threads: 4,
         version: "test",
         credential,
+        platform: None,
     };
     let live = |now| live_since(now, TIMING);
     let first = join(&mut c, &joining("a", None), 0, live(0)).unwrap();

@@ -245,7 +245,8 @@ pub fn frame_status(conn: &Connection, job: u64, frame: i32) -> Result<FrameStat
 
 const WORKER_QUERY: &str =
     "SELECT w.id, w.name, w.threads, w.version, w.last_seen_ms, w.tasks_done,
-        t.id, t.attempt, t.job_id, t.frame, w.left_ms, w.suspect_ms, w.quarantine_reason
+        t.id, t.attempt, t.job_id, t.frame, w.left_ms, w.suspect_ms, w.quarantine_reason,
+        w.platform
      FROM workers w
      LEFT JOIN tasks t ON t.id = (SELECT id FROM tasks WHERE worker_id = w.id AND state = 'leased'
                                   ORDER BY leased_ms DESC LIMIT 1)";
@@ -272,6 +273,7 @@ fn worker_from_row(r: &rusqlite::Row, now: i64, lease_ms: i64) -> rusqlite::Resu
         current_frame: r.get(9)?,
         suspect: r.get::<_, Option<i64>>(11)?.is_some(),
         quarantined: r.get(12)?,
+        platform: r.get(13)?,
     })
 }
 

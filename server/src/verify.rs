@@ -202,13 +202,18 @@ pub fn record(
         .into_iter()
         .filter(|r| r.task != check.id)
         .collect();
+    // Who rendered what, on which machine and build: a mismatch between two platforms may
+    // be the platforms', not a broken machine's.
+    let mut renders: Vec<(u64, u64)> = earlier.iter().map(|r| (r.task, r.worker)).collect();
+    renders.push((check.id, worker));
+    let platforms = platforms(tx, &renders)?;
     match verdict {
         Verdict::Agrees(with) => {
             let right = |r: &Render| with.contains(&r.task);
             for r in earlier.iter().filter(|r| !right(r)) {
                 let reason = format!(
                     "its tile of task {original_id} (job {}, frame {}, tile {}) differs from \
-                     the identical tiles of {} other render(s)",
+                     the identical tiles of {} other render(s); {platforms}",
                     check.job_id,
                     check.frame,
                     check.tile,
@@ -252,6 +257,17 @@ pub fn record(
                     params![w, now],
                 )?;
             }
+            log(
+                tx,
+                now,
+                Some(check.job_id),
+                "check_disagreed",
+                &format!(
+                    "task {original_id}: check {} differs from every earlier render; \
+                     {platforms}",
+                    check.id
+                ),
+            )?;
             // `earlier` is the task and every check before this one.
             if (earlier.len() as u32) < MAX_CHECKS {
                 add_check(tx, &original, now, "renders disagree")
@@ -269,6 +285,23 @@ pub fn record(
             }
         }
     }
+}
+
+/// "renders: task 12 by worker 3 on <platform>, ..." for `(task, worker)` pairs.
+fn platforms(tx: &Transaction, renders: &[(u64, u64)]) -> Result<String> {
+    let mut parts = Vec::with_capacity(renders.len());
+    for &(task, worker) in renders {
+        let (name, platform): (String, Option<String>) = tx.row(
+            "SELECT name, platform FROM workers WHERE id = ?1",
+            [worker],
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )?;
+        let platform = platform.unwrap_or_else(|| "a platform it did not report".into());
+        parts.push(format!(
+            "task {task} by worker {worker} ({name}) on {platform}"
+        ));
+    }
+    Ok(format!("renders: {}", parts.join("; ")))
 }
 
 /// A done task `t` whose tile is not yet in its frame `f` (which keeps it until then):

@@ -172,6 +172,7 @@ impl Rogue {
             threads: 1,
             version: "test".into(),
             credential: None,
+            platform: None,
         };
         let mut rogue = Rogue {
             port: farm.port,

@@ -129,6 +129,52 @@ impl WorkerConfig {
     }
 }
 
+/// This machine and build, as a worker reports them when it registers: architecture and
+/// OS, CPU model and the vector features that could matter to floating point, Tessera's
+/// version and build profile. E.g. `x86_64 linux, AMD EPYC 7B13 (avx2 fma), tessera 0.1.0
+/// release`.
+pub fn platform() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|info| {
+            info.lines()
+                .find(|l| l.starts_with("model name") || l.starts_with("Model"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, v)| v.split_whitespace().collect::<Vec<_>>().join(" "))
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    #[allow(unused_mut)]
+    let mut features: Vec<&str> = Vec::new();
+    #[cfg(target_arch = "x86_64")]
+    {
+        for (name, has) in [
+            ("avx2", std::arch::is_x86_feature_detected!("avx2")),
+            ("fma", std::arch::is_x86_feature_detected!("fma")),
+            ("avx512f", std::arch::is_x86_feature_detected!("avx512f")),
+        ] {
+            if has {
+                features.push(name);
+            }
+        }
+    }
+    let features = if features.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", features.join(" "))
+    };
+    let profile = if cfg!(debug_assertions) {
+        "debug"
+    } else {
+        "release"
+    };
+    format!(
+        "{} {}, {cpu}{features}, tessera {} {profile}",
+        std::env::consts::ARCH,
+        std::env::consts::OS,
+        env!("CARGO_PKG_VERSION")
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -122,6 +122,7 @@ pub async fn run(
             version: env!("CARGO_PKG_VERSION").to_string(),
             credential: identity::load(&config.cache_dir, &config.server, &config.name)
                 .map(|i| i.credential),
+            platform: Some(crate::config::platform()),
         },
         identity_dir: config.cache_dir.clone(),
         registered: None,

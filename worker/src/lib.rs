@@ -27,5 +27,5 @@ pub mod render;
 mod stop;
 
 pub use api::{http_client, tls_hint};
-pub use config::{Fault, UploadCompression, WorkerConfig};
+pub use config::{platform, Fault, UploadCompression, WorkerConfig};
 pub use daemon::{run, RunSummary};

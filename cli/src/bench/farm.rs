@@ -726,6 +726,7 @@ async fn load(
                 threads: 1,
                 version: env!("CARGO_PKG_VERSION").into(),
                 credential: None,
+                platform: None,
             };
             let id = api.register(&reg).await?.worker_id;
             Ok::<_, ApiError>((api, id))

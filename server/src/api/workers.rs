@@ -40,7 +40,11 @@ pub async fn register(
     State(app): State<AppState>,
     JsonBody(reg): JsonBody<WorkerRegistration>,
 ) -> Result<(StatusCode, Json<WorkerRegistered>)> {
-    for (field, value) in [("name", &reg.name), ("version", &reg.version)] {
+    let platform = reg.platform.iter().map(|p| ("platform", p));
+    for (field, value) in [("name", &reg.name), ("version", &reg.version)]
+        .into_iter()
+        .chain(platform)
+    {
         if value.is_empty() || value.len() > MAX_WORKER_TEXT_BYTES {
             return Err(Error::Invalid {
                 field: field.into(),
@@ -70,6 +74,7 @@ pub async fn register(
                 threads: reg.threads,
                 version: &reg.version,
                 credential: reg.credential.as_deref(),
+                platform: reg.platform.as_deref(),
             };
             scheduler::join(c, &joining, now, scheduler::live_since(now, timing))
         })

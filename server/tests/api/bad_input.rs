@@ -353,6 +353,7 @@ async fn worker_calls_with_bad_ids_or_fields_are_refused() {
                 threads,
                 version: "1".into(),
                 credential: None,
+                platform: None,
             })
             .send()
             .await

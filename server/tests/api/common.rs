@@ -181,6 +181,7 @@ impl SimWorker {
             threads: 2,
             version: "test".into(),
             credential: None,
+            platform: None,
         });
         if let Some(t) = token {
             req = req.bearer_auth(t);

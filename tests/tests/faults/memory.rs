@@ -54,6 +54,7 @@ impl Painter {
             threads: 1,
             version: "test".into(),
             credential: None,
+            platform: None,
         };
         let answer = post_json(port, "/api/v1/workers", &reg, None);
         assert_eq!(answer.status, 201, "{}", answer.text());

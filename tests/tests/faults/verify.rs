@@ -51,6 +51,20 @@ fn a_worker_that_perturbs_its_pixels_is_caught_quarantined_and_cleared() {
         .as_deref()
         .expect("the bad worker is quarantined");
     assert!(reason.contains("differs"), "{reason}");
+    // The reason names every render's worker and platform (CPU, build), so a mismatch
+    // between two kinds of machine can be told from a broken one.
+    let platform = bad
+        .platform
+        .as_deref()
+        .expect("workers report their platform");
+    assert!(
+        platform.starts_with(std::env::consts::ARCH) && platform.contains("tessera "),
+        "{platform}"
+    );
+    assert!(
+        reason.contains(&format!("by worker {} (bad) on {platform}", bad.id)),
+        "{reason}"
+    );
     for name in ["good-1", "good-2"] {
         let good = worker_named(&workers, name);
         assert!(good.quarantined.is_none() && !good.suspect, "{good:?}");
