@@ -48,9 +48,10 @@ struct Painter {
 }
 
 impl Painter {
-    fn register(port: u16) -> Painter {
+    /// Registers painter `k` (no two live workers share a name).
+    fn register(port: u16, k: usize) -> Painter {
         let reg = WorkerRegistration {
-            name: "painter".into(),
+            name: format!("painter-{k}"),
             threads: 1,
             version: "test".into(),
             credential: None,
@@ -187,9 +188,9 @@ fn the_largest_frame_is_assembled_within_a_memory_limit_across_a_restart() {
     let mut last = None;
     std::thread::scope(|s| {
         let painters: Vec<_> = (0..2)
-            .map(|_| {
+            .map(|k| {
                 s.spawn(move || {
-                    let painter = Painter::register(port);
+                    let painter = Painter::register(port, k);
                     let mut held = None;
                     while let Some(lease) = painter.lease() {
                         if let Some(previous) = held.replace(lease) {
