@@ -83,6 +83,95 @@ impl IntoResponse for Error {
     }
 }
 
+/// Adds to every operation of the OpenAPI document the error answers the server gives it
+/// beyond those its handler lists, each with the [`ErrorBody`] schema: 400 and 404 for an
+/// operation with path parameters, 400, 413 and 422 for one with a request body, 401 for
+/// one behind a token, 403 for a worker's own routes, 503 and 507 for one that writes.
+/// A handler's own description of a status is kept.
+pub struct ErrorAnswers;
+
+impl utoipa::Modify for ErrorAnswers {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::path::{HttpMethod, ParameterIn};
+        use utoipa::openapi::{ContentBuilder, Ref, ResponseBuilder};
+        for item in openapi.paths.paths.values_mut() {
+            let operations = [
+                (HttpMethod::Get, &mut item.get),
+                (HttpMethod::Post, &mut item.post),
+                (HttpMethod::Put, &mut item.put),
+                (HttpMethod::Delete, &mut item.delete),
+            ];
+            for (method, operation) in operations {
+                let Some(op) = operation.as_mut() else {
+                    continue;
+                };
+                let in_path = op
+                    .parameters
+                    .iter()
+                    .flatten()
+                    .any(|p| matches!(p.parameter_in, ParameterIn::Path));
+                let body = op.request_body.is_some();
+                let schemes: Vec<String> = op
+                    .security
+                    .iter()
+                    .flatten()
+                    .filter_map(|s| serde_json::to_value(s).ok())
+                    .filter_map(|v| v.as_object().map(|o| o.keys().cloned().collect::<Vec<_>>()))
+                    .flatten()
+                    .collect();
+                let writes = matches!(method, HttpMethod::Post | HttpMethod::Delete);
+                let mut add = |status: &str, description: &str, applies: bool| {
+                    if applies && !op.responses.responses.contains_key(status) {
+                        let content = ContentBuilder::new()
+                            .schema(Some(Ref::from_schema_name("ErrorBody")))
+                            .build();
+                        let response = ResponseBuilder::new()
+                            .description(description)
+                            .content("application/json", content)
+                            .build();
+                        op.responses
+                            .responses
+                            .insert(status.to_string(), response.into());
+                    }
+                };
+                add(
+                    "400",
+                    "the request is malformed: a path parameter that is not one (an id past \
+                     the largest), a body that is not JSON or not sent as application/json",
+                    in_path || body,
+                );
+                add(
+                    "401",
+                    "no token, or not one of this route's",
+                    !schemes.is_empty(),
+                );
+                add(
+                    "403",
+                    "another worker's credential: a worker acts only for itself",
+                    schemes.iter().any(|s| s == "worker_credential"),
+                );
+                add("404", "nothing has this id", in_path);
+                add("413", "the body is over this route's limit", body);
+                add(
+                    "422",
+                    "a field is out of bounds or of the wrong type; `field` names it",
+                    body,
+                );
+                add(
+                    "503",
+                    "the data folder is read-only: nothing stored, try again later",
+                    writes,
+                );
+                add(
+                    "507",
+                    "the server's disk is full: nothing stored, try again later",
+                    writes,
+                );
+            }
+        }
+    }
+}
+
 /// `axum::Json` whose rejections are JSON errors naming the problem (serde's message
 /// names the field and position).
 pub struct JsonBody<T>(pub T);

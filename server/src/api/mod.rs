@@ -111,7 +111,10 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .merge(join)
         .merge(worker)
         .merge(tile_upload);
-    OpenApiRouter::with_openapi(ApiDoc::openapi())
+    let (router, mut doc) = OpenApiRouter::with_openapi(ApiDoc::openapi())
         .nest(proto::API_PREFIX, v1)
-        .split_for_parts()
+        .split_for_parts();
+    // After the routes are in: it reads each operation.
+    error::ErrorAnswers.modify(&mut doc);
+    (router, doc)
 }

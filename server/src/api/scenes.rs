@@ -76,10 +76,10 @@ fn check_digest(digest: &str) -> Result<()> {
     if is_digest(digest) {
         Ok(())
     } else {
-        Err(Error::Invalid {
-            field: "digest".into(),
-            message: format!("`{digest}` is not a SHA-256 digest (64 lower-case hex digits)"),
-        })
+        // Malformed like any other path parameter (400), not a field out of bounds.
+        Err(Error::BadRequest(format!(
+            "in the URL path: `{digest}` is not a SHA-256 digest (64 lower-case hex digits)"
+        )))
     }
 }
 

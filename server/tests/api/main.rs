@@ -4,6 +4,7 @@
 mod auth;
 mod bad_input;
 mod common;
+mod contract;
 mod dashboard;
 mod farm;
 mod faults;
