@@ -3,9 +3,14 @@
 # parts that some tests need, where this machine allows it (Embree 3, for the BVH
 # comparison of `tessera bench rays --embree`), then runs `cargo test --workspace` with the
 # cargo features those parts enable. Where a part cannot be installed, it says so loudly
-# and its tests report themselves skipped. Arguments go to `cargo test`.
+# and its tests report themselves skipped. The fuzz targets (a workspace of their own, run
+# by fuzz/run.sh with nightly) are type-checked against today's types first, with their
+# lock file as committed. Arguments go to `cargo test`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+echo "=== the fuzz targets still build against the workspace's types ==="
+cargo check --manifest-path fuzz/Cargo.toml --locked --target-dir target/fuzz-check
 
 features=()
 if bash scripts/install-embree.sh; then
