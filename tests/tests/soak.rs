@@ -1,0 +1,177 @@
+//! The soak: a farm that runs for a long time (`TESSERA_SOAK_SECONDS`, default 1800)
+//! while faults are injected at random: workers killed with SIGKILL and started again,
+//! workers stalled (SIGSTOP) past their lease and let go, the server killed with SIGKILL
+//! and started again. Jobs keep coming the whole time. At the end every frame of every
+//! job must equal a direct `tessera render` of it bit for bit, and no task may have been
+//! leased again after its tile was accepted. Not part of CI: `scripts/soak.sh` runs it
+//! (ignored here) and prints the figures RELIABILITY.md records.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use proto::JobState;
+use tests::{job_id_in, render_directly, settings, tessera, Farm};
+
+/// Leases are short, so a killed or stalled worker's tile goes back to the queue soon.
+const LEASE_SECONDS: u64 = 6;
+const WORKERS: usize = 3;
+const SPP: &str = "2";
+
+#[derive(Debug, Default)]
+struct Figures {
+    jobs: u64,
+    frames: u64,
+    workers_killed: u64,
+    workers_stalled: u64,
+    servers_killed: u64,
+    submissions_refused: u64,
+}
+
+#[test]
+#[ignore = "a long run: scripts/soak.sh"]
+fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
+    let seconds: u64 = std::env::var("TESSERA_SOAK_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1800);
+    let seed: u64 = std::env::var("TESSERA_SOAK_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| fastrand::u64(..));
+    println!("soak: {seconds} s, TESSERA_SOAK_SEED={seed}");
+    let mut rng = fastrand::Rng::with_seed(seed);
+
+    let mut farm = Farm::new();
+    farm.start_server(LEASE_SECONDS);
+    let names: Vec<String> = (1..=WORKERS).map(|k| format!("soak-{k}")).collect();
+    // Which process in `farm.workers` is each worker now.
+    let mut current: BTreeMap<String, usize> = BTreeMap::new();
+    for name in &names {
+        current.insert(name.clone(), farm.start_worker(name, 1));
+    }
+    let scene = farm.demo_scene();
+    let scene_arg = scene.to_str().unwrap().to_string();
+
+    let mut figures = Figures::default();
+    let mut jobs: Vec<(u64, i32, i32)> = Vec::new();
+    let started = Instant::now();
+    let until = started + Duration::from_secs(seconds);
+    let mut next_job = Instant::now();
+    let mut next_fault = Instant::now() + Duration::from_secs(5);
+    while Instant::now() < until {
+        if Instant::now() >= next_job {
+            let first = rng.i32(1..=20);
+            let last = first + rng.i32(0..4);
+            let frames = format!("{first}-{last}");
+            let tile = ["8", "16", "32"][rng.usize(..3)];
+            let url = farm.url();
+            let mut args = vec![
+                "submit",
+                scene_arg.as_str(),
+                "--server",
+                url.as_str(),
+                "--frames",
+                frames.as_str(),
+                "--tile",
+                tile,
+                "--passes",
+                "1",
+            ];
+            args.extend(settings(SPP));
+            let out = tessera(&args, farm.path());
+            match job_id_in(&String::from_utf8_lossy(&out.stdout)) {
+                Some(id) if out.status.success() => {
+                    jobs.push((id, first, last));
+                    figures.jobs += 1;
+                    figures.frames += (last - first + 1) as u64;
+                }
+                // The server may be down this moment: the user tries again later.
+                _ => figures.submissions_refused += 1,
+            }
+            next_job = Instant::now() + Duration::from_secs(rng.u64(5..20));
+        }
+        if Instant::now() >= next_fault {
+            match rng.u8(..10) {
+                0..=3 => {
+                    let name = names[rng.usize(..names.len())].clone();
+                    farm.workers[current[&name]].kill9();
+                    std::thread::sleep(Duration::from_millis(rng.u64(0..3000)));
+                    current.insert(name.clone(), farm.start_worker(&name, 1));
+                    figures.workers_killed += 1;
+                }
+                4..=6 => {
+                    let name = &names[rng.usize(..names.len())];
+                    let worker = &farm.workers[current[name]];
+                    worker.signal(libc::SIGSTOP);
+                    // Past its lease sometimes, so the tile goes to another worker and the
+                    // stalled one's upload comes late.
+                    std::thread::sleep(Duration::from_secs(rng.u64(1..(2 * LEASE_SECONDS))));
+                    worker.signal(libc::SIGCONT);
+                    figures.workers_stalled += 1;
+                }
+                _ => {
+                    farm.server.as_mut().expect("the server runs").kill9();
+                    std::thread::sleep(Duration::from_millis(rng.u64(0..3000)));
+                    farm.start_server_with(LEASE_SECONDS, &[]);
+                    figures.servers_killed += 1;
+                }
+            }
+            next_fault = Instant::now() + Duration::from_secs(rng.u64(3..15));
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+
+    // Faults stop; every job must finish.
+    for &(id, _, _) in &jobs {
+        let st = farm.wait_for_job(id, Duration::from_secs(600));
+        assert_eq!(
+            st.state,
+            JobState::Done,
+            "job {id}: {st:?}\n{}",
+            farm.logs()
+        );
+    }
+    let mut direct = BTreeMap::new();
+    for &(id, first, last) in &jobs {
+        for frame in first..=last {
+            let want = direct
+                .entry(frame)
+                .or_insert_with(|| render_directly(&scene, frame, SPP, farm.path()));
+            assert!(
+                farm.server_frame(id, frame) == *want,
+                "job {id} frame {frame} differs from tessera render"
+            );
+        }
+    }
+    let db = rusqlite::Connection::open(farm.path().join("data").join("tessera.db")).unwrap();
+    let (tasks, leased_after_done): (u64, u64) = db
+        .query_row(
+            "SELECT count(*), coalesce(sum(leased_ms > done_ms), 0) FROM tasks
+             WHERE state = 'done'",
+            [],
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )
+        .unwrap();
+    assert_eq!(
+        leased_after_done, 0,
+        "a task was leased after its tile was accepted"
+    );
+    let expired: u64 = db
+        .query_row("SELECT coalesce(sum(failures), 0) FROM tasks", [], |r| {
+            r.get(0)
+        })
+        .unwrap();
+    println!(
+        "soak done in {:.0} s (seed {seed}): {} jobs, {} frames, {tasks} tasks ({expired} \
+         attempts lost to faults); faults: {} workers killed, {} workers stalled, {} server \
+         kills; {} submissions refused while the server was down; frames lost: 0, frames \
+         different from a direct render: 0, tasks leased after acceptance: 0",
+        started.elapsed().as_secs_f64(),
+        figures.jobs,
+        figures.frames,
+        figures.workers_killed,
+        figures.workers_stalled,
+        figures.servers_killed,
+        figures.submissions_refused,
+    );
+}
