@@ -2,18 +2,18 @@
 //! credential. The join token only registers a worker, which answers with the worker's
 //! credential; every call on a worker's own routes (`/workers/{id}/...`) must carry that
 //! worker's credential, so a worker can act only for itself. A worker token cannot create
-//! jobs and a client token cannot lease. Tokens are compared in constant time (over their
-//! SHA-256 digests, so the length does not leak either); a refusal is a bare 401.
+//! jobs and a client token cannot lease. The client and join tokens are compared in
+//! constant time (over their SHA-256 digests, so the length does not leak either); a
+//! credential is looked up by its SHA-256, all the database keeps of it. A refusal
+//! without a token that proves who the caller is, is a bare 401.
 
-use axum::extract::{Request, State};
+use std::collections::HashMap;
+
+use axum::extract::{FromRequestParts, Request, State};
 use axum::http::{header, Method, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use sha2::{Digest, Sha256};
-
-use std::collections::HashMap;
-
-use axum::extract::FromRequestParts;
 
 use crate::app::AppState;
 use crate::error::Error;
@@ -148,8 +148,7 @@ pub async fn require_worker(State(app): State<AppState>, req: Request, next: Nex
     let Some(id) = id else {
         return next.run(req).await;
     };
-    let token = token_of(&req);
-    let presented = token.clone();
+    let presented = token_of(&req);
     let found = app
         .db
         .run(move |c| -> crate::error::Result<_> {

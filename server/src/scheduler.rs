@@ -312,16 +312,7 @@ pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64)
     let hash = sha256_hex(credential.as_bytes());
     let id = match returning {
         Some(id) => {
-            let held: Vec<TaskRow> = {
-                let mut stmt = tx.prepare_cached(&format!(
-                    "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased' AND worker_id = ?1"
-                ))?;
-                let rows = stmt.query_map([id], task_from_row)?;
-                rows.collect::<rusqlite::Result<_>>()?
-            };
-            for task in &held {
-                revoke(&tx, task)?;
-            }
+            let held = give_back(&tx, id)?;
             tx.exec(
                 "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
                         left_ms = NULL, credential = ?6, platform = ?7 WHERE id = ?1",
@@ -904,16 +895,9 @@ pub fn revoke_all_leases(conn: &mut Connection, now: i64) -> Result<usize> {
 pub fn leave(conn: &mut Connection, worker: u64, now: i64) -> Result<Vec<u64>> {
     let tx = conn.transaction()?;
     touch_worker(&tx, worker, now)?;
-    let held: Vec<TaskRow> = {
-        let mut stmt = tx.prepare_cached(&format!(
-            "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased' AND worker_id = ?1"
-        ))?;
-        let rows = stmt.query_map([worker], task_from_row)?;
-        rows.collect::<rusqlite::Result<_>>()?
-    };
+    let held = give_back(&tx, worker)?;
     let mut jobs = Vec::new();
     for task in &held {
-        revoke(&tx, task)?;
         if !jobs.contains(&task.job_id) {
             jobs.push(task.job_id);
         }
@@ -931,6 +915,22 @@ pub fn leave(conn: &mut Connection, worker: u64, now: i64) -> Result<Vec<u64>> {
     )?;
     tx.commit()?;
     Ok(jobs)
+}
+
+/// Queues again every task `worker` holds a lease on (no attempt is counted: it said it is
+/// gone, or came back); returns them.
+fn give_back(tx: &Transaction, worker: u64) -> Result<Vec<TaskRow>> {
+    let held: Vec<TaskRow> = {
+        let mut stmt = tx.prepare_cached(&format!(
+            "SELECT {TASK_COLUMNS} FROM tasks WHERE state = 'leased' AND worker_id = ?1"
+        ))?;
+        let rows = stmt.query_map([worker], task_from_row)?;
+        rows.collect::<rusqlite::Result<_>>()?
+    };
+    for task in &held {
+        revoke(tx, task)?;
+    }
+    Ok(held)
 }
 
 pub(crate) fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {

@@ -15,7 +15,6 @@ use tests::{job_id_in, render_directly, settings, tessera, Farm};
 /// Leases are short, so a killed or stalled worker's tile goes back to the queue soon.
 const LEASE_SECONDS: u64 = 6;
 const WORKERS: usize = 3;
-const SPP: &str = "2";
 
 #[derive(Debug, Default)]
 struct Figures {
@@ -38,7 +37,11 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or_else(|| fastrand::u64(..));
-    println!("soak: {seconds} s, TESSERA_SOAK_SEED={seed}");
+    // Samples per pixel: more makes each tile take longer, so more faults hit a worker
+    // holding a lease.
+    let spp = std::env::var("TESSERA_SOAK_SPP").unwrap_or_else(|_| "64".into());
+    let spp = spp.as_str();
+    println!("soak: {seconds} s, {spp} spp, TESSERA_SOAK_SEED={seed}");
     let mut rng = fastrand::Rng::with_seed(seed);
 
     let mut farm = Farm::new();
@@ -77,7 +80,7 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
                 "--passes",
                 "1",
             ];
-            args.extend(settings(SPP));
+            args.extend(settings(spp));
             let out = tessera(&args, farm.path());
             match job_id_in(&String::from_utf8_lossy(&out.stdout)) {
                 Some(id) if out.status.success() => {
@@ -136,7 +139,7 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
         for frame in first..=last {
             let want = direct
                 .entry(frame)
-                .or_insert_with(|| render_directly(&scene, frame, SPP, farm.path()));
+                .or_insert_with(|| render_directly(&scene, frame, spp, farm.path()));
             assert!(
                 farm.server_frame(id, frame) == *want,
                 "job {id} frame {frame} differs from tessera render"
@@ -162,7 +165,7 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
         })
         .unwrap();
     println!(
-        "soak done in {:.0} s (seed {seed}): {} jobs, {} frames, {tasks} tasks ({expired} \
+        "soak done in {:.0} s (seed {seed}, {spp} spp): {} jobs, {} frames, {tasks} tasks ({expired} \
          attempts lost to faults); faults: {} workers killed, {} workers stalled, {} server \
          kills; {} submissions refused while the server was down; frames lost: 0, frames \
          different from a direct render: 0, tasks leased after acceptance: 0",
