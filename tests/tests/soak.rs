@@ -24,6 +24,8 @@ struct Figures {
     workers_stalled: u64,
     servers_killed: u64,
     submissions_refused: u64,
+    /// Faults that found a worker holding a lease.
+    faults_on_leases: u64,
 }
 
 #[test]
@@ -94,17 +96,32 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
             next_job = Instant::now() + Duration::from_secs(rng.u64(5..20));
         }
         if Instant::now() >= next_fault {
+            // The worker a fault hits: one holding a lease when there is one, so that the
+            // fault lands mid-tile rather than on a worker waiting for work.
+            let busy: Vec<String> = farm
+                .worker_list()
+                .workers
+                .into_iter()
+                .filter(|w| w.online && w.current_task.is_some())
+                .map(|w| w.name)
+                .filter(|n| names.contains(n))
+                .collect();
+            let victim = if busy.is_empty() {
+                names[rng.usize(..names.len())].clone()
+            } else {
+                busy[rng.usize(..busy.len())].clone()
+            };
+            figures.faults_on_leases += u64::from(!busy.is_empty());
             match rng.u8(..10) {
                 0..=3 => {
-                    let name = names[rng.usize(..names.len())].clone();
+                    let name = victim;
                     farm.workers[current[&name]].kill9();
                     std::thread::sleep(Duration::from_millis(rng.u64(0..3000)));
                     current.insert(name.clone(), farm.start_worker(&name, 1));
                     figures.workers_killed += 1;
                 }
                 4..=6 => {
-                    let name = &names[rng.usize(..names.len())];
-                    let worker = &farm.workers[current[name]];
+                    let worker = &farm.workers[current[&victim]];
                     worker.signal(libc::SIGSTOP);
                     // Past its lease sometimes, so the tile goes to another worker and the
                     // stalled one's upload comes late.
@@ -167,14 +184,16 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
     println!(
         "soak done in {:.0} s (seed {seed}, {spp} spp): {} jobs, {} frames, {tasks} tasks ({expired} \
          attempts lost to faults); faults: {} workers killed, {} workers stalled, {} server \
-         kills; {} submissions refused while the server was down; frames lost: 0, frames \
-         different from a direct render: 0, tasks leased after acceptance: 0",
+         kills ({} of them while a worker held a lease); {} submissions refused while the \
+         server was down; frames lost: 0, frames different from a direct render: 0, tasks \
+         leased after acceptance: 0",
         started.elapsed().as_secs_f64(),
         figures.jobs,
         figures.frames,
         figures.workers_killed,
         figures.workers_stalled,
         figures.servers_killed,
+        figures.faults_on_leases,
         figures.submissions_refused,
     );
 }
