@@ -17,7 +17,7 @@ use sha2::{Digest, Sha256};
 
 use crate::app::AppState;
 use crate::error::Error;
-use crate::scheduler;
+use crate::identity;
 
 /// Who a route is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -103,7 +103,7 @@ pub async fn require(
         if let Some(t) = token.clone() {
             match app
                 .db
-                .run(move |c| scheduler::worker_of_credential(c, &t))
+                .run(move |c| identity::worker_of_credential(c, &t))
                 .await
             {
                 Ok(worker) => ok = worker.is_some(),
@@ -152,9 +152,9 @@ pub async fn require_worker(State(app): State<AppState>, req: Request, next: Nex
     let found = app
         .db
         .run(move |c| -> crate::error::Result<_> {
-            let stored = scheduler::worker_credential(c, id)?;
+            let stored = identity::worker_credential(c, id)?;
             let owner = match &presented {
-                Some(t) => scheduler::worker_of_credential(c, t)?,
+                Some(t) => identity::worker_of_credential(c, t)?,
                 None => None,
             };
             Ok((stored, owner))

@@ -340,15 +340,15 @@ mod tests {
             .unwrap();
             let plan = crate::spec::plan(spec, &scene, 10).unwrap();
             let job = scheduler::create_job(c, &plan, 0).unwrap();
-            let joining = |name| scheduler::Joining {
+            let joining = |name| crate::identity::Joining {
                 name,
                 threads: 1,
                 version: "t",
                 credential: None,
                 platform: None,
             };
-            let a = scheduler::join(c, &joining("a"), 0, 0).unwrap().id;
-            let b = scheduler::join(c, &joining("b"), 0, 0).unwrap().id;
+            let a = crate::identity::join(c, &joining("a"), 0, 0).unwrap().id;
+            let b = crate::identity::join(c, &joining("b"), 0, 0).unwrap().id;
             let first = scheduler::lease(c, a, 0, timing).unwrap().unwrap();
             let late = timing.lease_ms + 1;
             scheduler::expire(c, late, timing).unwrap();

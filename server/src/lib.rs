@@ -16,7 +16,9 @@
 //! | [`status`] | read models: job progress, frames, workers |
 //! | [`events`], [`metrics`] | server-sent events; Prometheus metrics |
 //! | [`verify`] | bit-for-bit checks of tiles on a second worker; quarantine |
-//! | [`auth`] | worker and client bearer tokens |
+//! | [`auth`] | client and join tokens, each worker's own credential |
+//! | [`identity`] | workers joining: new, or an earlier one back by credential or name |
+//! | [`tls`] | HTTPS from a certificate and key, handshakes off the accept loop |
 //! | [`api`] | the HTTP routes, one file per resource, and the OpenAPI document |
 //! | [`dashboard`] | the web page at `/` |
 //!
@@ -32,6 +34,7 @@ pub mod dashboard;
 pub mod db;
 pub mod error;
 pub mod events;
+pub mod identity;
 pub mod intake;
 pub mod limits;
 pub mod metrics;

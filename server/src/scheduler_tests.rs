@@ -4,6 +4,7 @@ use proto::{FrameRange, JobSpec, JobState, SceneInfo, TaskToken};
 use rusqlite::Connection;
 
 use super::*;
+use crate::identity::{join, worker_of_credential, Joining};
 use crate::status::job_status;
 
 const LEASE_MS: i64 = 10_000;

@@ -16,7 +16,7 @@ use super::error::{read_body, Id, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
 use crate::limits::{MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
-use crate::{intake, scheduler, status, verify};
+use crate::{identity, intake, scheduler, status, verify};
 
 /// Registers a worker with the join token (the server's worker token); the answer carries
 /// its id, its own credential for every later call, and the timing it must keep. A worker
@@ -69,14 +69,14 @@ pub async fn register(
     let joined = app
         .db
         .run(move |c| {
-            let joining = scheduler::Joining {
+            let joining = identity::Joining {
                 name: &reg.name,
                 threads: reg.threads,
                 version: &reg.version,
                 credential: reg.credential.as_deref(),
                 platform: reg.platform.as_deref(),
             };
-            scheduler::join(c, &joining, now, scheduler::live_since(now, timing))
+            identity::join(c, &joining, now, scheduler::live_since(now, timing))
         })
         .await?;
     let id = joined.id;

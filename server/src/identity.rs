@@ -1,0 +1,169 @@
+//! Who a worker is: joining the farm as a new worker, or as an earlier one come back (by
+//! the credential it kept, or by the name of a worker that is gone), and the credentials
+//! that prove it on every later call. The database keeps only each credential's SHA-256.
+
+use rusqlite::{params, Connection, OptionalExtension};
+
+use crate::db::Cached;
+use crate::error::{Error, Result};
+use crate::scheduler::{give_back, log};
+use crate::store::sha256_hex;
+
+/// A worker asking to join: [`proto::WorkerRegistration`], checked.
+#[derive(Clone, Copy, Debug)]
+pub struct Joining<'a> {
+    /// Its name, which no two live workers share.
+    pub name: &'a str,
+    /// Render threads.
+    pub threads: u32,
+    /// Its version.
+    pub version: &'a str,
+    /// The credential it kept from an earlier registration.
+    pub credential: Option<&'a str>,
+    /// Its machine and build.
+    pub platform: Option<&'a str>,
+}
+
+/// Who a joining worker turned out to be.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Joined {
+    /// Its id: an earlier worker's when it came back.
+    pub id: u64,
+    /// The credential to use from now on.
+    pub credential: String,
+    /// It is an earlier worker come back (`false`: a new one).
+    pub returned: bool,
+}
+
+/// Registers a worker, or takes an earlier one back: the worker whose credential it
+/// presents, else the last worker of its name when that one is gone (left, or not seen
+/// for two lease periods: seen before `live_since`). A name a live worker holds is
+/// refused (409). A returning worker's leases are queued again (its previous process is
+/// gone) and it gets a fresh credential unless it presented its own; its quarantine and
+/// job blocks stay. Only the credential's SHA-256 is stored.
+pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64) -> Result<Joined> {
+    let tx = conn.transaction()?;
+    let by_credential: Option<u64> = match joining.credential {
+        Some(c) => tx
+            .row(
+                "SELECT id FROM workers WHERE credential = ?1",
+                [sha256_hex(c.as_bytes())],
+                |r| r.get(0),
+            )
+            .optional()?,
+        None => None,
+    };
+    let holder: Option<(u64, bool)> = tx
+        .row(
+            "SELECT id, last_seen_ms >= ?2 AND left_ms IS NULL FROM workers
+             WHERE name = ?1 ORDER BY id DESC LIMIT 1",
+            params![joining.name, live_since],
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )
+        .optional()?;
+    let (returning, credential) = match (by_credential, holder) {
+        (Some(id), Some((other, true))) if other != id => {
+            return Err(name_in_use(joining.name, other))
+        }
+        (Some(id), _) => (Some(id), joining.credential.unwrap_or_default().to_string()),
+        (None, Some((other, true))) => return Err(name_in_use(joining.name, other)),
+        (None, Some((gone, false))) => (Some(gone), new_credential()?),
+        (None, None) => (None, new_credential()?),
+    };
+    let hash = sha256_hex(credential.as_bytes());
+    let id = match returning {
+        Some(id) => {
+            let held = give_back(&tx, id)?;
+            tx.exec(
+                "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
+                        left_ms = NULL, credential = ?6, platform = ?7 WHERE id = ?1",
+                params![
+                    id,
+                    joining.name,
+                    joining.threads,
+                    joining.version,
+                    now,
+                    hash,
+                    joining.platform
+                ],
+            )?;
+            log(
+                &tx,
+                now,
+                None,
+                "worker_returned",
+                &format!("{id} {}, {} leases given back", joining.name, held.len()),
+            )?;
+            id
+        }
+        None => {
+            tx.exec(
+                "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms,
+                                      credential, platform)
+                 VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6)",
+                params![
+                    joining.name,
+                    joining.threads,
+                    joining.version,
+                    now,
+                    hash,
+                    joining.platform
+                ],
+            )?;
+            let id = tx.last_insert_rowid() as u64;
+            log(
+                &tx,
+                now,
+                None,
+                "worker_registered",
+                &format!("{id} {}", joining.name),
+            )?;
+            id
+        }
+    };
+    tx.commit()?;
+    Ok(Joined {
+        id,
+        credential,
+        returned: returning.is_some(),
+    })
+}
+
+/// The refusal of a name a live worker holds.
+fn name_in_use(name: &str, holder: u64) -> Error {
+    Error::Conflict(format!(
+        "the name `{name}` belongs to worker {holder}, which is live: give this worker \
+         another --name, or start it once that one has left or gone silent for two lease \
+         periods"
+    ))
+}
+
+/// A new worker credential: 32 random bytes from the OS, in hex.
+fn new_credential() -> Result<String> {
+    let mut bytes = [0u8; 32];
+    getrandom::fill(&mut bytes)
+        .map_err(|e| Error::Internal(format!("drawing a worker credential: {e}")))?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// The SHA-256 of worker `id`'s credential: `None` when there is no such worker or it
+/// registered before workers had credentials.
+pub fn worker_credential(conn: &Connection, id: u64) -> Result<Option<String>> {
+    Ok(conn
+        .row("SELECT credential FROM workers WHERE id = ?1", [id], |r| {
+            r.get::<_, Option<String>>(0)
+        })
+        .optional()?
+        .flatten())
+}
+
+/// The worker `credential` belongs to, if any.
+pub fn worker_of_credential(conn: &Connection, credential: &str) -> Result<Option<u64>> {
+    Ok(conn
+        .row(
+            "SELECT id FROM workers WHERE credential = ?1",
+            [sha256_hex(credential.as_bytes())],
+            |r| r.get(0),
+        )
+        .optional()?)
+}
