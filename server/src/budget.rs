@@ -208,7 +208,7 @@ fn withdraw_unstarted_pass(tx: &Transaction, job: u64, frame_pixels: f64) -> Res
 }
 
 /// The tasks time-budget jobs could run now beyond those queued and leased: a budget job
-/// keeps only about [`QUEUE_PER_WORKER`] tasks per live worker queued, however much work
+/// keeps only about `QUEUE_PER_WORKER` (2) tasks per live worker queued, however much work
 /// it has left, so its queue says nothing about how many workers it could use. Each of its
 /// frames still under the job's spp with no pass open could run a pass of one task per
 /// tile now, had it the workers. Counts active jobs before their deadline.
