@@ -43,14 +43,8 @@ pub struct Joined {
 /// job blocks stay. Only the credential's SHA-256 is stored.
 pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64) -> Result<Joined> {
     let tx = conn.transaction()?;
-    let by_credential: Option<u64> = match joining.credential {
-        Some(c) => tx
-            .row(
-                "SELECT id FROM workers WHERE credential = ?1",
-                [sha256_hex(c.as_bytes())],
-                |r| r.get(0),
-            )
-            .optional()?,
+    let by_credential = match joining.credential {
+        Some(c) => worker_of_credential(&tx, c)?,
         None => None,
     };
     let holder: Option<(u64, bool)> = tx
