@@ -14,7 +14,7 @@
 use libfuzzer_sys::fuzz_target;
 use proto::ResultMetadata;
 use server::assembly::{check_tile, merge_passes};
-use server::scheduler::TaskRow;
+use server::db::tasks::TaskRow;
 use server::state::TaskState;
 use tracer::film::{Layers, SampleRange, TileRect};
 use tracer::output::{self, ExrMetadata};

@@ -5,11 +5,10 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 use tokio::sync::Notify;
 
-use crate::config::Config;
-use crate::db::Db;
+use crate::config::{Config, Timing};
+use crate::db::{self, Db};
 use crate::events::Hub;
 use crate::metrics::Metrics;
-use crate::scheduler::Timing;
 use crate::status;
 use crate::store::Store;
 
@@ -46,12 +45,7 @@ pub fn now_ms() -> i64 {
 impl App {
     /// The scheduler's settings.
     pub fn timing(&self) -> Timing {
-        Timing {
-            lease_ms: self.config.lease_ms(),
-            block_after_failures: self.config.block_after_failures,
-            verify_fraction: self.config.verify_fraction,
-            max_tasks_per_job: self.config.max_tasks_per_job,
-        }
+        self.config.timing()
     }
 
     /// Sends the job's current status to event listeners.
@@ -76,7 +70,7 @@ impl App {
         }
         if let Ok(f) = self
             .db
-            .run(move |c| status::frame_status(c, job, frame))
+            .run(move |c| db::frames::status(c, job, frame))
             .await
         {
             self.events.send(proto::Event::Frame {
@@ -91,10 +85,10 @@ impl App {
         if !self.events.has_listeners() {
             return;
         }
-        let (now, lease) = (now_ms(), self.config.lease_ms());
+        let live_since = self.timing().live_since(now_ms());
         if let Ok(w) = self
             .db
-            .run(move |c| status::worker(c, worker, now, lease))
+            .run(move |c| db::workers::info(c, worker, live_since))
             .await
         {
             self.events.send(proto::Event::Worker { worker: w });

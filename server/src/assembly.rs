@@ -20,9 +20,9 @@ use tracer::film::{
 };
 use tracer::output::{self, ExrCompression, ExrMetadata, ExrTarget, ImageLayer, PreviewTarget};
 
+use crate::db::tasks::TaskRow;
 use crate::error::{Error, Result};
 use crate::limits::MAX_TILE_SIZE;
-use crate::scheduler::TaskRow;
 use crate::store::{sha256_hex, Store};
 
 /// Checks an uploaded tile against its task and returns its pixels.

@@ -152,7 +152,7 @@ pub async fn require_worker(State(app): State<AppState>, req: Request, next: Nex
     let found = app
         .db
         .run(move |c| -> crate::error::Result<_> {
-            let stored = identity::worker_credential(c, id)?;
+            let stored = crate::db::workers::credential_hash(c, id)?;
             let owner = match &presented {
                 Some(t) => identity::worker_of_credential(c, t)?,
                 None => None,

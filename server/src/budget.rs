@@ -11,13 +11,14 @@
 //! go round the frames.
 
 use proto::{BudgetPlan, JobSpec};
-use rusqlite::{params, OptionalExtension, Transaction};
-use tracer::film::{SampleRange, TileRect};
+use rusqlite::{Connection, Transaction};
+use tracer::film::SampleRange;
 
-use crate::db::Cached;
+use crate::config::Timing;
+use crate::db::plans::{self, Open};
+use crate::db::{jobs, workers};
 use crate::error::Result;
-use crate::limits::MAX_SAMPLE_PASSES;
-use crate::scheduler::insert_task;
+use crate::state::JobControl;
 
 /// A worker's speed is measured over its last this many tiles of the job.
 const SPEED_WINDOW: u32 = 8;
@@ -47,34 +48,15 @@ struct Speed {
 /// Each live worker's speed (a worker is live if seen since `live_since`): the pixel
 /// samples of its last [`SPEED_WINDOW`] tiles of the job over the time from lease to
 /// upload (so preparing frames and uploads count).
-fn measure(tx: &Transaction, job: u64, live_since: i64) -> Result<Speed> {
-    let workers: Vec<u64> = {
-        let mut stmt = tx.prepare_cached(
-            "SELECT w.id FROM workers w
-             WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL AND w.quarantined_ms IS NULL
-               AND NOT EXISTS (SELECT 1 FROM job_blocks b
-                               WHERE b.job_id = ?1 AND b.worker_id = w.id)",
-        )?;
-        let rows = stmt.query_map(params![job, live_since], |r| r.get(0))?;
-        rows.collect::<rusqlite::Result<_>>()?
-    };
+fn measure(conn: &Connection, job: u64, live_since: i64) -> Result<Speed> {
+    let live = workers::live_for_job(conn, job, live_since)?;
     let mut speed = Speed {
         slowest: f64::INFINITY,
-        live: workers.len() as u32,
+        live: live.len() as u32,
         ..Speed::default()
     };
-    let mut stmt = tx.prepare_cached(
-        "SELECT sum(w * h * (sample_end - sample_start)), sum(max(done_ms - leased_ms, 1))
-         FROM (SELECT w, h, sample_start, sample_end, done_ms, leased_ms FROM tasks
-               WHERE job_id = ?1 AND worker_id = ?2 AND state = 'done'
-               ORDER BY done_ms DESC LIMIT ?3)",
-    )?;
-    for worker in workers {
-        let (samples, ms): (Option<i64>, Option<i64>) = stmt
-            .query_row(params![job, worker, SPEED_WINDOW], |r| {
-                Ok((r.get(0)?, r.get(1)?))
-            })?;
-        if let (Some(samples), Some(ms)) = (samples, ms) {
+    for worker in live {
+        if let Some((samples, ms)) = plans::recent_speed(conn, job, worker, SPEED_WINDOW)? {
             let rate = samples as f64 / (ms as f64 / 1000.0) * SPEED_MARGIN;
             speed.total += rate;
             speed.slowest = speed.slowest.min(rate);
@@ -87,148 +69,10 @@ fn measure(tx: &Transaction, job: u64, live_since: i64) -> Result<Speed> {
     Ok(speed)
 }
 
-/// Work queued and leased (checks included: they take a worker's time too).
-#[derive(Clone, Copy, Debug, Default)]
-struct Open {
-    /// Pixel samples.
-    samples: f64,
-    /// The largest task's pixel samples.
-    largest: f64,
-    /// Tasks queued.
-    queued: u64,
-    /// First-pass tasks queued.
-    first_pass_queued: u64,
-}
-
-fn open_work(tx: &Transaction, job: u64) -> Result<Open> {
-    Ok(tx.row(
-        "SELECT coalesce(sum(w * h * (sample_end - sample_start)), 0),
-                coalesce(max(w * h * (sample_end - sample_start)), 0),
-                coalesce(sum(state = 'queued'), 0),
-                coalesce(sum(state = 'queued' AND pass = 0 AND check_of IS NULL), 0)
-         FROM tasks WHERE job_id = ?1 AND state IN ('queued', 'leased')",
-        [job],
-        |r| {
-            Ok(Open {
-                samples: r.get::<_, i64>(0)? as f64,
-                largest: r.get::<_, i64>(1)? as f64,
-                queued: r.get(2)?,
-                first_pass_queued: r.get(3)?,
-            })
-        },
-    )?)
-}
-
 /// Seconds until `open` is done at `speed`: the work shared among the workers, then the
 /// largest task on the slowest of them.
 fn seconds_to_finish(open: &Open, speed: &Speed) -> f64 {
     open.samples / speed.total + open.largest / speed.slowest
-}
-
-/// The frame that most needs a pass: assembled with everything it has (nothing of it in
-/// flight), under the job's spp, highest estimated error first (no estimate counts as the
-/// highest), then fewest samples.
-fn noisiest_frame(tx: &Transaction, job: u64, spp: u32) -> Result<Option<(i32, u32, u32)>> {
-    Ok(tx
-        .row(
-            "SELECT frame, reached, passes FROM (
-                 SELECT f.frame, f.noise,
-                        (SELECT max(t.sample_end) FROM tasks t WHERE t.job_id = f.job_id
-                           AND t.frame = f.frame AND t.check_of IS NULL) AS reached,
-                        (SELECT max(t.pass) + 1 FROM tasks t WHERE t.job_id = f.job_id
-                           AND t.frame = f.frame AND t.check_of IS NULL) AS passes
-                 FROM frames f
-                 WHERE f.job_id = ?1 AND f.tasks_done = f.tasks_total
-                   AND f.assembled_tasks IS f.tasks_total)
-             WHERE reached < ?2 AND passes < ?3
-             ORDER BY noise IS NOT NULL, noise DESC, reached, frame LIMIT 1",
-            params![job, spp, MAX_SAMPLE_PASSES],
-            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)),
-        )
-        .optional()?)
-}
-
-/// Frames still under the job's spp (at least 1).
-fn hungry_frames(tx: &Transaction, job: u64, spp: u32) -> Result<u32> {
-    let n: u32 = tx.row(
-        "SELECT count(*) FROM frames f WHERE f.job_id = ?1
-           AND (SELECT max(t.sample_end) FROM tasks t
-                WHERE t.job_id = f.job_id AND t.frame = f.frame) < ?2",
-        params![job, spp],
-        |r| r.get(0),
-    )?;
-    Ok(n.max(1))
-}
-
-/// The tiles of a frame (those of its first pass: every pass covers the same ones).
-fn tiles(tx: &Transaction, job: u64, frame: i32) -> Result<Vec<(u32, TileRect)>> {
-    let mut stmt = tx.prepare_cached(
-        "SELECT tile, x, y, w, h FROM tasks
-         WHERE job_id = ?1 AND frame = ?2 AND pass = 0 AND check_of IS NULL ORDER BY tile",
-    )?;
-    let rows = stmt.query_map(params![job, frame], |r| {
-        Ok((
-            r.get(0)?,
-            TileRect::new(r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?),
-        ))
-    })?;
-    Ok(rows.collect::<rusqlite::Result<_>>()?)
-}
-
-/// Removes the newest pass (after the first) of which no task was ever leased; returns
-/// whether there was one.
-fn withdraw_unstarted_pass(tx: &Transaction, job: u64, frame_pixels: f64) -> Result<bool> {
-    let newest: Option<(i32, u32, u32, i64)> = tx
-        .row(
-            "SELECT frame, pass, count(*), max(sample_end - sample_start) FROM tasks
-             WHERE job_id = ?1 AND pass > 0 AND check_of IS NULL
-             GROUP BY frame, pass
-             HAVING sum(state != 'queued' OR attempt > 0) = 0
-             ORDER BY max(id) DESC LIMIT 1",
-            [job],
-            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)),
-        )
-        .optional()?;
-    let Some((frame, pass, tasks, samples)) = newest else {
-        return Ok(false);
-    };
-    tx.exec(
-        "DELETE FROM tasks WHERE job_id = ?1 AND frame = ?2 AND pass = ?3",
-        params![job, frame, pass],
-    )?;
-    tx.exec(
-        "UPDATE frames SET tasks_total = tasks_total - ?3 WHERE job_id = ?1 AND frame = ?2",
-        params![job, frame, tasks],
-    )?;
-    tx.exec(
-        "UPDATE jobs SET pixel_samples = pixel_samples - ?2 WHERE id = ?1",
-        params![job, (frame_pixels * samples as f64) as i64],
-    )?;
-    Ok(true)
-}
-
-/// The tasks time-budget jobs could run now beyond those queued and leased: a budget job
-/// keeps only about `QUEUE_PER_WORKER` (2) tasks per live worker queued, however much work
-/// it has left, so its queue says nothing about how many workers it could use. Each of its
-/// frames still under the job's spp with no pass open could run a pass of one task per
-/// tile now, had it the workers. Counts active jobs before their deadline.
-pub fn waiting_passes(conn: &rusqlite::Connection, now: i64) -> Result<u64> {
-    Ok(conn.row(
-        "SELECT coalesce(sum((SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id
-                                AND t.frame = f.frame AND t.pass = 0
-                                AND t.check_of IS NULL)), 0)
-         FROM frames f JOIN jobs j ON j.id = f.job_id
-         WHERE j.control = 'active'
-           AND json_extract(j.spec, '$.time_budget') IS NOT NULL
-           AND j.created_ms + json_extract(j.spec, '$.time_budget') * 1000 > ?1
-           AND (SELECT max(t.sample_end) FROM tasks t WHERE t.job_id = f.job_id
-                  AND t.frame = f.frame AND t.check_of IS NULL)
-               < json_extract(j.spec, '$.spp')
-           AND NOT EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = f.job_id
-                             AND t.frame = f.frame AND t.state IN ('queued', 'leased'))",
-        [now],
-        |r| r.get(0),
-    )?)
 }
 
 /// Plans a time-budget job again at `now` (see the module documentation): adds the passes
@@ -245,35 +89,29 @@ pub fn replan(
     let Some(budget) = spec.time_budget else {
         return Ok(());
     };
-    let (control, created_ms): (String, i64) = tx.row(
-        "SELECT control, created_ms FROM jobs WHERE id = ?1",
-        [job],
-        |r| Ok((r.get(0)?, r.get(1)?)),
-    )?;
+    let control = jobs::control(tx, job)?;
+    let created_ms = jobs::created_ms(tx, job)?;
     let deadline_ms = created_ms + (budget * 1000.0).round() as i64;
     // The last frames are assembled after their last tiles come in: plan to end a little
     // before the deadline.
     let plan_end_ms =
         deadline_ms - (budget * RESERVE_FRACTION * 1000.0).clamp(250.0, 30_000.0) as i64;
     let speed = measure(tx, job, live_since)?;
-    let mut open = open_work(tx, job)?;
+    let mut open = plans::open_work(tx, job)?;
     let first_spp = spec.min_spp.unwrap_or(1).max(1);
     let frame_pixels = spec.width as f64 * spec.height as f64;
 
-    let stage = if control != "active" {
-        format!("{control}: no passes added")
+    let stage = if control != JobControl::Active {
+        format!("{}: no passes added", control.as_str())
     } else if open.first_pass_queued > 0 {
         format!("first pass: every frame at {first_spp} spp")
     } else if speed.measured == 0 {
         "waiting for a worker's speed".to_string()
     } else {
         let mut stage = String::from("refining: the noisiest frames get more samples");
-        let mut tasks: u64 =
-            tx.row("SELECT count(*) FROM tasks WHERE job_id = ?1", [job], |r| {
-                r.get(0)
-            })?;
+        let mut tasks = plans::task_count(tx, job)?;
         while open.queued < QUEUE_PER_WORKER * u64::from(speed.live.max(1)) {
-            let Some((frame, reached, pass)) = noisiest_frame(tx, job, spec.spp)? else {
+            let Some((frame, reached, pass)) = plans::noisiest_frame(tx, job, spec.spp)? else {
                 stage = if open.samples > 0.0 {
                     "refining: every frame that can take more has a pass running".into()
                 } else {
@@ -281,7 +119,7 @@ pub fn replan(
                 };
                 break;
             };
-            let tiles = tiles(tx, job, frame)?;
+            let tiles = plans::tiles(tx, job, frame)?;
             if tasks + tiles.len() as u64 > max_tasks {
                 stage = format!("stopped: the job holds {tasks} tasks, this server's limit");
                 break;
@@ -295,10 +133,11 @@ pub fn replan(
             let fit = fit_shared.min(fit_tail).floor().max(0.0) as u32;
             // A frame's fair share of the samples left, so that one frame's big pass late
             // in the budget does not leave the others behind.
-            let share =
-                (left * speed.total / frame_pixels / f64::from(hungry_frames(tx, job, spec.spp)?))
-                    .floor()
-                    .max(f64::from(first_spp)) as u32;
+            let share = (left * speed.total
+                / frame_pixels
+                / f64::from(plans::hungry_frames(tx, job, spec.spp)?))
+            .floor()
+            .max(f64::from(first_spp)) as u32;
             let k = reached.min(spec.spp - reached).min(fit).min(share);
             if k < first_spp.min(spec.spp - reached) {
                 stage = format!(
@@ -308,17 +147,7 @@ pub fn replan(
                 break;
             }
             let samples = SampleRange::new(reached, reached + k);
-            for (tile, rect) in &tiles {
-                insert_task(tx, job, frame, *tile, pass, *rect, samples)?;
-            }
-            tx.exec(
-                "UPDATE frames SET tasks_total = tasks_total + ?3 WHERE job_id = ?1 AND frame = ?2",
-                params![job, frame, tiles.len()],
-            )?;
-            tx.exec(
-                "UPDATE jobs SET pixel_samples = pixel_samples + ?2 WHERE id = ?1",
-                params![job, (frame_pixels * f64::from(k)) as i64],
-            )?;
+            plans::add_pass(tx, job, frame, pass, &tiles, samples, frame_pixels)?;
             open.samples += frame_pixels * f64::from(k);
             open.largest = open.largest.max(largest_tile * f64::from(k));
             open.queued += tiles.len() as u64;
@@ -328,23 +157,18 @@ pub fn replan(
         // the deadline go, newest first.
         let mut withdrawn = 0;
         while now as f64 + seconds_to_finish(&open, &speed) * 1000.0 > deadline_ms as f64 {
-            if !withdraw_unstarted_pass(tx, job, frame_pixels)? {
+            if !plans::withdraw_unstarted_pass(tx, job, frame_pixels)? {
                 break;
             }
             withdrawn += 1;
-            open = open_work(tx, job)?;
+            open = plans::open_work(tx, job)?;
         }
         if withdrawn > 0 {
             stage = format!("slowed down: {withdrawn} pass(es) nobody started were withdrawn");
         }
         stage
     };
-    let passes_added: u32 = tx.row(
-        "SELECT count(*) FROM tasks WHERE job_id = ?1 AND pass > 0 AND tile = 0
-           AND check_of IS NULL",
-        [job],
-        |r| r.get(0),
-    )?;
+    let passes_added = plans::passes_added(tx, job)?;
     let predicted_end_ms = (speed.measured > 0)
         .then(|| now + (seconds_to_finish(&open, &speed) * 1000.0).round() as i64);
     let plan = BudgetPlan {
@@ -357,9 +181,31 @@ pub fn replan(
         passes_added,
         stage,
     };
-    tx.exec(
-        "UPDATE jobs SET budget_plan = ?2 WHERE id = ?1",
-        params![job, serde_json::to_string(&plan)?],
-    )?;
-    Ok(())
+    jobs::set_budget_plan(tx, job, &plan)
+}
+
+/// [`replan`] with the scheduler's settings.
+pub fn replan_with(tx: &Transaction, job: u64, now: i64, timing: Timing) -> Result<()> {
+    replan(
+        tx,
+        job,
+        &jobs::spec(tx, job)?,
+        now,
+        timing.live_since(now),
+        timing.max_tasks_per_job,
+    )
+}
+
+/// Plans every unfinished active time-budget job again (the sweeper does, every tick, so
+/// that a worker joining or leaving between two frames changes the plan at once);
+/// returns those jobs.
+pub fn replan_running(conn: &mut Connection, now: i64, timing: Timing) -> Result<Vec<u64>> {
+    let tx = conn.transaction()?;
+    let running = jobs::running_budget_jobs(&tx)?;
+    for &job in &running {
+        replan_with(&tx, job, now, timing)?;
+        jobs::update_finished(&tx, job, now)?;
+    }
+    tx.commit()?;
+    Ok(running)
 }

@@ -45,6 +45,16 @@ pub struct Config {
 }
 
 impl Config {
+    /// The scheduler's settings.
+    pub fn timing(&self) -> Timing {
+        Timing {
+            lease_ms: self.lease_ms(),
+            block_after_failures: self.block_after_failures,
+            verify_fraction: self.verify_fraction,
+            max_tasks_per_job: self.max_tasks_per_job,
+        }
+    }
+
     /// Defaults: 127.0.0.1:8700, no tokens, 60 s leases.
     pub fn new(data_dir: impl Into<PathBuf>) -> Self {
         Config {
@@ -100,5 +110,26 @@ impl Config {
     /// heartbeats may be lost before the lease expires.
     pub fn heartbeat_interval(&self) -> Duration {
         (self.lease / 4).max(Duration::from_secs(1))
+    }
+}
+
+/// The scheduler's settings, from the [`Config`].
+#[derive(Clone, Copy, Debug)]
+pub struct Timing {
+    /// Lease length, ms.
+    pub lease_ms: i64,
+    /// A worker that failed this many tasks of a job is blocked from it.
+    pub block_after_failures: u32,
+    /// The fraction of tasks rendered a second time to check the first (see
+    /// [`crate::verify`]).
+    pub verify_fraction: f64,
+    /// Tasks one job may hold, the passes a time budget adds included.
+    pub max_tasks_per_job: u64,
+}
+
+impl Timing {
+    /// A worker counts as live at `now` if it called since this: within two lease periods.
+    pub fn live_since(&self, now: i64) -> i64 {
+        now - 2 * self.lease_ms
     }
 }

@@ -1,19 +1,14 @@
-//! Server-sent events: every job, frame and worker change is broadcast to the listeners of
-//! `GET /api/v1/events` (the dashboard, `tessera status --watch`).
+//! The event hub: every job, frame and worker change is broadcast to the listeners of
+//! `GET /api/v1/events` (the dashboard, `tessera status --watch`; the route is in
+//! [`crate::api::events`]).
 
-use std::convert::Infallible;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
 
-use axum::extract::State;
-use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use tokio::sync::broadcast;
 use tokio_stream::wrappers::errors::BroadcastStreamRecvError;
 use tokio_stream::wrappers::BroadcastStream;
 use tokio_stream::{Stream, StreamExt};
-
-use crate::app::AppState;
 
 /// Events a slow listener may fall behind by before it misses some (it is told, and
 /// should re-read the lists).
@@ -59,38 +54,21 @@ impl Hub {
         self.tx.subscribe()
     }
 
+    /// A new listener as a stream, counted in [`Hub::listeners`] for as long as it lives:
+    /// each event, or how many it missed after falling behind.
+    pub fn stream(&self) -> impl Stream<Item = Result<proto::Event, u64>> {
+        self.listeners.fetch_add(1, Ordering::Relaxed);
+        let listening = Listening(self.listeners.clone());
+        BroadcastStream::new(self.subscribe()).map(move |item| {
+            let _ = &listening; // dropped with the stream when the listener goes away
+            item.map_err(|BroadcastStreamRecvError::Lagged(n)| n)
+        })
+    }
+
     /// Open `/events` streams (a gauge in `/metrics`).
     pub fn listeners(&self) -> usize {
         self.listeners.load(Ordering::Relaxed)
     }
-}
-
-/// The SSE stream: event name = the event's `type`, data = its JSON. A listener that fell
-/// behind gets a `lagged` event with the number missed.
-#[utoipa::path(
-    get,
-    path = "/events",
-    tag = "events",
-    responses((status = 200, description = "text/event-stream of `Event` JSON", body = proto::Event, content_type = "text/event-stream")),
-    security(("client_token" = []))
-)]
-pub async fn events(
-    State(app): State<AppState>,
-) -> Sse<impl Stream<Item = Result<SseEvent, Infallible>>> {
-    app.events.listeners.fetch_add(1, Ordering::Relaxed);
-    let listening = Listening(app.events.listeners.clone());
-    let stream = BroadcastStream::new(app.events.subscribe()).map(move |item| {
-        let _ = &listening; // dropped with the stream when the client goes away
-        Ok(match item {
-            Ok(event) => SseEvent::default()
-                .event(event.name())
-                .data(serde_json::to_string(&event).unwrap_or_default()),
-            Err(BroadcastStreamRecvError::Lagged(n)) => {
-                SseEvent::default().event("lagged").data(n.to_string())
-            }
-        })
-    });
-    Sse::new(stream).keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
 }
 
 #[cfg(test)]

@@ -2,11 +2,12 @@
 //! the credential it kept, or by the name of a worker that is gone), and the credentials
 //! that prove it on every later call. The database keeps only each credential's SHA-256.
 
-use rusqlite::{params, Connection, OptionalExtension};
+use rusqlite::Connection;
 
-use crate::db::Cached;
+use crate::db::events::log;
+use crate::db::tasks;
+use crate::db::workers::{self, Profile};
 use crate::error::{Error, Result};
-use crate::scheduler::{give_back, log};
 use crate::store::sha256_hex;
 
 /// A worker asking to join: [`proto::WorkerRegistration`], checked.
@@ -47,14 +48,7 @@ pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64)
         Some(c) => worker_of_credential(&tx, c)?,
         None => None,
     };
-    let holder: Option<(u64, bool)> = tx
-        .row(
-            "SELECT id, last_seen_ms >= ?2 AND left_ms IS NULL FROM workers
-             WHERE name = ?1 ORDER BY id DESC LIMIT 1",
-            params![joining.name, live_since],
-            |r| Ok((r.get(0)?, r.get(1)?)),
-        )
-        .optional()?;
+    let holder = workers::newest_named(&tx, joining.name, live_since)?;
     let (returning, credential) = match (by_credential, holder) {
         (Some(id), Some((other, true))) if other != id => {
             return Err(name_in_use(joining.name, other))
@@ -65,22 +59,16 @@ pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64)
         (None, None) => (None, new_credential()?),
     };
     let hash = sha256_hex(credential.as_bytes());
+    let profile = Profile {
+        name: joining.name,
+        threads: joining.threads,
+        version: joining.version,
+        platform: joining.platform,
+    };
     let id = match returning {
         Some(id) => {
-            let held = give_back(&tx, id)?;
-            tx.exec(
-                "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
-                        left_ms = NULL, credential = ?6, platform = ?7 WHERE id = ?1",
-                params![
-                    id,
-                    joining.name,
-                    joining.threads,
-                    joining.version,
-                    now,
-                    hash,
-                    joining.platform
-                ],
-            )?;
+            let held = tasks::give_back(&tx, id)?;
+            workers::set_returned(&tx, id, &profile, &hash, now)?;
             log(
                 &tx,
                 now,
@@ -91,20 +79,7 @@ pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64)
             id
         }
         None => {
-            tx.exec(
-                "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms,
-                                      credential, platform)
-                 VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6)",
-                params![
-                    joining.name,
-                    joining.threads,
-                    joining.version,
-                    now,
-                    hash,
-                    joining.platform
-                ],
-            )?;
-            let id = tx.last_insert_rowid() as u64;
+            let id = workers::insert(&tx, &profile, &hash, now)?;
             log(
                 &tx,
                 now,
@@ -140,24 +115,7 @@ fn new_credential() -> Result<String> {
     Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
-/// The SHA-256 of worker `id`'s credential: `None` when there is no such worker or it
-/// registered before workers had credentials.
-pub fn worker_credential(conn: &Connection, id: u64) -> Result<Option<String>> {
-    Ok(conn
-        .row("SELECT credential FROM workers WHERE id = ?1", [id], |r| {
-            r.get::<_, Option<String>>(0)
-        })
-        .optional()?
-        .flatten())
-}
-
 /// The worker `credential` belongs to, if any.
 pub fn worker_of_credential(conn: &Connection, credential: &str) -> Result<Option<u64>> {
-    Ok(conn
-        .row(
-            "SELECT id FROM workers WHERE credential = ?1",
-            [sha256_hex(credential.as_bytes())],
-            |r| r.get(0),
-        )
-        .optional()?)
+    workers::of_credential_hash(conn, &sha256_hex(credential.as_bytes()))
 }

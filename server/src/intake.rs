@@ -1,18 +1,27 @@
 //! The tile upload pipeline, start to end on one blocking thread (a client that hangs up
 //! cannot stop it half-way): is the lease current, is the tile good, store it, mark the
 //! task done (one transaction), then assemble the frame or write a progressive preview.
-//! A check task's tile is first compared with the tiles it repeats (see [`verify`]).
+//! A check task's tile is first compared with the tiles it repeats (see [`verify`]). A
+//! frame's assembly ends in one transaction too: assembled (and, for a time-budget job,
+//! planned again) or failed with its reason.
 
 use std::collections::HashSet;
 use std::time::Instant;
 
 use proto::{ResultMetadata, TaskToken};
-use tracer::film::Layers;
+use rusqlite::Connection;
+use tracer::film::{Layers, SamplingSummary};
 
 use crate::app::{now_ms, App};
 use crate::assembly::{self, FrameSource};
+use crate::budget;
+use crate::config::Timing;
+use crate::db::events::log;
+use crate::db::tasks::{self, TaskRow};
+use crate::db::{frames, jobs};
 use crate::error::{Error, Result};
-use crate::scheduler::{self, Accepted, TaskRow};
+use crate::scheduler::{self, Accepted};
+use crate::state::JobControl;
 use crate::store::write_atomic;
 use crate::verify::{self, Verdict};
 
@@ -48,7 +57,7 @@ pub fn receive(
             frame_done: false,
         });
     }
-    let spec = app.db.with(|c| scheduler::job_spec(c, task.job_id))?;
+    let spec = app.db.with(|c| jobs::spec(c, task.job_id))?;
     let layers = match assembly::check_tile(bytes, meta, &task, (spec.width, spec.height)) {
         Ok(layers) => layers,
         Err(e) => {
@@ -131,7 +140,7 @@ pub fn store_and_commit(
         let counts = match &accepted {
             Ok(Accepted::New { .. }) => true,
             Ok(Accepted::Duplicate) => {
-                scheduler::load_task(c, token.task_id)?.is_some_and(|t| t.attempt == token.attempt)
+                tasks::load(c, token.task_id)?.is_some_and(|t| t.attempt == token.attempt)
             }
             Err(_) => false,
         };
@@ -200,7 +209,7 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
         Err(Error::BadFrame(reason)) => {
             tracing::error!("job {job} frame {frame} failed to assemble: {reason}");
             app.db
-                .with(|c| scheduler::fail_frame(c, job, frame, &reason, now_ms()))
+                .with(|c| fail_frame(c, job, frame, &reason, now_ms()))
         }
         Err(Error::Conflict(why) | Error::NotFound(why)) => {
             tracing::info!("job {job} frame {frame} not assembled: {why}");
@@ -214,11 +223,11 @@ pub fn finish_frame(app: &App, job: u64, frame: i32) -> Result<()> {
 fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     let (spec, tasks, assembled, render_seconds, features) = app.db.with(|c| -> Result<_> {
         Ok((
-            scheduler::job_spec(c, job)?,
-            scheduler::done_tasks_of_frame(c, job, frame)?,
-            scheduler::is_assembled(c, job, frame)?,
-            scheduler::frame_render_seconds(c, job, frame)?,
-            scheduler::job_scene_features(c, job)?,
+            jobs::spec(c, job)?,
+            tasks::done_of_frame(c, job, frame)?,
+            frames::is_assembled(c, job, frame)?,
+            tasks::render_seconds_of_frame(c, job, frame)?,
+            jobs::scene_features(c, job)?,
         ))
     })?;
     // Another caller (the upload that completed it, or the sweeper) got here first.
@@ -227,7 +236,7 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     }
     let budget = app.config.assembly_memory;
     // The job may be cancelled or deleted while a big frame is written: each band asks.
-    let wanted = || app.db.with(|c| scheduler::assembly_wanted(c, job));
+    let wanted = || app.db.with(|c| assembly_wanted(c, job));
     let started = Instant::now();
     let tile_bytes: u64 = tasks
         .iter()
@@ -250,22 +259,74 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     source.write_frame(&facts)?;
     let (now, timing) = (now_ms(), app.timing());
     app.db
-        .with(|c| scheduler::mark_assembled(c, job, frame, now, &facts.reached, timing))?;
+        .with(|c| mark_assembled(c, job, frame, now, &facts.reached, timing))?;
     app.metrics
         .frame_assembled(started.elapsed().as_secs_f64(), tile_bytes);
     let checks = app
         .db
-        .with(|c| scheduler::done_checks_of_frame(c, job, frame))?;
+        .with(|c| tasks::done_checks_of_frame(c, job, frame))?;
     let done: HashSet<u64> = tasks.iter().map(|t| t.id).chain(checks).collect();
     app.store.remove_tiles(job, &done);
     if spec.time_budget.is_some() {
         // Passes planned just now are waiting to be leased.
         app.work.notify_waiters();
-        if app.db.with(|c| scheduler::finished_cleanly(c, job))? {
+        if app.db.with(|c| jobs::finished_cleanly(c, job))? {
             remove_merged_frames(app, job);
         }
     }
     Ok(())
+}
+
+/// Marks a frame assembled from all of its tasks so far, with what it reached; a time-budget
+/// job then plans its next passes (before it can count as finished).
+pub fn mark_assembled(
+    conn: &mut Connection,
+    job: u64,
+    frame: i32,
+    now: i64,
+    reached: &SamplingSummary,
+    timing: Timing,
+) -> Result<()> {
+    let tx = conn.transaction()?;
+    frames::set_assembled(&tx, job, frame, now, reached)?;
+    log(&tx, now, Some(job), "frame_assembled", &frame.to_string())?;
+    budget::replan_with(&tx, job, now, timing)?;
+    jobs::update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Marks a frame whose assembly failed, with the reason: it is not assembled again until
+/// the job is retried, and the job counts as failed.
+pub fn fail_frame(
+    conn: &mut Connection,
+    job: u64,
+    frame: i32,
+    reason: &str,
+    now: i64,
+) -> Result<()> {
+    let tx = conn.transaction()?;
+    frames::set_failure(&tx, job, frame, reason)?;
+    log(
+        &tx,
+        now,
+        Some(job),
+        "frame_failed",
+        &format!("{frame}: {reason}"),
+    )?;
+    jobs::update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Whether a frame of `job` should still be assembled: `NotFound` once the job is
+/// deleted, `Conflict` once it is cancelled (an assembly under way stops).
+fn assembly_wanted(conn: &Connection, job: u64) -> Result<()> {
+    match jobs::find_control(conn, job)? {
+        None => Err(Error::NotFound(format!("job {job} was deleted"))),
+        Some(JobControl::Cancelled) => Err(Error::Conflict(format!("job {job} was cancelled"))),
+        Some(JobControl::Active | JobControl::Paused) => Ok(()),
+    }
 }
 
 /// Removes a finished time-budget job's merged frames (kept while a failed task could
@@ -287,9 +348,9 @@ pub fn preview_frame(app: &App, job: u64, frame: i32) -> Result<()> {
     let _guard = app.assembly.lock().unwrap_or_else(|p| p.into_inner());
     let (spec, tasks, assembled) = app.db.with(|c| -> Result<_> {
         Ok((
-            scheduler::job_spec(c, job)?,
-            scheduler::done_tasks_of_frame(c, job, frame)?,
-            scheduler::is_assembled(c, job, frame)?,
+            jobs::spec(c, job)?,
+            tasks::done_of_frame(c, job, frame)?,
+            frames::is_assembled(c, job, frame)?,
         ))
     })?;
     if assembled {
@@ -333,13 +394,9 @@ mod tests {
         (spec.width, spec.height, spec.tile_size) = (8, 8, Some(8));
         let timing = app.timing();
         let (job, a, b, first, second) = app.db.with(|c| {
-            c.execute(
-                "INSERT INTO scenes (digest, size, info, created_ms) VALUES (?1, 1, '{}', 0)",
-                [&scene.digest],
-            )
-            .unwrap();
+            crate::db::scenes::insert(c, &scene.digest, 1, &scene, 0).unwrap();
             let plan = crate::spec::plan(spec, &scene, 10).unwrap();
-            let job = scheduler::create_job(c, &plan, 0).unwrap();
+            let job = crate::controls::submit(c, &plan, 0).unwrap();
             let joining = |name| crate::identity::Joining {
                 name,
                 threads: 1,

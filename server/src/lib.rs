@@ -5,16 +5,17 @@
 //! |---|---|
 //! | [`config`] | settings: listen address, data folder, tokens, lease timing, limits |
 //! | [`limits`] | every bound the server enforces, with its value |
-//! | [`db`], [`migrations`] | SQLite (WAL) off the async runtime; versioned schema |
+//! | [`db`] | every SQL statement: one file per table, the versioned schema, SQLite (WAL) off the async runtime |
 //! | [`store`] | files beside the database: scenes by SHA-256, tiles, job outputs |
-//! | [`state`] | the task state machine: one transition table |
-//! | [`scheduler`] | leases, heartbeats, failures, expiry, job controls: one transaction each |
+//! | [`state`] | the task and job state machines: one transition table each |
+//! | [`scheduler`] | leases, heartbeats, uploads accepted, failures, expiry: one transaction each |
+//! | [`controls`] | job controls: submit, pause, resume, cancel, retry, delete |
 //! | [`spec`] | job-spec checks (each error names its field) and the split into tasks |
 //! | [`budget`] | time-budget jobs: the farm's measured speed decides which passes fit |
 //! | [`scene`] | scene uploads checked with the tracer's loader and summarised |
 //! | [`intake`], [`assembly`] | tile uploads checked and accepted; frames assembled |
-//! | [`status`] | read models: job progress, frames, workers |
-//! | [`events`], [`metrics`] | server-sent events; Prometheus metrics |
+//! | [`status`] | a job's status: state, progress, speed, ETA |
+//! | [`events`], [`metrics`] | the event hub; Prometheus metrics |
 //! | [`verify`] | bit-for-bit checks of tiles on a second worker; quarantine |
 //! | [`auth`] | client and join tokens, each worker's own credential |
 //! | [`identity`] | workers joining: new, or an earlier one back by credential or name |
@@ -30,15 +31,17 @@ pub mod assembly;
 pub mod auth;
 pub mod budget;
 pub mod config;
+pub mod controls;
 pub mod dashboard;
 pub mod db;
 pub mod error;
 pub mod events;
+#[cfg(test)]
+mod farm_tests;
 pub mod identity;
 pub mod intake;
 pub mod limits;
 pub mod metrics;
-pub mod migrations;
 pub mod scene;
 pub mod scheduler;
 pub mod spec;
@@ -115,7 +118,7 @@ pub fn open(config: Config) -> Result<AppState, StartError> {
     }
     let db = db::Db::open(&store.database())?;
     let renamed = db.with(|c| {
-        store.name_tiles_by_attempt(|task| Ok(scheduler::load_task(c, task)?.map(|t| t.attempt)))
+        store.name_tiles_by_attempt(|task| Ok(db::tasks::load(c, task)?.map(|t| t.attempt)))
     })?;
     if renamed > 0 {
         tracing::info!("named {renamed} tiles by their accepted attempt");
@@ -216,7 +219,7 @@ async fn sweep(app: AppState) {
         }
         match app
             .db
-            .run(move |c| scheduler::replan_budgets(c, now, timing))
+            .run(move |c| budget::replan_running(c, now, timing))
             .await
         {
             Ok(jobs) if !jobs.is_empty() => {
@@ -230,7 +233,7 @@ async fn sweep(app: AppState) {
         }
         let a = app.clone();
         let finished = tokio::task::spawn_blocking(move || -> error::Result<Vec<(u64, i32)>> {
-            let pending = a.db.with(|c| scheduler::unassembled_frames(c))?;
+            let pending = a.db.with(|c| db::frames::unassembled(c))?;
             // One frame that fails (the disk is still full) does not hold up the others,
             // and those assembled are announced.
             let mut done = Vec::new();

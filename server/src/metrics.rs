@@ -9,6 +9,7 @@
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle, PrometheusRecorder};
 use rusqlite::Connection;
 
+use crate::db;
 use crate::error::Result;
 
 /// The server's recorder.
@@ -192,11 +193,11 @@ impl Metrics {
     }
 }
 
-/// Reads the gauges: jobs by state, tasks by state, workers online (seen within two lease
-/// periods) and offline, and the demand an autoscaler sizes the pool by: the queued and
+/// Reads the gauges: jobs by state, tasks by state, workers online (seen since
+/// `live_since`) and offline, and the demand an autoscaler sizes the pool by: the queued and
 /// leased tasks of jobs that are not paused, plus the passes time-budget jobs could run
-/// now ([`crate::budget::waiting_passes`]).
-pub fn snapshot(conn: &Connection, now: i64, lease_ms: i64) -> Result<Snapshot> {
+/// now ([`db::plans::waiting_passes`]).
+pub fn snapshot(conn: &Connection, now: i64, live_since: i64) -> Result<Snapshot> {
     let mut jobs: Vec<(String, u64)> =
         ["queued", "running", "paused", "cancelled", "failed", "done"]
             .iter()
@@ -211,35 +212,18 @@ pub fn snapshot(conn: &Connection, now: i64, lease_ms: i64) -> Result<Snapshot> 
             slot.1 += 1;
         }
     }
-    let mut tasks: Vec<(String, u64)> = crate::state::TaskState::ALL
-        .iter()
-        .map(|s| (s.as_str().to_string(), 0))
+    let tasks = db::tasks::count_by_state(conn)?
+        .into_iter()
+        .map(|(s, n)| (s.as_str().to_string(), n))
         .collect();
-    let mut stmt = conn.prepare("SELECT state, count(*) FROM tasks GROUP BY state")?;
-    let rows = stmt.query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, u64>(1)?)))?;
-    for row in rows {
-        let (state, n) = row?;
-        if let Some(slot) = tasks.iter_mut().find(|(s, _)| *s == state) {
-            slot.1 = n;
-        }
-    }
-    let (workers_total, workers_online) = conn.query_row(
-        "SELECT count(*), coalesce(sum(last_seen_ms >= ?1 AND left_ms IS NULL), 0) FROM workers",
-        [now - 2 * lease_ms],
-        |r| Ok((r.get(0)?, r.get(1)?)),
-    )?;
-    let open: u64 = conn.query_row(
-        "SELECT count(*) FROM tasks t JOIN jobs j ON j.id = t.job_id
-         WHERE j.control = 'active' AND t.state IN ('queued', 'leased')",
-        [],
-        |r| r.get(0),
-    )?;
+    let (workers_total, workers_online) = db::workers::counts(conn, live_since)?;
+    let open = db::tasks::open_of_active_jobs(conn)?;
     Ok(Snapshot {
         jobs,
         tasks,
         workers_online,
         workers_total,
-        demand: open + crate::budget::waiting_passes(conn, now)?,
+        demand: open + db::plans::waiting_passes(conn, now)?,
         listeners: 0,
     })
 }

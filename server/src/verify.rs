@@ -15,12 +15,14 @@
 //! decided. A quarantined worker's other unchecked tiles in frames not yet assembled are
 //! checked too.
 
-use rusqlite::{params, Connection, Transaction};
+use rusqlite::{Connection, Transaction};
 use tracer::film::Layers;
 
-use crate::db::Cached;
+use crate::db::events::log;
+pub use crate::db::tasks::Render;
+use crate::db::tasks::{self, NewTask, TaskRow};
+use crate::db::{frames, workers};
 use crate::error::{Error, Result};
-use crate::scheduler::{load_task, log, revoke, TaskRow, TASK_COLUMNS};
 
 /// The most check renders of one task: with the first render, four chances for two
 /// workers to agree.
@@ -60,19 +62,6 @@ pub fn identical(a: &Layers, b: &Layers) -> bool {
         && bits(&a.depth) == bits(&b.depth)
 }
 
-/// One finished render of a check group: the task itself or one of its checks.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Render {
-    /// Its task id.
-    pub task: u64,
-    /// The attempt whose tile was accepted.
-    pub attempt: u32,
-    /// The worker that rendered it.
-    pub worker: u64,
-    /// That worker is quarantined.
-    pub quarantined: bool,
-}
-
 /// What a check's tile says about its group, decided before the tile is accepted.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Verdict {
@@ -110,47 +99,13 @@ impl Verdict {
 
 /// The finished renders of the task `original` and its checks.
 pub fn group(conn: &Connection, original: u64) -> Result<Vec<Render>> {
-    let mut stmt = conn.prepare_cached(
-        "SELECT t.id, t.attempt, t.worker_id, w.quarantined_ms IS NOT NULL
-         FROM tasks t JOIN workers w ON w.id = t.worker_id
-         WHERE (t.id = ?1 OR t.check_of = ?1) AND t.state = 'done'
-         ORDER BY t.id",
-    )?;
-    let rows = stmt.query_map([original], |r| {
-        Ok(Render {
-            task: r.get(0)?,
-            attempt: r.get(1)?,
-            worker: r.get(2)?,
-            quarantined: r.get(3)?,
-        })
-    })?;
-    Ok(rows.collect::<rusqlite::Result<_>>()?)
+    tasks::renders_of(conn, original)
 }
 
 /// Queues a check of the render task `task`; its frame now waits for it.
 fn add_check(tx: &Transaction, task: &TaskRow, now: i64, why: &str) -> Result<()> {
-    tx.exec(
-        "INSERT INTO tasks (job_id, frame, tile, pass, x, y, w, h, sample_start, sample_end,
-                            state, check_of)
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued', ?11)",
-        params![
-            task.job_id,
-            task.frame,
-            task.tile,
-            task.pass,
-            task.rect.x,
-            task.rect.y,
-            task.rect.width,
-            task.rect.height,
-            task.samples.start,
-            task.samples.end,
-            task.id
-        ],
-    )?;
-    tx.exec(
-        "UPDATE frames SET tasks_total = tasks_total + 1 WHERE job_id = ?1 AND frame = ?2",
-        params![task.job_id, task.frame],
-    )?;
+    tasks::insert(tx, &NewTask::check_of(task))?;
+    frames::add_tasks(tx, task.job_id, task.frame, 1)?;
     log(
         tx,
         now,
@@ -173,13 +128,7 @@ pub fn sample(
     if task.check_of.is_some() || !sampled(task.id, fraction) {
         return Ok(());
     }
-    let other: bool = tx.row(
-        "SELECT EXISTS (SELECT 1 FROM workers WHERE id != ?1 AND last_seen_ms >= ?2
-                          AND left_ms IS NULL AND quarantined_ms IS NULL)",
-        params![worker, live_since],
-        |r| r.get(0),
-    )?;
-    if other {
+    if workers::another_live(tx, worker, live_since)? {
         add_check(tx, task, now, "sampled")?;
     }
     Ok(())
@@ -196,7 +145,7 @@ pub fn record(
     let original_id = check
         .check_of
         .ok_or_else(|| Error::Internal(format!("task {} is not a check", check.id)))?;
-    let original = load_task(tx, original_id)?
+    let original = tasks::load(tx, original_id)?
         .ok_or_else(|| Error::Internal(format!("checked task {original_id} vanished")))?;
     let earlier: Vec<Render> = group(tx, original_id)?
         .into_iter()
@@ -227,7 +176,7 @@ pub fn record(
                 .map(|r| r.worker)
                 .chain([worker])
             {
-                tx.exec("UPDATE workers SET suspect_ms = NULL WHERE id = ?1", [w])?;
+                workers::unsuspect(tx, w)?;
             }
             log(
                 tx,
@@ -252,10 +201,7 @@ pub fn record(
         ),
         Verdict::Disagrees => {
             for w in earlier.iter().map(|r| r.worker).chain([worker]) {
-                tx.exec(
-                    "UPDATE workers SET suspect_ms = coalesce(suspect_ms, ?2) WHERE id = ?1",
-                    params![w, now],
-                )?;
+                workers::suspect(tx, w, now)?;
             }
             log(
                 tx,
@@ -291,11 +237,7 @@ pub fn record(
 fn platforms(tx: &Transaction, renders: &[(u64, u64)]) -> Result<String> {
     let mut parts = Vec::with_capacity(renders.len());
     for &(task, worker) in renders {
-        let (name, platform): (String, Option<String>) = tx.row(
-            "SELECT name, platform FROM workers WHERE id = ?1",
-            [worker],
-            |r| Ok((r.get(0)?, r.get(1)?)),
-        )?;
+        let (name, platform) = workers::name_and_platform(tx, worker)?;
         let platform = platform.unwrap_or_else(|| "a platform it did not report".into());
         parts.push(format!(
             "task {task} by worker {worker} ({name}) on {platform}"
@@ -304,49 +246,20 @@ fn platforms(tx: &Transaction, renders: &[(u64, u64)]) -> Result<String> {
     Ok(format!("renders: {}", parts.join("; ")))
 }
 
-/// A done task `t` whose tile is not yet in its frame `f` (which keeps it until then):
-/// the frame was never assembled, or the task came after its last assembly (a time-budget
-/// frame's next pass).
-const UNMERGED: &str = "(f.assembled_ms IS NULL OR t.done_ms > f.assembled_ms)";
-
 /// Quarantines `worker`: its leases go back to the queue, it gets no more work, and its
 /// unchecked tiles in frames not yet assembled are checked.
 fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<()> {
-    let newly = tx.exec(
-        "UPDATE workers SET quarantined_ms = ?2, quarantine_reason = ?3, suspect_ms = NULL
-         WHERE id = ?1 AND quarantined_ms IS NULL",
-        params![worker, now, reason],
-    )?;
-    if newly == 0 {
+    if !workers::quarantine(tx, worker, reason, now)? {
         return Ok(());
     }
-    let select = |filter: &str| -> Result<Vec<TaskRow>> {
-        let mut stmt = tx.prepare_cached(&format!(
-            "SELECT {TASK_COLUMNS} FROM tasks t WHERE t.worker_id = ?1 AND {filter}"
-        ))?;
-        let rows = stmt.query_map([worker], crate::scheduler::task_from_row)?;
-        Ok(rows.collect::<rusqlite::Result<_>>()?)
-    };
-    for task in select("t.state = 'leased'")? {
-        revoke(tx, &task)?;
+    for task in tasks::leased_by(tx, worker)? {
+        tasks::revoke(tx, &task)?;
     }
-    let unchecked = select(&format!(
-        "t.state = 'done' AND t.check_of IS NULL
-         AND NOT EXISTS (SELECT 1 FROM tasks c WHERE c.check_of = t.id)
-         AND EXISTS (SELECT 1 FROM frames f WHERE f.job_id = t.job_id AND f.frame = t.frame
-                       AND {UNMERGED})"
-    ))?;
+    let unchecked = tasks::unchecked_unmerged_of(tx, worker)?;
     for task in &unchecked {
         add_check(tx, task, now, &format!("worker {worker} quarantined"))?;
     }
-    let assembled: i64 = tx.row(
-        &format!(
-            "SELECT count(*) FROM tasks t JOIN frames f ON f.job_id = t.job_id AND f.frame = t.frame
-             WHERE t.worker_id = ?1 AND t.state = 'done' AND NOT {UNMERGED}"
-        ),
-        [worker],
-        |r| r.get(0),
-    )?;
+    let assembled = tasks::merged_count_of(tx, worker)?;
     log(
         tx,
         now,
@@ -360,24 +273,10 @@ fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<(
     )
 }
 
-/// Whether `worker` is quarantined.
-pub fn is_quarantined(conn: &Connection, worker: u64) -> Result<bool> {
-    Ok(conn.row(
-        "SELECT quarantined_ms IS NOT NULL FROM workers WHERE id = ?1",
-        [worker],
-        |r| r.get(0),
-    )?)
-}
-
 /// An operator clears a worker: it is no longer quarantined or suspect and gets work again.
 pub fn clear(conn: &mut Connection, worker: u64, now: i64) -> Result<()> {
     let tx = conn.transaction()?;
-    let n = tx.exec(
-        "UPDATE workers SET quarantined_ms = NULL, quarantine_reason = NULL, suspect_ms = NULL
-         WHERE id = ?1",
-        [worker],
-    )?;
-    if n == 0 {
+    if !workers::clear(&tx, worker)? {
         return Err(Error::NotFound(format!(
             "worker {worker} is not registered"
         )));

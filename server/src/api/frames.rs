@@ -8,8 +8,8 @@ use proto::{FrameList, FrameState};
 
 use super::error::{Id, PathParams};
 use crate::app::AppState;
+use crate::db;
 use crate::error::{Error, Result};
-use crate::status;
 
 /// The frames of a job, with their states.
 #[utoipa::path(
@@ -24,7 +24,7 @@ pub async fn list(
     State(app): State<AppState>,
     PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<FrameList>> {
-    Ok(Json(app.db.run(move |c| status::frames(c, id)).await?))
+    Ok(Json(app.db.run(move |c| db::frames::list(c, id)).await?))
 }
 
 async fn file(
@@ -36,7 +36,7 @@ async fn file(
 ) -> Result<Response> {
     let f = app
         .db
-        .run(move |c| status::frame_status(c, job, frame))
+        .run(move |c| db::frames::status(c, job, frame))
         .await?;
     let path = app
         .store

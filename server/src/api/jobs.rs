@@ -3,13 +3,12 @@
 use axum::extract::State;
 use axum::http::StatusCode;
 use axum::Json;
-use proto::{JobList, JobSpec, JobStatus, SceneInfo};
-use rusqlite::OptionalExtension;
+use proto::{JobList, JobSpec, JobStatus};
 
 use super::error::{Id, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
-use crate::{assembly, scheduler, spec, status};
+use crate::{assembly, controls, db, spec, status};
 
 /// Creates a job: the spec is checked field by field and split into tasks.
 #[utoipa::path(
@@ -32,15 +31,8 @@ pub async fn create(
     let id = app
         .db
         .run(move |c| -> Result<u64> {
-            let scene: Option<String> = c
-                .query_row(
-                    "SELECT info FROM scenes WHERE digest = ?1",
-                    [&spec.scene],
-                    |r| r.get(0),
-                )
-                .optional()?;
-            let scene: SceneInfo = match scene {
-                Some(json) => serde_json::from_str(&json)?,
+            let scene = match db::scenes::info(c, &spec.scene)? {
+                Some(scene) => scene,
                 None => {
                     return Err(Error::Invalid {
                         field: "scene".into(),
@@ -56,7 +48,7 @@ pub async fn create(
                 message: e.message,
             })?;
             assembly::check_assembly_memory(&plan.spec, assembly_memory)?;
-            scheduler::create_job(c, &plan, now)
+            controls::submit(c, &plan, now)
         })
         .await?;
     app.work.notify_waiters();
@@ -128,7 +120,7 @@ pub async fn cancel(
     State(app): State<AppState>,
     PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
-    control(app, id, scheduler::cancel).await
+    control(app, id, controls::cancel).await
 }
 
 /// Pauses a job: nothing more is leased; workers rendering it hear 409 and the tasks go
@@ -145,7 +137,7 @@ pub async fn pause(
     State(app): State<AppState>,
     PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
-    control(app, id, scheduler::pause).await
+    control(app, id, controls::pause).await
 }
 
 /// Resumes a paused job.
@@ -161,7 +153,7 @@ pub async fn resume(
     State(app): State<AppState>,
     PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
-    control(app, id, scheduler::resume).await
+    control(app, id, controls::resume).await
 }
 
 /// Re-queues a job's failed tasks with fresh attempts, and assembles again the frames
@@ -179,7 +171,7 @@ pub async fn retry(
     PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
     control(app, id, |c, id, now| {
-        scheduler::retry(c, id, now).map(|_| ())
+        controls::retry(c, id, now).map(|_| ())
     })
     .await
 }
@@ -198,9 +190,7 @@ pub async fn delete(
     PathParams(Id(id)): PathParams<Id>,
 ) -> Result<StatusCode> {
     let now = now_ms();
-    app.db
-        .run(move |c| scheduler::delete_job(c, id, now))
-        .await?;
+    app.db.run(move |c| controls::delete(c, id, now)).await?;
     let (jobs_dir, tiles_dir) = (app.store.job_dir(id), app.store.tile_dir(id));
     for dir in [jobs_dir, tiles_dir] {
         match tokio::fs::remove_dir_all(&dir).await {

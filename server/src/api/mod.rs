@@ -8,10 +8,12 @@
 //! | `jobs.rs` | `POST/GET /jobs`, `GET/DELETE /jobs/{id}`, `POST /jobs/{id}/{cancel,pause,resume,retry}` |
 //! | `frames.rs` | `GET /jobs/{id}/frames`, `GET /jobs/{id}/frames/{frame}/{exr,png}` |
 //! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat,leave,clear}`, `POST /workers/{id}/tasks/{task}/{result,failure}` |
+//! | `events.rs` | `GET /events` (server-sent events) |
 //! | `system.rs` | `/healthz`, `/metrics`, `/api/v1/openapi.json` |
 //! | `error.rs` | errors as JSON; extractors that reject with them |
 
 pub mod error;
+pub mod events;
 pub mod frames;
 pub mod jobs;
 pub mod scenes;
@@ -28,7 +30,6 @@ use utoipa_axum::routes;
 
 use crate::app::AppState;
 use crate::auth::{self, Role};
-use crate::events;
 use crate::limits::MAX_JSON_BYTES;
 
 #[derive(OpenApi)]

@@ -7,10 +7,10 @@ use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use proto::SceneInfo;
-use rusqlite::OptionalExtension;
 
 use super::error::{read_body, PathParams};
 use crate::app::{now_ms, AppState};
+use crate::db;
 use crate::error::{Error, Result};
 use crate::store::{self, is_digest};
 
@@ -41,24 +41,14 @@ pub async fn upload(State(app): State<AppState>, body: Body) -> Result<Response>
     let (info, created) = tokio::task::spawn_blocking(move || -> Result<(SceneInfo, bool)> {
         // A scene already stored was checked when it first came: answer from the database.
         let digest = store::sha256_hex(&bytes);
-        let known: Option<String> = a.db.with(|c| {
-            c.query_row("SELECT info FROM scenes WHERE digest = ?1", [&digest], |r| r.get(0))
-                .optional()
-        })?;
-        if let Some(json) = known {
-            return Ok((serde_json::from_str(&json)?, false));
+        if let Some(info) = a.db.with(|c| db::scenes::info(c, &digest))? {
+            return Ok((info, false));
         }
         let (info, _scene) = crate::scene::inspect(&bytes)
             .map_err(|e| Error::BadScene(format!("the scene cannot be loaded: {e}")))?;
         store::write_atomic(&a.store.scene(&digest), &bytes)?;
-        let json = serde_json::to_string(&info)?;
         let now = now_ms();
-        a.db.with(|c| {
-            c.execute(
-                "INSERT OR IGNORE INTO scenes (digest, size, info, created_ms) VALUES (?1, ?2, ?3, ?4)",
-                rusqlite::params![digest, bytes.len() as i64, json, now],
-            )
-        })?;
+        a.db.with(|c| db::scenes::insert(c, &digest, bytes.len() as u64, &info, now))?;
         a.metrics.scene_stored(bytes.len());
         Ok((info, true))
     })
@@ -98,19 +88,11 @@ pub async fn info(
 ) -> Result<Json<SceneInfo>> {
     check_digest(&digest)?;
     let d = digest.clone();
-    let json: Option<String> = app
-        .db
-        .run(move |c| {
-            c.query_row("SELECT info FROM scenes WHERE digest = ?1", [&d], |r| {
-                r.get(0)
-            })
-            .optional()
-        })
-        .await?;
-    let json = json.ok_or_else(|| {
+    let info = app.db.run(move |c| db::scenes::info(c, &d)).await?;
+    let info = info.ok_or_else(|| {
         Error::NotFound(format!("no scene with digest {digest}; upload it first"))
     })?;
-    Ok(Json(serde_json::from_str(&json)?))
+    Ok(Json(info))
 }
 
 /// The GLB bytes of a scene (workers fetch it once per digest and cache it).

@@ -8,14 +8,13 @@ use axum::Json;
 use proto::Health;
 
 use crate::app::{now_ms, AppState};
+use crate::db;
 use crate::error::Result;
 use crate::metrics;
 
 /// `GET /healthz`: 200 while the server answers and its database responds.
 pub async fn healthz(State(app): State<AppState>) -> Result<Json<Health>> {
-    app.db
-        .run(|c| c.query_row("SELECT 1", [], |r| r.get::<_, i64>(0)))
-        .await?;
+    app.db.run(|c| db::ping(c)).await?;
     Ok(Json(Health {
         status: "ok".into(),
         version: env!("CARGO_PKG_VERSION").into(),
@@ -24,10 +23,11 @@ pub async fn healthz(State(app): State<AppState>) -> Result<Json<Health>> {
 
 /// `GET /metrics`: Prometheus text format.
 pub async fn prometheus(State(app): State<AppState>) -> Result<Response> {
-    let (now, lease) = (now_ms(), app.config.lease_ms());
+    let now = now_ms();
+    let live_since = app.timing().live_since(now);
     let mut snapshot = app
         .db
-        .run(move |c| metrics::snapshot(c, now, lease))
+        .run(move |c| metrics::snapshot(c, now, live_since))
         .await?;
     snapshot.listeners = app.events.listeners();
     let text = app.metrics.render(&snapshot);

@@ -16,7 +16,7 @@ use super::error::{read_body, Id, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
 use crate::limits::{MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
-use crate::{identity, intake, scheduler, status, verify};
+use crate::{db, identity, intake, scheduler, verify};
 
 /// Registers a worker with the join token (the server's worker token); the answer carries
 /// its id, its own credential for every later call, and the timing it must keep. A worker
@@ -76,7 +76,7 @@ pub async fn register(
                 credential: reg.credential.as_deref(),
                 platform: reg.platform.as_deref(),
             };
-            identity::join(c, &joining, now, scheduler::live_since(now, timing))
+            identity::join(c, &joining, now, timing.live_since(now))
         })
         .await?;
     let id = joined.id;
@@ -105,9 +105,11 @@ pub async fn register(
 /// Every worker: name, threads, version, current task, last seen.
 #[utoipa::path(get, path = "/workers", tag = "workers", responses((status = 200, body = WorkerList)), security(("client_token" = [])))]
 pub async fn list(State(app): State<AppState>) -> Result<Json<WorkerList>> {
-    let (now, lease) = (now_ms(), app.config.lease_ms());
+    let live_since = app.timing().live_since(now_ms());
     Ok(Json(
-        app.db.run(move |c| status::workers(c, now, lease)).await?,
+        app.db
+            .run(move |c| db::workers::list(c, live_since))
+            .await?,
     ))
 }
 
@@ -341,12 +343,13 @@ pub async fn clear(
     State(app): State<AppState>,
     PathParams(Id(worker)): PathParams<Id>,
 ) -> Result<Json<proto::WorkerInfo>> {
-    let (now, lease) = (now_ms(), app.config.lease_ms());
+    let now = now_ms();
+    let live_since = app.timing().live_since(now);
     let info = app
         .db
         .run(move |c| {
             verify::clear(c, worker, now)?;
-            status::worker(c, worker, now, lease)
+            db::workers::info(c, worker, live_since)
         })
         .await?;
     app.work.notify_waiters();

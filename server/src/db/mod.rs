@@ -1,13 +1,37 @@
-//! The SQLite database: one connection in WAL mode behind a mutex. Every call runs on
-//! tokio's blocking pool ([`Db::run`]) so SQLite never blocks the async runtime; code that
-//! is already on a blocking thread (tile assembly) uses [`Db::with`].
+//! The persistence layer: every SQL statement of the server is in this module, one file per
+//! table (or concern), and nowhere else. One SQLite connection in WAL mode behind a mutex;
+//! every call runs on tokio's blocking pool ([`Db::run`]) so SQLite never blocks the async
+//! runtime; code that is already on a blocking thread (tile assembly) uses [`Db::with`].
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`migrations`] | the versioned schema |
+//! | [`jobs`] | specs, control states, finished or not, worker blocks, budget plans |
+//! | [`frames`] | task counts per frame, assembly done or failed, the frame list |
+//! | [`tasks`] | task rows and states, the lease queries, failures, check groups |
+//! | [`workers`] | registration, liveness, credentials (hashed), quarantine |
+//! | [`scenes`] | uploaded scenes' summaries |
+//! | [`plans`] | what the time-budget planner measures and the passes it adds |
+//! | [`events`] | the event log |
+//!
+//! Functions take a `&Connection` to read and a `&Transaction` to write: a change is
+//! made inside the transaction of the operation that needs it, never on its own.
+
+pub mod events;
+pub mod frames;
+pub mod jobs;
+pub mod migrations;
+pub mod plans;
+pub mod scenes;
+pub mod tasks;
+pub mod workers;
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use rusqlite::{Connection, Params, Row};
 
-use crate::migrations::{self, MigrationError};
+use migrations::MigrationError;
 
 /// Why the database could not be opened.
 #[derive(Debug, thiserror::Error)]
@@ -56,6 +80,11 @@ impl Cached for Connection {
     ) -> rusqlite::Result<T> {
         self.prepare_cached(sql)?.query_row(params, f)
     }
+}
+
+/// Whether the database answers (for the health check).
+pub fn ping(conn: &Connection) -> rusqlite::Result<()> {
+    conn.row("SELECT 1", [], |r| r.get::<_, i64>(0)).map(|_| ())
 }
 
 /// A handle on the database; clones share the connection.

@@ -1,4 +1,4 @@
-//! The task state machine: one transition table, pure. Storage (scheduler.rs) reads a
+//! The task state machine: one transition table, pure. Storage ([`crate::db::tasks`]) reads a
 //! task's state, asks [`transition`] and writes the answer in the same transaction.
 //!
 //! ```text

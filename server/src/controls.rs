@@ -1,0 +1,149 @@
+//! Job controls, each one database transaction: submit, pause, resume, cancel, retry and
+//! delete. A command asks the job's control state machine
+//! ([`state::control_transition`](crate::state::control_transition)) first; a refusal is a
+//! 409 naming the job and why.
+
+use rusqlite::{Connection, Transaction};
+
+use crate::budget;
+use crate::db::events::log;
+use crate::db::tasks::{self, NewTask};
+use crate::db::{frames, jobs};
+use crate::error::{Error, Result};
+use crate::spec::Plan;
+use crate::state::{control_transition, ControlChange, JobCommand, TaskEvent, TaskState};
+
+/// Stores a new job and its tasks; returns its id.
+pub fn submit(conn: &mut Connection, plan: &Plan, now: i64) -> Result<u64> {
+    let tx = conn.transaction()?;
+    let spec = &plan.spec;
+    let id = jobs::insert(&tx, spec, plan.pixel_samples(), now)?;
+    for &f in &plan.frames {
+        frames::insert(&tx, id, f, plan.tasks_per_frame())?;
+    }
+    for t in plan.tasks() {
+        tasks::insert(
+            &tx,
+            &NewTask {
+                job: id,
+                frame: t.frame,
+                tile: t.tile,
+                pass: t.pass,
+                rect: t.rect,
+                samples: t.samples,
+                check_of: None,
+            },
+        )?;
+    }
+    // No worker has a speed on a new job: the plan says the first pass is queued.
+    budget::replan(&tx, id, spec, now, now, u64::MAX)?;
+    log(
+        &tx,
+        now,
+        Some(id),
+        "job_created",
+        &format!("{} tasks", plan.task_count()),
+    )?;
+    tx.commit()?;
+    Ok(id)
+}
+
+/// Asks the transition table about `command` on `job` and stores the new control; a
+/// refusal is a conflict that names the job.
+fn command(tx: &Transaction, job: u64, command: JobCommand) -> Result<ControlChange> {
+    let from = jobs::control(tx, job)?;
+    let change = control_transition(from, command, jobs::is_finished(tx, job)?)
+        .map_err(|refused| Error::Conflict(format!("job {job} {refused}")))?;
+    if let ControlChange::To(to) = change {
+        jobs::set_control(tx, job, to)?;
+    }
+    Ok(change)
+}
+
+/// Pauses a job: nothing more is leased, and its live leases are taken back (their
+/// workers hear 409 on their next heartbeat).
+pub fn pause(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    if command(&tx, job, JobCommand::Pause)? == ControlChange::Stays {
+        return Ok(());
+    }
+    for task in tasks::of_job(&tx, job, &[TaskState::Leased])? {
+        tasks::revoke(&tx, &task)?;
+    }
+    log(&tx, now, Some(job), "job_paused", "")?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Resumes a paused job.
+pub fn resume(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    if command(&tx, job, JobCommand::Resume)? == ControlChange::Stays {
+        return Ok(());
+    }
+    log(&tx, now, Some(job), "job_resumed", "")?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Cancels a job: its queued and leased tasks are cancelled (workers hear 409).
+pub fn cancel(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    if command(&tx, job, JobCommand::Cancel)? == ControlChange::Stays {
+        return Ok(());
+    }
+    let open = tasks::of_job(&tx, job, &[TaskState::Queued, TaskState::Leased])?;
+    for task in &open {
+        tasks::advance(&tx, task, TaskEvent::Cancel)?;
+        tasks::clear_lease(&tx, task.id)?;
+    }
+    log(
+        &tx,
+        now,
+        Some(job),
+        "job_cancelled",
+        &format!("{} tasks cancelled", open.len()),
+    )?;
+    jobs::update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(())
+}
+
+/// Re-queues a job's failed tasks with fresh attempts, lifts its worker blocks, and lets
+/// frames whose assembly failed be assembled again. Returns how many tasks and frames.
+pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
+    let tx = conn.transaction()?;
+    command(&tx, job, JobCommand::Retry)?;
+    let failed = tasks::of_job(&tx, job, &[TaskState::Failed])?;
+    let frames = frames::clear_failures(&tx, job)?;
+    if failed.is_empty() && frames == 0 {
+        return Err(Error::Conflict(format!(
+            "job {job} has no failed tasks or frames"
+        )));
+    }
+    for task in &failed {
+        tasks::advance(&tx, task, TaskEvent::Retry)?;
+        tasks::forget_failures(&tx, task.id)?;
+    }
+    jobs::unblock_all(&tx, job)?;
+    log(
+        &tx,
+        now,
+        Some(job),
+        "job_retried",
+        &format!("{} tasks, {frames} frames", failed.len()),
+    )?;
+    jobs::update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(failed.len() + frames)
+}
+
+/// Deletes a job's rows (its files are removed by the caller after this commits).
+pub fn delete(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+    let tx = conn.transaction()?;
+    jobs::control(&tx, job)?;
+    jobs::delete(&tx, job)?;
+    log(&tx, now, Some(job), "job_deleted", "")?;
+    tx.commit()?;
+    Ok(())
+}

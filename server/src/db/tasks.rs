@@ -1,0 +1,546 @@
+//! The `tasks` table (and `task_failures`): rows, the state column moved only through
+//! [`crate::state::transition`], the queries the scheduler leases by, and the sets of tasks
+//! assembly, checks and time budgets read.
+
+use rusqlite::{params, Connection, OptionalExtension, Transaction};
+use tracer::film::{SampleRange, TileRect};
+
+use super::Cached;
+use crate::error::{Error, Result};
+use crate::state::{transition, TaskEvent, TaskState};
+
+/// One row of `tasks`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TaskRow {
+    /// Task id.
+    pub id: u64,
+    /// Job id.
+    pub job_id: u64,
+    /// Frame number.
+    pub frame: i32,
+    /// Tile index in the frame.
+    pub tile: u32,
+    /// Sample pass index.
+    pub pass: u32,
+    /// The tile.
+    pub rect: TileRect,
+    /// The samples.
+    pub samples: SampleRange,
+    /// State.
+    pub state: TaskState,
+    /// Leases granted so far (the current lease's attempt).
+    pub attempt: u32,
+    /// Failed or expired attempts.
+    pub failures: u32,
+    /// The worker holding the lease (or that rendered the tile, once done).
+    pub worker_id: Option<u64>,
+    /// For a check task, the render task it repeats.
+    pub check_of: Option<u64>,
+}
+
+const COLUMNS: &str = "t.id, t.job_id, t.frame, t.tile, t.pass, t.x, t.y, t.w, t.h, \
+     t.sample_start, t.sample_end, t.state, t.attempt, t.failures, t.worker_id, t.check_of";
+
+fn from_row(r: &rusqlite::Row) -> rusqlite::Result<TaskRow> {
+    let state: String = r.get(11)?;
+    Ok(TaskRow {
+        id: r.get(0)?,
+        job_id: r.get(1)?,
+        frame: r.get(2)?,
+        tile: r.get(3)?,
+        pass: r.get(4)?,
+        rect: TileRect::new(r.get(5)?, r.get(6)?, r.get(7)?, r.get(8)?),
+        samples: SampleRange::new(r.get(9)?, r.get(10)?),
+        state: TaskState::parse(&state).ok_or_else(|| {
+            rusqlite::Error::FromSqlConversionFailure(
+                11,
+                rusqlite::types::Type::Text,
+                format!("unknown task state `{state}`").into(),
+            )
+        })?,
+        attempt: r.get(12)?,
+        failures: r.get(13)?,
+        worker_id: r.get(14)?,
+        check_of: r.get(15)?,
+    })
+}
+
+/// The tasks (`t`) matching `filter` (SQL over `t`), with `params`.
+fn select<P: rusqlite::Params>(conn: &Connection, filter: &str, params: P) -> Result<Vec<TaskRow>> {
+    let mut stmt = conn.prepare_cached(&format!("SELECT {COLUMNS} FROM tasks t WHERE {filter}"))?;
+    let rows = stmt.query_map(params, from_row)?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// The task `id`, if it exists.
+pub fn load(conn: &Connection, id: u64) -> Result<Option<TaskRow>> {
+    Ok(conn
+        .row(
+            &format!("SELECT {COLUMNS} FROM tasks t WHERE t.id = ?1"),
+            [id],
+            from_row,
+        )
+        .optional()?)
+}
+
+/// Moves `task` by `event` through the transition table and stores the new state; the
+/// caller updates the other columns in the same transaction.
+pub fn advance(tx: &Transaction, task: &TaskRow, event: TaskEvent) -> Result<TaskState> {
+    let to = transition(task.state, event)?;
+    let changed = tx.exec(
+        "UPDATE tasks SET state = ?1 WHERE id = ?2 AND state = ?3",
+        params![to.as_str(), task.id, task.state.as_str()],
+    )?;
+    if changed != 1 {
+        return Err(Error::Conflict(format!(
+            "task {} changed meanwhile",
+            task.id
+        )));
+    }
+    Ok(to)
+}
+
+/// What a new task renders.
+#[derive(Clone, Copy, Debug)]
+pub struct NewTask {
+    /// Its job.
+    pub job: u64,
+    /// Its frame.
+    pub frame: i32,
+    /// Its tile's index.
+    pub tile: u32,
+    /// Its sample pass.
+    pub pass: u32,
+    /// The tile.
+    pub rect: TileRect,
+    /// The samples.
+    pub samples: SampleRange,
+    /// The render task it checks, for a check task.
+    pub check_of: Option<u64>,
+}
+
+impl NewTask {
+    /// A check of the render task `task`: the same tile and samples.
+    pub fn check_of(task: &TaskRow) -> NewTask {
+        NewTask {
+            job: task.job_id,
+            frame: task.frame,
+            tile: task.tile,
+            pass: task.pass,
+            rect: task.rect,
+            samples: task.samples,
+            check_of: Some(task.id),
+        }
+    }
+}
+
+/// Queues one task.
+pub fn insert(tx: &Transaction, t: &NewTask) -> Result<()> {
+    tx.exec(
+        "INSERT INTO tasks (job_id, frame, tile, pass, x, y, w, h, sample_start, sample_end,
+                            state, check_of)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued', ?11)",
+        params![
+            t.job,
+            t.frame,
+            t.tile,
+            t.pass,
+            t.rect.x,
+            t.rect.y,
+            t.rect.width,
+            t.rect.height,
+            t.samples.start,
+            t.samples.end,
+            t.check_of
+        ],
+    )?;
+    Ok(())
+}
+
+/// Active jobs with a queued task that `worker` is not blocked from, with whether each is
+/// a time-budget job: by priority (highest first), then age.
+pub fn leasable_jobs(tx: &Transaction, worker: u64) -> Result<Vec<(u64, bool)>> {
+    let mut stmt = tx.prepare_cached(
+        "SELECT j.id, j.budget_plan IS NOT NULL FROM jobs j
+         WHERE j.control = 'active'
+           AND EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = j.id AND t.state = 'queued')
+           AND NOT EXISTS (SELECT 1 FROM job_blocks b
+                           WHERE b.job_id = j.id AND b.worker_id = ?1)
+         ORDER BY j.priority DESC, j.created_ms, j.id",
+    )?;
+    let rows = stmt.query_map([worker], |r| Ok((r.get(0)?, r.get(1)?)))?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// A check task (`t`) goes to a worker (`?2`) that has not rendered its tile yet.
+const NOT_IN_CHECK_GROUP: &str = "(t.check_of IS NULL OR NOT EXISTS (
+        SELECT 1 FROM tasks g WHERE (g.id = t.check_of OR g.check_of = t.check_of)
+          AND g.state = 'done' AND g.worker_id = ?2))";
+
+/// The next queued task for `worker` in job `job`: tasks it has not failed first; a task
+/// it failed only when no other live worker (seen since `live_since`) could take it.
+/// Frame by frame, pass by pass; a time-budget job's (`budget`) in the order its plan
+/// issued them (frame order would starve a late frame's pass behind the passes planned
+/// for earlier frames after it).
+pub fn next_for(
+    tx: &Transaction,
+    job: u64,
+    budget: bool,
+    worker: u64,
+    live_since: i64,
+) -> Result<Option<u64>> {
+    let order = if budget {
+        "t.id"
+    } else {
+        "t.frame, t.pass, t.tile"
+    };
+    let fresh: Option<u64> = tx
+        .row(
+            &format!(
+                "SELECT t.id FROM tasks t
+             WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
+               AND NOT EXISTS (SELECT 1 FROM task_failures f
+                               WHERE f.task_id = t.id AND f.worker_id = ?2)
+             ORDER BY {order} LIMIT 1"
+            ),
+            params![job, worker],
+            |r| r.get(0),
+        )
+        .optional()?;
+    if fresh.is_some() {
+        return Ok(fresh);
+    }
+    Ok(tx
+        .row(
+            &format!(
+                "SELECT t.id FROM tasks t
+             WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
+               AND NOT EXISTS (
+                   SELECT 1 FROM workers w
+                   WHERE w.id != ?2 AND w.last_seen_ms >= ?3 AND w.left_ms IS NULL
+                     AND w.quarantined_ms IS NULL
+                     AND NOT EXISTS (SELECT 1 FROM task_failures f
+                                     WHERE f.task_id = t.id AND f.worker_id = w.id)
+                     AND NOT EXISTS (SELECT 1 FROM job_blocks b
+                                     WHERE b.job_id = t.job_id AND b.worker_id = w.id))
+             ORDER BY {order} LIMIT 1"
+            ),
+            params![job, worker, live_since],
+            |r| r.get(0),
+        )
+        .optional()?)
+}
+
+/// Records the lease of a task the caller moved to leased.
+pub fn set_lease(
+    tx: &Transaction,
+    task: u64,
+    attempt: u32,
+    worker: u64,
+    now: i64,
+    deadline: i64,
+) -> Result<()> {
+    tx.exec(
+        "UPDATE tasks SET attempt = ?2, worker_id = ?3, leased_ms = ?4, deadline_ms = ?5
+         WHERE id = ?1",
+        params![task, attempt, worker, now, deadline],
+    )?;
+    Ok(())
+}
+
+/// Moves a lease's deadline.
+pub fn extend_lease(tx: &Transaction, task: u64, deadline: i64) -> Result<()> {
+    tx.exec(
+        "UPDATE tasks SET deadline_ms = ?2 WHERE id = ?1",
+        params![task, deadline],
+    )?;
+    Ok(())
+}
+
+/// Records the result of a task the caller moved to done.
+pub fn set_done(tx: &Transaction, task: u64, now: i64, rays: u64, render_ms: u64) -> Result<()> {
+    tx.exec(
+        "UPDATE tasks SET done_ms = ?2, rays = ?3, render_ms = ?4, deadline_ms = NULL
+         WHERE id = ?1",
+        params![task, now, rays as i64, render_ms as i64],
+    )?;
+    Ok(())
+}
+
+/// Clears the lease of a task the caller moved out of leased (queued, failed, cancelled).
+pub fn clear_lease(tx: &Transaction, task: u64) -> Result<()> {
+    tx.exec(
+        "UPDATE tasks SET worker_id = NULL, deadline_ms = NULL WHERE id = ?1",
+        [task],
+    )?;
+    Ok(())
+}
+
+/// Sets how many attempts of a task failed.
+pub fn set_failures(tx: &Transaction, task: u64, failures: u32) -> Result<()> {
+    tx.exec(
+        "UPDATE tasks SET failures = ?2 WHERE id = ?1",
+        params![task, failures],
+    )?;
+    Ok(())
+}
+
+/// Queues again every task `worker` holds a lease on (no attempt is counted: it said it is
+/// gone, or came back); returns them.
+pub fn give_back(tx: &Transaction, worker: u64) -> Result<Vec<TaskRow>> {
+    let held = leased_by(tx, worker)?;
+    for task in &held {
+        revoke(tx, task)?;
+    }
+    Ok(held)
+}
+
+/// Takes a lease back through no fault of its worker: the task is queued again with no
+/// attempt counted.
+pub fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {
+    advance(tx, task, TaskEvent::Revoke)?;
+    clear_lease(tx, task.id)
+}
+
+/// Records why an attempt of `task` by `worker` failed; returns how many attempts of the
+/// job's tasks that worker has failed.
+pub fn record_failure(
+    tx: &Transaction,
+    task: &TaskRow,
+    worker: u64,
+    reason: &str,
+    message: &str,
+    now: i64,
+) -> Result<u32> {
+    tx.exec(
+        "INSERT INTO task_failures (task_id, job_id, worker_id, attempt, reason, message, at_ms)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+        params![
+            task.id,
+            task.job_id,
+            worker,
+            task.attempt,
+            reason,
+            message,
+            now
+        ],
+    )?;
+    Ok(tx.row(
+        "SELECT count(*) FROM task_failures WHERE job_id = ?1 AND worker_id = ?2",
+        params![task.job_id, worker],
+        |r| r.get(0),
+    )?)
+}
+
+/// Forgets the failures of a task queued again with fresh attempts.
+pub fn forget_failures(tx: &Transaction, task: u64) -> Result<()> {
+    set_failures(tx, task, 0)?;
+    tx.exec("DELETE FROM task_failures WHERE task_id = ?1", [task])?;
+    Ok(())
+}
+
+/// Every leased task.
+pub fn leased(conn: &Connection) -> Result<Vec<TaskRow>> {
+    select(conn, "t.state = 'leased'", [])
+}
+
+/// The leased tasks whose deadline passed before `now`.
+pub fn expired(conn: &Connection, now: i64) -> Result<Vec<TaskRow>> {
+    select(conn, "t.state = 'leased' AND t.deadline_ms < ?1", [now])
+}
+
+/// The tasks `worker` holds a lease on.
+pub fn leased_by(conn: &Connection, worker: u64) -> Result<Vec<TaskRow>> {
+    select(conn, "t.state = 'leased' AND t.worker_id = ?1", [worker])
+}
+
+/// The tasks of `job` in one of `states`.
+pub fn of_job(conn: &Connection, job: u64, states: &[TaskState]) -> Result<Vec<TaskRow>> {
+    let list: Vec<String> = states.iter().map(|s| format!("'{}'", s.as_str())).collect();
+    select(
+        conn,
+        &format!("t.job_id = ?1 AND t.state IN ({})", list.join(", ")),
+        [job],
+    )
+}
+
+/// The done render tasks of one frame (for assembly), by tile then pass.
+pub fn done_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<TaskRow>> {
+    select(
+        conn,
+        "t.job_id = ?1 AND t.frame = ?2 AND t.state = 'done' AND t.check_of IS NULL
+         ORDER BY t.tile, t.pass",
+        params![job, frame],
+    )
+}
+
+/// The ids of one frame's done check tasks (whose tiles go once the frame is assembled).
+pub fn done_checks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<u64>> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT id FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
+           AND check_of IS NOT NULL",
+    )?;
+    let rows = stmt.query_map(params![job, frame], |r| r.get(0))?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// Seconds the workers spent rendering one frame's tiles (its done tasks, checks left
+/// out), as they reported.
+pub fn render_seconds_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<f64> {
+    let ms: Option<i64> = conn.row(
+        "SELECT SUM(render_ms) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
+           AND check_of IS NULL",
+        params![job, frame],
+        |r| r.get(0),
+    )?;
+    Ok(ms.unwrap_or(0) as f64 / 1000.0)
+}
+
+/// Whether every render task of one pass of a frame is done.
+pub fn pass_done(tx: &Transaction, job: u64, frame: i32, pass: u32) -> Result<bool> {
+    let left: i64 = tx.row(
+        "SELECT count(*) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND pass = ?3
+           AND state != 'done' AND check_of IS NULL",
+        params![job, frame, pass],
+        |r| r.get(0),
+    )?;
+    Ok(left == 0)
+}
+
+/// One finished render of a task or of a check of it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Render {
+    /// The task (the original or a check).
+    pub task: u64,
+    /// The attempt whose tile was accepted (its file's name).
+    pub attempt: u32,
+    /// Its worker.
+    pub worker: u64,
+    /// That worker is quarantined.
+    pub quarantined: bool,
+}
+
+/// The finished renders of the task `original` and its checks.
+pub fn renders_of(conn: &Connection, original: u64) -> Result<Vec<Render>> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT t.id, t.attempt, t.worker_id, w.quarantined_ms IS NOT NULL
+         FROM tasks t JOIN workers w ON w.id = t.worker_id
+         WHERE (t.id = ?1 OR t.check_of = ?1) AND t.state = 'done'
+         ORDER BY t.id",
+    )?;
+    let rows = stmt.query_map([original], |r| {
+        Ok(Render {
+            task: r.get(0)?,
+            attempt: r.get(1)?,
+            worker: r.get(2)?,
+            quarantined: r.get(3)?,
+        })
+    })?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// A done task `t` whose tile is not yet in its frame `f` (which keeps it until then):
+/// the frame was never assembled, or the task came after its last assembly (a time-budget
+/// frame's next pass).
+const UNMERGED: &str = "(f.assembled_ms IS NULL OR t.done_ms > f.assembled_ms)";
+
+/// The done render tasks of `worker` that no check covers and whose tiles are not yet in
+/// their frames.
+pub fn unchecked_unmerged_of(conn: &Connection, worker: u64) -> Result<Vec<TaskRow>> {
+    select(
+        conn,
+        &format!(
+            "t.worker_id = ?1 AND t.state = 'done' AND t.check_of IS NULL
+             AND NOT EXISTS (SELECT 1 FROM tasks c WHERE c.check_of = t.id)
+             AND EXISTS (SELECT 1 FROM frames f WHERE f.job_id = t.job_id AND f.frame = t.frame
+                           AND {UNMERGED})"
+        ),
+        [worker],
+    )
+}
+
+/// How many tiles of `worker` are already in assembled frames.
+pub fn merged_count_of(conn: &Connection, worker: u64) -> Result<i64> {
+    Ok(conn.row(
+        &format!(
+            "SELECT count(*) FROM tasks t JOIN frames f ON f.job_id = t.job_id AND f.frame = t.frame
+             WHERE t.worker_id = ?1 AND t.state = 'done' AND NOT {UNMERGED}"
+        ),
+        [worker],
+        |r| r.get(0),
+    )?)
+}
+
+/// Tasks by state (each state's name with its count), over the whole farm.
+pub fn count_by_state(conn: &Connection) -> Result<Vec<(TaskState, u64)>> {
+    let mut counts: Vec<(TaskState, u64)> = TaskState::ALL.iter().map(|&s| (s, 0)).collect();
+    let mut stmt = conn.prepare_cached("SELECT state, count(*) FROM tasks GROUP BY state")?;
+    let rows = stmt.query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, u64>(1)?)))?;
+    for row in rows {
+        let (state, n) = row?;
+        if let Some(slot) = counts.iter_mut().find(|(s, _)| s.as_str() == state) {
+            slot.1 = n;
+        }
+    }
+    Ok(counts)
+}
+
+/// The queued and leased tasks of jobs that are not paused or cancelled.
+pub fn open_of_active_jobs(conn: &Connection) -> Result<u64> {
+    Ok(conn.row(
+        "SELECT count(*) FROM tasks t JOIN jobs j ON j.id = t.job_id
+         WHERE j.control = 'active' AND t.state IN ('queued', 'leased')",
+        [],
+        |r| r.get(0),
+    )?)
+}
+
+/// A job's tasks by state, with the pixel samples of its done render tasks and when the
+/// last task was done.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Progress {
+    /// Tasks by state.
+    pub counts: proto::TaskCounts,
+    /// Pixel samples of the done render tasks (checks repeat samples: left out).
+    pub done_samples: i64,
+    /// When the last task was done.
+    pub last_done_ms: Option<i64>,
+}
+
+/// The progress of `job`'s tasks.
+pub fn progress(conn: &Connection, job: u64) -> Result<Progress> {
+    let mut p = Progress::default();
+    let mut stmt = conn.prepare_cached(
+        "SELECT state, count(*),
+                coalesce(sum(CASE WHEN check_of IS NULL
+                                  THEN w * h * (sample_end - sample_start) END), 0),
+                max(done_ms)
+         FROM tasks WHERE job_id = ?1 GROUP BY state",
+    )?;
+    let rows = stmt.query_map([job], |r| {
+        Ok((
+            r.get::<_, String>(0)?,
+            r.get::<_, u64>(1)?,
+            r.get::<_, i64>(2)?,
+            r.get::<_, Option<i64>>(3)?,
+        ))
+    })?;
+    for row in rows {
+        let (state, n, samples, done_ms) = row?;
+        let state = TaskState::parse(&state)
+            .ok_or_else(|| Error::Internal(format!("unknown task state `{state}`")))?;
+        let slot = match state {
+            TaskState::Queued => &mut p.counts.queued,
+            TaskState::Leased => &mut p.counts.leased,
+            TaskState::Done => {
+                p.done_samples = samples;
+                p.last_done_ms = done_ms;
+                &mut p.counts.done
+            }
+            TaskState::Failed => &mut p.counts.failed,
+            TaskState::Cancelled => &mut p.counts.cancelled,
+        };
+        *slot = n;
+    }
+    Ok(p)
+}

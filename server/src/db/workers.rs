@@ -1,0 +1,270 @@
+//! The `workers` table: registration and return, liveness, quarantine and suspicion, and
+//! the worker list clients read. Credentials are stored as their SHA-256 only; the caller
+//! hashes.
+
+use proto::{TaskToken, WorkerInfo, WorkerList};
+use rusqlite::{params, Connection, OptionalExtension, Transaction};
+
+use super::Cached;
+use crate::error::{Error, Result};
+
+/// What a worker says of itself when it joins.
+#[derive(Clone, Copy, Debug)]
+pub struct Profile<'a> {
+    /// Its name.
+    pub name: &'a str,
+    /// Render threads.
+    pub threads: u32,
+    /// Its version.
+    pub version: &'a str,
+    /// Its machine and build.
+    pub platform: Option<&'a str>,
+}
+
+/// Stores a new worker with its credential's hash; returns its id.
+pub fn insert(tx: &Transaction, p: &Profile, credential_hash: &str, now: i64) -> Result<u64> {
+    tx.exec(
+        "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms,
+                              credential, platform)
+         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6)",
+        params![
+            p.name,
+            p.threads,
+            p.version,
+            now,
+            credential_hash,
+            p.platform
+        ],
+    )?;
+    Ok(tx.last_insert_rowid() as u64)
+}
+
+/// An earlier worker comes back: its profile and credential are replaced and it is live.
+pub fn set_returned(
+    tx: &Transaction,
+    id: u64,
+    p: &Profile,
+    credential_hash: &str,
+    now: i64,
+) -> Result<()> {
+    tx.exec(
+        "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
+                left_ms = NULL, credential = ?6, platform = ?7 WHERE id = ?1",
+        params![
+            id,
+            p.name,
+            p.threads,
+            p.version,
+            now,
+            credential_hash,
+            p.platform
+        ],
+    )?;
+    Ok(())
+}
+
+/// The newest worker named `name`, with whether it is live (seen since `live_since` and
+/// not left).
+pub fn newest_named(conn: &Connection, name: &str, live_since: i64) -> Result<Option<(u64, bool)>> {
+    Ok(conn
+        .row(
+            "SELECT id, last_seen_ms >= ?2 AND left_ms IS NULL FROM workers
+             WHERE name = ?1 ORDER BY id DESC LIMIT 1",
+            params![name, live_since],
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )
+        .optional()?)
+}
+
+/// The hash of worker `id`'s credential: `None` when there is no such worker or it
+/// registered before workers had credentials.
+pub fn credential_hash(conn: &Connection, id: u64) -> Result<Option<String>> {
+    Ok(conn
+        .row("SELECT credential FROM workers WHERE id = ?1", [id], |r| {
+            r.get::<_, Option<String>>(0)
+        })
+        .optional()?
+        .flatten())
+}
+
+/// The worker whose credential has this hash, if any.
+pub fn of_credential_hash(conn: &Connection, hash: &str) -> Result<Option<u64>> {
+    Ok(conn
+        .row(
+            "SELECT id FROM workers WHERE credential = ?1",
+            [hash],
+            |r| r.get(0),
+        )
+        .optional()?)
+}
+
+/// Records that `worker` called now; fails if it never registered or has left.
+pub fn touch(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
+    let n = tx.exec(
+        "UPDATE workers SET last_seen_ms = ?2 WHERE id = ?1 AND left_ms IS NULL",
+        params![worker, now],
+    )?;
+    if n == 0 {
+        return Err(Error::NotFound(format!(
+            "worker {worker} is not registered or has left (the server's data folder may \
+             have been replaced); register again"
+        )));
+    }
+    Ok(())
+}
+
+/// Counts a tile `worker` finished.
+pub fn count_done(tx: &Transaction, worker: u64) -> Result<()> {
+    tx.exec(
+        "UPDATE workers SET tasks_done = tasks_done + 1 WHERE id = ?1",
+        [worker],
+    )?;
+    Ok(())
+}
+
+/// `worker` has left.
+pub fn set_left(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
+    tx.exec(
+        "UPDATE workers SET left_ms = ?2 WHERE id = ?1",
+        params![worker, now],
+    )?;
+    Ok(())
+}
+
+/// Whether a worker other than `except`, live (seen since `live_since`, not left) and not
+/// quarantined, exists.
+pub fn another_live(conn: &Connection, except: u64, live_since: i64) -> Result<bool> {
+    Ok(conn.row(
+        "SELECT EXISTS (SELECT 1 FROM workers WHERE id != ?1 AND last_seen_ms >= ?2
+                          AND left_ms IS NULL AND quarantined_ms IS NULL)",
+        params![except, live_since],
+        |r| r.get(0),
+    )?)
+}
+
+/// The live workers (seen since `live_since`, not left, not quarantined) not blocked from
+/// `job`.
+pub fn live_for_job(conn: &Connection, job: u64, live_since: i64) -> Result<Vec<u64>> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT w.id FROM workers w
+         WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL AND w.quarantined_ms IS NULL
+           AND NOT EXISTS (SELECT 1 FROM job_blocks b
+                           WHERE b.job_id = ?1 AND b.worker_id = w.id)",
+    )?;
+    let rows = stmt.query_map(params![job, live_since], |r| r.get(0))?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// A worker's name and the platform it reported.
+pub fn name_and_platform(conn: &Connection, worker: u64) -> Result<(String, Option<String>)> {
+    Ok(conn.row(
+        "SELECT name, platform FROM workers WHERE id = ?1",
+        [worker],
+        |r| Ok((r.get(0)?, r.get(1)?)),
+    )?)
+}
+
+/// Whether `worker` is quarantined.
+pub fn is_quarantined(conn: &Connection, worker: u64) -> Result<bool> {
+    Ok(conn.row(
+        "SELECT quarantined_ms IS NOT NULL FROM workers WHERE id = ?1",
+        [worker],
+        |r| r.get(0),
+    )?)
+}
+
+/// Quarantines `worker` with `reason`; `false` when it already was.
+pub fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<bool> {
+    Ok(tx.exec(
+        "UPDATE workers SET quarantined_ms = ?2, quarantine_reason = ?3, suspect_ms = NULL
+         WHERE id = ?1 AND quarantined_ms IS NULL",
+        params![worker, now, reason],
+    )? > 0)
+}
+
+/// Lifts `worker`'s quarantine and suspicion; `false` when there is no such worker.
+pub fn clear(tx: &Transaction, worker: u64) -> Result<bool> {
+    Ok(tx.exec(
+        "UPDATE workers SET quarantined_ms = NULL, quarantine_reason = NULL, suspect_ms = NULL
+         WHERE id = ?1",
+        [worker],
+    )? > 0)
+}
+
+/// `worker` is a suspect (since the first time it became one).
+pub fn suspect(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
+    tx.exec(
+        "UPDATE workers SET suspect_ms = coalesce(suspect_ms, ?2) WHERE id = ?1",
+        params![worker, now],
+    )?;
+    Ok(())
+}
+
+/// `worker` is no longer a suspect.
+pub fn unsuspect(tx: &Transaction, worker: u64) -> Result<()> {
+    tx.exec(
+        "UPDATE workers SET suspect_ms = NULL WHERE id = ?1",
+        [worker],
+    )?;
+    Ok(())
+}
+
+/// Workers registered, and those live (seen since `live_since`, not left).
+pub fn counts(conn: &Connection, live_since: i64) -> Result<(u64, u64)> {
+    Ok(conn.row(
+        "SELECT count(*), coalesce(sum(last_seen_ms >= ?1 AND left_ms IS NULL), 0) FROM workers",
+        [live_since],
+        |r| Ok((r.get(0)?, r.get(1)?)),
+    )?)
+}
+
+const INFO_QUERY: &str = "SELECT w.id, w.name, w.threads, w.version, w.last_seen_ms, w.tasks_done,
+        t.id, t.attempt, t.job_id, t.frame, w.left_ms, w.suspect_ms, w.quarantine_reason,
+        w.platform
+     FROM workers w
+     LEFT JOIN tasks t ON t.id = (SELECT id FROM tasks WHERE worker_id = w.id AND state = 'leased'
+                                  ORDER BY leased_ms DESC LIMIT 1)";
+
+fn info_from_row(r: &rusqlite::Row, live_since: i64) -> rusqlite::Result<WorkerInfo> {
+    let last_seen_ms: i64 = r.get(4)?;
+    let task: Option<u64> = r.get(6)?;
+    Ok(WorkerInfo {
+        id: r.get(0)?,
+        name: r.get(1)?,
+        threads: r.get(2)?,
+        version: r.get(3)?,
+        last_seen_ms,
+        online: last_seen_ms >= live_since && r.get::<_, Option<i64>>(10)?.is_none(),
+        tasks_done: r.get(5)?,
+        current_task: match task {
+            Some(task_id) => Some(TaskToken {
+                task_id,
+                attempt: r.get(7)?,
+            }),
+            None => None,
+        },
+        current_job: r.get(8)?,
+        current_frame: r.get(9)?,
+        suspect: r.get::<_, Option<i64>>(11)?.is_some(),
+        quarantined: r.get(12)?,
+        platform: r.get(13)?,
+    })
+}
+
+/// One worker as clients see it; online when seen since `live_since`.
+pub fn info(conn: &Connection, id: u64, live_since: i64) -> Result<WorkerInfo> {
+    conn.row(&format!("{INFO_QUERY} WHERE w.id = ?1"), [id], |r| {
+        info_from_row(r, live_since)
+    })
+    .optional()?
+    .ok_or_else(|| Error::NotFound(format!("worker {id} is not registered")))
+}
+
+/// Every worker, by id.
+pub fn list(conn: &Connection, live_since: i64) -> Result<WorkerList> {
+    let mut stmt = conn.prepare_cached(&format!("{INFO_QUERY} ORDER BY w.id"))?;
+    let rows = stmt.query_map([], |r| info_from_row(r, live_since))?;
+    Ok(WorkerList {
+        workers: rows.collect::<rusqlite::Result<_>>()?,
+    })
+}
