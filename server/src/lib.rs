@@ -48,6 +48,8 @@ pub mod spec;
 pub mod state;
 pub mod status;
 pub mod store;
+#[cfg(feature = "test-server")]
+pub mod testing;
 pub mod tls;
 pub mod verify;
 

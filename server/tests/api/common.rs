@@ -1,7 +1,8 @@
-//! A real server on 127.0.0.1:0 in its own runtime (so a test can crash it), a test
-//! scene as GLB, and a simulated worker that renders tiles with the tracer.
+//! A real server on 127.0.0.1:0 in its own runtime (so a test can crash it: the shared
+//! [`TestServer`]), a test scene as GLB, and a simulated worker that renders tiles with
+//! the tracer.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -14,76 +15,7 @@ use tracer::render::{
     prepare_frame, render_tile, CameraChoice, FrameOptions, PreparedFrame, RenderSettings,
 };
 
-/// A server running on its own thread and runtime.
-pub struct TestServer {
-    pub base: String,
-    pub data: PathBuf,
-    stop: Option<std::sync::mpsc::Sender<bool>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl TestServer {
-    /// Starts a server on 127.0.0.1:0 with `config` (its `listen` is ignored).
-    pub fn start(config: Config) -> TestServer {
-        let data = config.data_dir.clone();
-        let (addr_tx, addr_rx) = std::sync::mpsc::channel();
-        let (stop_tx, stop_rx) = std::sync::mpsc::channel::<bool>();
-        let thread = std::thread::spawn(move || {
-            let rt = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .unwrap();
-            let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-            rt.spawn(async move {
-                let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-                addr_tx.send(listener.local_addr().unwrap()).unwrap();
-                server::serve(listener, config, async {
-                    let _ = rx.await;
-                })
-                .await
-                .unwrap();
-            });
-            // `true`: shut down gracefully; `false`: drop everything at once, like kill -9
-            // (no task gets to finish; only what SQLite committed survives).
-            let graceful = stop_rx.recv().unwrap_or(true);
-            if graceful {
-                let _ = tx.send(());
-                rt.shutdown_timeout(Duration::from_secs(5));
-            } else {
-                rt.shutdown_background();
-            }
-        });
-        let addr = addr_rx.recv().expect("server started");
-        TestServer {
-            base: format!("http://{addr}"),
-            data,
-            stop: Some(stop_tx),
-            thread: Some(thread),
-        }
-    }
-
-    /// Kills the server without any shutdown.
-    pub fn crash(mut self) {
-        self.stop.take().unwrap().send(false).unwrap();
-        self.thread.take().unwrap().join().unwrap();
-    }
-
-    pub fn url(&self, path: &str) -> String {
-        format!("{}/api/v1{path}", self.base)
-    }
-}
-
-impl Drop for TestServer {
-    fn drop(&mut self) {
-        if let Some(stop) = self.stop.take() {
-            let _ = stop.send(true);
-        }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
+pub use server::testing::TestServer;
 
 /// A config for a fresh data folder.
 pub fn config(dir: &Path) -> Config {

@@ -26,78 +26,7 @@ pub fn init_logs() {
         .try_init();
 }
 
-/// A server running on its own thread and runtime.
-pub struct TestServer {
-    pub base: String,
-    stop: Option<std::sync::mpsc::Sender<bool>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl TestServer {
-    /// Starts a server on 127.0.0.1:0.
-    pub fn start(config: server::Config) -> TestServer {
-        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        Self::start_on(listener, config)
-    }
-
-    /// Starts a server on `listener`.
-    pub fn start_on(listener: std::net::TcpListener, config: server::Config) -> TestServer {
-        let addr = listener.local_addr().unwrap();
-        listener.set_nonblocking(true).unwrap();
-        let (stop_tx, stop_rx) = std::sync::mpsc::channel::<bool>();
-        let thread = std::thread::spawn(move || {
-            let rt = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .unwrap();
-            let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-            rt.spawn(async move {
-                let listener = tokio::net::TcpListener::from_std(listener).unwrap();
-                server::serve(listener, config, async {
-                    let _ = rx.await;
-                })
-                .await
-                .unwrap();
-            });
-            // `true`: shut down gracefully; `false`: drop everything at once (kill -9).
-            if stop_rx.recv().unwrap_or(true) {
-                let _ = tx.send(());
-                rt.shutdown_timeout(Duration::from_secs(5));
-            } else {
-                rt.shutdown_background();
-            }
-        });
-        TestServer {
-            base: format!("http://{addr}"),
-            stop: Some(stop_tx),
-            thread: Some(thread),
-        }
-    }
-
-    /// Kills the server: every connection drops at once.
-    pub fn crash(mut self) {
-        self.stop.take().unwrap().send(false).unwrap();
-        self.thread.take().unwrap().join().unwrap();
-    }
-
-    pub fn url(&self, path: &str) -> String {
-        format!("{}/api/v1{path}", self.base)
-    }
-}
-
-impl Drop for TestServer {
-    fn drop(&mut self) {
-        if let Some(stop) = self.stop.take() {
-            // Killed, not stopped gracefully: a worker's open long poll would hold a
-            // graceful shutdown for up to its whole wait.
-            let _ = stop.send(false);
-        }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
+pub use server::testing::TestServer;
 
 /// A server config for a fresh data folder under `dir`.
 pub fn server_config(dir: &Path) -> server::Config {
@@ -179,7 +108,7 @@ pub struct Setup {
 pub async fn setup() -> Setup {
     init_logs();
     let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(server_config(dir.path()));
+    let s = TestServer::start(server_config(dir.path())).kill_on_drop();
     let c = client();
     let glb = spinning_quad();
     let scene = upload_scene(&s, &c, glb.clone()).await;

@@ -103,7 +103,7 @@ async fn a_worker_started_before_its_server_waits_and_then_works() {
         ..worker_config(&format!("http://{addr}"), &dir.path().join("cache"))
     });
     tokio::time::sleep(Duration::from_millis(1200)).await;
-    let s = TestServer::start_on(bind_again(addr), server_config(dir.path()));
+    let s = TestServer::start_on(bind_again(addr), server_config(dir.path())).kill_on_drop();
     let c = client();
     let glb = spinning_quad();
     let scene = upload_scene(&s, &c, glb.clone()).await;

@@ -60,7 +60,7 @@ async fn a_heartbeat_answered_409_stops_the_render() {
     let mut config = server_config(dir.path());
     // 4 s leases: a heartbeat every second.
     config.lease = Duration::from_secs(4);
-    let s = TestServer::start(config);
+    let s = TestServer::start(config).kill_on_drop();
     let c = client();
     let scene = upload_scene(&s, &c, spinning_quad()).await;
     // One tile that takes several seconds.
@@ -104,7 +104,7 @@ async fn a_worker_whose_server_lost_its_data_registers_again() {
     config.max_lease_wait = Duration::from_secs(1);
     // An address no other test's server takes while this one is down between the two.
     let addr = free_addr();
-    let first = TestServer::start_on(bind_again(addr), config.clone());
+    let first = TestServer::start_on(bind_again(addr), config.clone()).kill_on_drop();
     let w = TestWorker::start(&first.base, &dir.path().join("cache"), None);
     // Registered and polling.
     let c = client();
@@ -131,7 +131,7 @@ async fn a_worker_whose_server_lost_its_data_registers_again() {
     tokio::time::sleep(Duration::from_millis(500)).await;
     let mut config = server_config(&dir.path().join("b"));
     config.max_lease_wait = Duration::from_secs(1);
-    let s = TestServer::start_on(bind_again(addr), config);
+    let s = TestServer::start_on(bind_again(addr), config).kill_on_drop();
     let glb = spinning_quad();
     let scene = upload_scene(&s, &c, glb).await;
     let job = create_job(&s, &c, &spec(&scene.digest, 1, 1, 1)).await;
@@ -148,7 +148,7 @@ async fn a_wrong_token_stops_the_worker_with_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let mut config = server_config(dir.path());
     config.worker_token = Some("right".into());
-    let s = TestServer::start(config);
+    let s = TestServer::start(config).kill_on_drop();
     let w = TestWorker::start(&s.base, &dir.path().join("cache"), Some("wrong"));
     let err = w.finished().await.unwrap_err();
     let text = format!("{err:#}");

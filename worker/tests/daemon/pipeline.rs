@@ -132,7 +132,7 @@ async fn a_tile_waiting_for_the_upload_before_it_keeps_its_lease() {
         sweep_interval: Duration::from_millis(200),
         ..server_config(dir.path())
     };
-    let s = TestServer::start(config);
+    let s = TestServer::start(config).kill_on_drop();
     let c = client();
     let glb = spinning_quad();
     let scene = upload_scene(&s, &c, glb.clone()).await;
