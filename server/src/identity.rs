@@ -13,16 +13,10 @@ use crate::store::sha256_hex;
 /// A worker asking to join: [`proto::WorkerRegistration`], checked.
 #[derive(Clone, Copy, Debug)]
 pub struct Joining<'a> {
-    /// Its name, which no two live workers share.
-    pub name: &'a str,
-    /// Render threads.
-    pub threads: u32,
-    /// Its version.
-    pub version: &'a str,
+    /// What it says of itself (its name no two live workers share).
+    pub profile: Profile<'a>,
     /// The credential it kept from an earlier registration.
     pub credential: Option<&'a str>,
-    /// Its machine and build.
-    pub platform: Option<&'a str>,
 }
 
 /// Who a joining worker turned out to be.
@@ -48,44 +42,42 @@ pub fn join(conn: &mut Connection, joining: &Joining, now: i64, live_since: i64)
         Some(c) => worker_of_credential(&tx, c)?,
         None => None,
     };
-    let holder = workers::newest_named(&tx, joining.name, live_since)?;
+    let holder = workers::newest_named(&tx, joining.profile.name, live_since)?;
     let (returning, credential) = match (by_credential, holder) {
         (Some(id), Some((other, true))) if other != id => {
-            return Err(name_in_use(joining.name, other))
+            return Err(name_in_use(joining.profile.name, other))
         }
         (Some(id), _) => (Some(id), joining.credential.unwrap_or_default().to_string()),
-        (None, Some((other, true))) => return Err(name_in_use(joining.name, other)),
+        (None, Some((other, true))) => return Err(name_in_use(joining.profile.name, other)),
         (None, Some((gone, false))) => (Some(gone), new_credential()?),
         (None, None) => (None, new_credential()?),
     };
     let hash = sha256_hex(credential.as_bytes());
-    let profile = Profile {
-        name: joining.name,
-        threads: joining.threads,
-        version: joining.version,
-        platform: joining.platform,
-    };
     let id = match returning {
         Some(id) => {
             let held = tasks::give_back(&tx, id)?;
-            workers::set_returned(&tx, id, &profile, &hash, now)?;
+            workers::set_returned(&tx, id, &joining.profile, &hash, now)?;
             log(
                 &tx,
                 now,
                 None,
                 "worker_returned",
-                &format!("{id} {}, {} leases given back", joining.name, held.len()),
+                &format!(
+                    "{id} {}, {} leases given back",
+                    joining.profile.name,
+                    held.len()
+                ),
             )?;
             id
         }
         None => {
-            let id = workers::insert(&tx, &profile, &hash, now)?;
+            let id = workers::insert(&tx, &joining.profile, &hash, now)?;
             log(
                 &tx,
                 now,
                 None,
                 "worker_registered",
-                &format!("{id} {}", joining.name),
+                &format!("{id} {}", joining.profile.name),
             )?;
             id
         }

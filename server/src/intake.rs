@@ -398,11 +398,13 @@ mod tests {
             let plan = crate::spec::plan(spec, &scene, 10).unwrap();
             let job = crate::controls::submit(c, &plan, 0).unwrap();
             let joining = |name| crate::identity::Joining {
-                name,
-                threads: 1,
-                version: "t",
+                profile: crate::db::workers::Profile {
+                    name,
+                    threads: 1,
+                    version: "t",
+                    platform: None,
+                },
                 credential: None,
-                platform: None,
             };
             let a = crate::identity::join(c, &joining("a"), 0, 0).unwrap().id;
             let b = crate::identity::join(c, &joining("b"), 0, 0).unwrap().id;

@@ -7,7 +7,7 @@
 use proto::{FailureAck, Lease, Rect, SampleSpan, TaskToken};
 use rusqlite::{Connection, Transaction};
 
-pub use crate::config::Timing;
+use crate::config::Timing;
 use crate::db::events::log;
 use crate::db::tasks::{self, TaskRow};
 use crate::db::{frames, jobs, workers};

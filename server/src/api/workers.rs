@@ -70,11 +70,13 @@ pub async fn register(
         .db
         .run(move |c| {
             let joining = identity::Joining {
-                name: &reg.name,
-                threads: reg.threads,
-                version: &reg.version,
+                profile: db::workers::Profile {
+                    name: &reg.name,
+                    threads: reg.threads,
+                    version: &reg.version,
+                    platform: reg.platform.as_deref(),
+                },
                 credential: reg.credential.as_deref(),
-                platform: reg.platform.as_deref(),
             };
             identity::join(c, &joining, now, timing.live_since(now))
         })

@@ -10,13 +10,6 @@ use super::*;
 fn a_worker_that_comes_back_keeps_its_identity_and_a_live_name_is_refused() {
     let mut c = db();
     let j = job(&mut c, 1, 0, 5, 0);
-    let joining = |name, credential| Joining {
-        name,
-        threads: 4,
-        version: "test",
-        credential,
-        platform: None,
-    };
     let live = |now| TIMING.live_since(now);
     let first = join(&mut c, &joining("a", None), 0, live(0)).unwrap();
     assert!(!first.returned);

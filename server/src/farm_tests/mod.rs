@@ -14,6 +14,7 @@ use rusqlite::{params, Connection};
 use tracer::film::SamplingSummary;
 
 use crate::budget::replan_running;
+use crate::config::Timing;
 use crate::controls::{cancel, pause, resume, retry, submit};
 use crate::db::frames::is_assembled;
 use crate::db::tasks;
@@ -83,14 +84,22 @@ pub(super) fn job(
 }
 
 pub(super) fn worker(c: &mut Connection, name: &str, now: i64) -> u64 {
-    let joining = Joining {
-        name,
-        threads: 4,
-        version: "test",
-        credential: None,
-        platform: None,
-    };
-    join(c, &joining, now, now - 2 * LEASE_MS).unwrap().id
+    join(c, &joining(name, None), now, TIMING.live_since(now))
+        .unwrap()
+        .id
+}
+
+/// A worker of 4 threads asking to join as `name`, with `credential` if it kept one.
+pub(super) fn joining<'a>(name: &'a str, credential: Option<&'a str>) -> Joining<'a> {
+    Joining {
+        profile: workers::Profile {
+            name,
+            threads: 4,
+            version: "test",
+            platform: None,
+        },
+        credential,
+    }
 }
 
 /// The task a leased check repeats (`None` for a render task).
