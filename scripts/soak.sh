@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The soak, not part of CI: a short run of every fuzz target, then a farm that renders for
-# a long time under random SIGKILLs of workers and the server and random worker stalls, and
+# a long time under random SIGKILLs of workers and the server, random worker stalls and a
+# full disk now and then (the server's data folder on a small tmpfs of its own), and
 # checks at the end that every frame equals a direct render and no task was leased again
 # after it was accepted (tests/tests/soak.rs). Prints the figures RELIABILITY.md records.
 #

@@ -10,6 +10,7 @@
 pub mod http;
 
 use std::fs;
+use std::io::Write;
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Output, Stdio};
@@ -328,9 +329,18 @@ pub struct Farm {
     /// ([`Farm::start_tls_server`]): the URL is https:// and clients and workers get `--ca`.
     pub tls_ca: Option<PathBuf>,
     servers_started: usize,
-    /// The server's data folder lies on a small disk of its own (a tmpfs in its mount
-    /// namespace): see [`Farm::start_server_on_small_disk`].
-    small_disk: bool,
+    /// The server's data folder lies on a small disk of its own: see
+    /// [`Farm::use_small_disk`].
+    small_disk: Option<SmallDisk>,
+}
+
+/// A tmpfs over the farm's `data/` in a mount namespace of its own, held by a sleeping
+/// process so that it outlives server restarts; servers enter it with `nsenter`.
+struct SmallDisk {
+    /// Holds the namespace; killed (and the tmpfs gone) when the farm is dropped.
+    holder: Process,
+    /// The namespaces a server enters (`nsenter` flags).
+    enter: &'static [&'static str],
 }
 
 impl Default for Farm {
@@ -350,7 +360,7 @@ impl Farm {
             client_token: None,
             tls_ca: None,
             servers_started: 0,
-            small_disk: false,
+            small_disk: None,
         }
     }
 
@@ -414,17 +424,30 @@ impl Farm {
         let listen = format!("127.0.0.1:{}", self.port);
         let lease = lease_seconds.to_string();
         let name = format!("server-{}", self.servers_started);
+        // Absolute: a server in the small disk's namespace must find the tmpfs.
+        let data = self.path().join("data");
+        let data = data.to_str().expect("a UTF-8 temp path");
         let mut args = vec![
             "server",
             "--listen",
             &listen,
             "--data",
-            "data",
+            data,
             "--lease-seconds",
             &lease,
         ];
         args.extend(extra);
-        let mut command = Command::new(tessera_bin());
+        let mut command = match &self.small_disk {
+            Some(disk) => {
+                let mut c = Command::new("nsenter");
+                c.args(["--target", &disk.holder.pid().to_string()])
+                    .args(disk.enter)
+                    .arg("--")
+                    .arg(tessera_bin());
+                c
+            }
+            None => Command::new(tessera_bin()),
+        };
         command.args(&args);
         if let Some(limit) = memory_bytes {
             use std::os::unix::process::CommandExt;
@@ -444,7 +467,6 @@ impl Farm {
             }
         }
         self.server = Some(Process::spawn(&name, command, self.path()));
-        self.small_disk = false;
         self.wait_for_server();
     }
 
@@ -465,92 +487,106 @@ impl Farm {
         );
     }
 
-    /// [`Farm::start_server`] with the data folder on a tmpfs of `size_bytes` that only
-    /// the server sees (a mount namespace of its own, through `unshare`), so a test can
-    /// fill its disk; the test reaches the folder at [`Farm::data_dir`]. The tmpfs goes
-    /// away with the server. `Err` says why this machine cannot arrange it (no `unshare`,
+    /// Puts the server's data folder on a tmpfs of `size_bytes` that only the farm's
+    /// servers see (a mount namespace of their own, through `unshare`, held by a sleeping
+    /// process so that the disk outlives server restarts), so a test can fill it; call it
+    /// before the first server starts. The test reaches the folder at [`Farm::data_dir`].
+    /// `Err` says why this machine cannot arrange it (no `unshare` or `nsenter`,
     /// namespaces or mounts not permitted): the caller skips, saying so.
-    pub fn start_server_on_small_disk(
-        &mut self,
-        lease_seconds: u64,
-        size_bytes: u64,
-    ) -> Result<(), String> {
+    pub fn use_small_disk(&mut self, size_bytes: u64) -> Result<(), String> {
+        assert!(
+            self.server.is_none(),
+            "a small disk is set up before the server"
+        );
         let data = self.path().join("data");
         fs::create_dir_all(&data).expect("creating the data mount point");
         let data = data.to_str().expect("a UTF-8 temp path").to_owned();
+        let size = size_bytes.to_string();
         // A user namespace lets a non-root user mount a tmpfs; as root it may be refused
         // (seccomp in some containers) where a plain mount namespace works.
         let mut refusals = Vec::new();
-        let mut unshare = None;
-        for flags in [&["--user", "--map-root-user", "--mount"][..], &["--mount"]] {
-            let probe = Command::new("unshare")
-                .args(flags)
-                .args(["sh", "-c", MOUNT_TMPFS, "sh", "1m", &data, "true"])
-                .output();
-            match probe {
-                Ok(o) if o.status.success() => {
-                    unshare = Some(flags);
-                    break;
-                }
-                Ok(o) => refusals.push(format!(
-                    "`unshare {} sh -c 'mount -t tmpfs ...'` failed ({}): {}",
-                    flags.join(" "),
-                    o.status,
-                    String::from_utf8_lossy(&o.stderr).trim()
-                )),
-                Err(e) => {
-                    refusals.push(format!("running `unshare`: {e}"));
-                    break;
-                }
-            }
-        }
-        let Some(flags) = unshare else {
-            return Err(refusals.join("; "));
-        };
-        self.servers_started += 1;
-        let (listen, lease) = (
-            format!("127.0.0.1:{}", self.port),
-            lease_seconds.to_string(),
-        );
-        let mut command = Command::new("unshare");
-        command
-            .args(flags)
-            .args([
+        let ways: [(&[&str], &'static [&'static str]); 2] = [
+            (
+                &["--user", "--map-root-user", "--mount"],
+                &["--user", "--mount"],
+            ),
+            (&["--mount"], &["--mount"]),
+        ];
+        for (flags, enter) in ways {
+            let mut command = Command::new("unshare");
+            command.args(flags).args([
                 "sh",
                 "-c",
                 MOUNT_TMPFS,
                 "sh",
-                &size_bytes.to_string(),
+                &size,
                 &data,
-            ])
-            .arg(tessera_bin())
-            .args([
-                "server",
-                "--listen",
-                &listen,
-                "--data",
-                &data,
-                "--lease-seconds",
-                &lease,
+                "sleep",
+                "1000000",
             ]);
-        let name = format!("server-{}", self.servers_started);
-        self.server = Some(Process::spawn(&name, command, self.path()));
-        self.small_disk = true;
-        self.wait_for_server();
-        Ok(())
+            let mut holder = Process::spawn("small-disk", command, self.path());
+            let pid = holder.pid();
+            let mounted = || {
+                fs::read_to_string(format!("/proc/{pid}/mounts"))
+                    .is_ok_and(|m| m.contains("tessera-data"))
+            };
+            let until = Instant::now() + Duration::from_secs(10);
+            while holder.running() && !mounted() && Instant::now() < until {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let probe = Command::new("nsenter")
+                .args(["--target", &pid.to_string()])
+                .args(enter)
+                .args(["--", "true"])
+                .output();
+            match probe {
+                Ok(o) if mounted() && o.status.success() => {
+                    self.small_disk = Some(SmallDisk { holder, enter });
+                    return Ok(());
+                }
+                Ok(o) => refusals.push(format!(
+                    "`unshare {} sh -c 'mount -t tmpfs ...'` then `nsenter {}`: {}{}",
+                    flags.join(" "),
+                    enter.join(" "),
+                    holder.log().trim(),
+                    String::from_utf8_lossy(&o.stderr).trim()
+                )),
+                Err(e) => {
+                    refusals.push(format!("running `nsenter`: {e}"));
+                    break;
+                }
+            }
+        }
+        Err(refusals.join("; "))
     }
 
     /// The server's data folder as this process sees it: `data/` in the farm's folder,
-    /// or, on a small disk, the same path inside the server's mount namespace (through
-    /// `/proc/<pid>/root`, while the server runs).
+    /// or, on a small disk, the same path inside its mount namespace (through
+    /// `/proc/<pid>/root` of the process holding it).
     pub fn data_dir(&self) -> PathBuf {
         let data = self.path().join("data");
-        match (&self.server, self.small_disk) {
-            (Some(server), true) => {
+        match &self.small_disk {
+            Some(disk) => {
                 let inside = data.strip_prefix("/").expect("an absolute temp path");
-                Path::new(&format!("/proc/{}/root", server.pid())).join(inside)
+                Path::new(&format!("/proc/{}/root", disk.holder.pid())).join(inside)
             }
-            _ => data,
+            None => data,
+        }
+    }
+
+    /// Fills the server's disk with the file `name` in its data folder until the disk
+    /// says it is full; returns how many bytes went in. Removing the file frees the space.
+    pub fn fill_disk(&self, name: &str) -> u64 {
+        let path = self.data_dir().join(name);
+        let mut f = fs::File::create(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let block = vec![0xa5u8; 64 << 10];
+        let mut written = 0;
+        loop {
+            match f.write(&block) {
+                Ok(n) => written += n as u64,
+                Err(e) if e.kind() == std::io::ErrorKind::StorageFull => return written,
+                Err(e) => panic!("filling {}: {e}", path.display()),
+            }
         }
     }
 

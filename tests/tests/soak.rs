@@ -1,7 +1,8 @@
 //! The soak: a farm that runs for a long time (`TESSERA_SOAK_SECONDS`, default 1800)
 //! while faults are injected at random: workers killed with SIGKILL and started again,
 //! workers stalled (SIGSTOP) past their lease and let go, the server killed with SIGKILL
-//! and started again. Jobs keep coming the whole time. At the end every frame of every
+//! and started again, the server's disk filled for a while (its data folder is on a small
+//! tmpfs of its own). Jobs keep coming the whole time. At the end every frame of every
 //! job must equal a direct `tessera render` of it bit for bit, and no task may have been
 //! leased again after its tile was accepted. Not part of CI: `scripts/soak.sh` runs it
 //! (ignored here) and prints the figures RELIABILITY.md records.
@@ -15,6 +16,8 @@ use tests::{job_id_in, render_directly, settings, tessera, Farm};
 /// Leases are short, so a killed or stalled worker's tile goes back to the queue soon.
 const LEASE_SECONDS: u64 = 6;
 const WORKERS: usize = 3;
+/// The server's disk: room for every job a long soak submits, filled now and then.
+const DISK_BYTES: u64 = 512 << 20;
 
 #[derive(Debug, Default)]
 struct Figures {
@@ -23,6 +26,7 @@ struct Figures {
     workers_killed: u64,
     workers_stalled: u64,
     servers_killed: u64,
+    disks_filled: u64,
     submissions_refused: u64,
     /// Faults that found a worker holding a lease.
     faults_on_leases: u64,
@@ -47,6 +51,16 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
     let mut rng = fastrand::Rng::with_seed(seed);
 
     let mut farm = Farm::new();
+    let disk_faults = match farm.use_small_disk(DISK_BYTES) {
+        Ok(()) => true,
+        Err(why) => {
+            eprintln!(
+                "SKIPPED FAULT: no full-disk faults in this soak, this machine cannot give \
+                 the server a small disk of its own: {why}"
+            );
+            false
+        }
+    };
     farm.start_server(LEASE_SECONDS);
     let names: Vec<String> = (1..=WORKERS).map(|k| format!("soak-{k}")).collect();
     // Which process in `farm.workers` is each worker now.
@@ -129,6 +143,14 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
                     worker.signal(libc::SIGCONT);
                     figures.workers_stalled += 1;
                 }
+                9 if disk_faults => {
+                    // Uploads, leases and submissions meet ENOSPC or SQLITE_FULL (507)
+                    // for a while; then the space comes back.
+                    farm.fill_disk("soak-filler");
+                    std::thread::sleep(Duration::from_secs(rng.u64(2..20)));
+                    std::fs::remove_file(farm.data_dir().join("soak-filler")).unwrap();
+                    figures.disks_filled += 1;
+                }
                 _ => {
                     farm.server.as_mut().expect("the server runs").kill9();
                     std::thread::sleep(Duration::from_millis(rng.u64(0..3000)));
@@ -163,7 +185,7 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
             );
         }
     }
-    let db = rusqlite::Connection::open(farm.path().join("data").join("tessera.db")).unwrap();
+    let db = rusqlite::Connection::open(farm.data_dir().join("tessera.db")).unwrap();
     let (tasks, leased_after_done): (u64, u64) = db
         .query_row(
             "SELECT count(*), coalesce(sum(leased_ms > done_ms), 0) FROM tasks
@@ -184,8 +206,8 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
     println!(
         "soak done in {:.0} s (seed {seed}, {spp} spp): {} jobs, {} frames, {tasks} tasks ({expired} \
          attempts lost to faults); faults: {} workers killed, {} workers stalled, {} server \
-         kills ({} of them while a worker held a lease); {} submissions refused while the \
-         server was down; frames lost: 0, frames different from a direct render: 0, tasks \
+         kills, {} full disks ({} of the faults while a worker held a lease); {} submissions \
+         refused while the server was down or its disk full; frames lost: 0, frames different from a direct render: 0, tasks \
          leased after acceptance: 0",
         started.elapsed().as_secs_f64(),
         figures.jobs,
@@ -193,6 +215,7 @@ fn a_farm_under_random_faults_loses_nothing_and_renders_nothing_twice() {
         figures.workers_killed,
         figures.workers_stalled,
         figures.servers_killed,
+        figures.disks_filled,
         figures.faults_on_leases,
         figures.submissions_refused,
     );

@@ -4,7 +4,6 @@
 //! frame equal to a direct `tessera render`.
 
 use std::fs;
-use std::io::Write;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -19,20 +18,6 @@ const DISK_BYTES: u64 = 16 << 20;
 /// is about space, not about leases.
 const LEASE_SECONDS: u64 = 30;
 const SPP: &str = "16";
-
-/// Writes `path` until the disk says it is full; returns how many bytes went in.
-fn fill(path: &Path) -> u64 {
-    let mut f = fs::File::create(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let block = vec![0xa5u8; 64 << 10];
-    let mut written = 0;
-    loop {
-        match f.write(&block) {
-            Ok(n) => written += n as u64,
-            Err(e) if e.kind() == std::io::ErrorKind::StorageFull => return written,
-            Err(e) => panic!("filling {}: {e}", path.display()),
-        }
-    }
-}
 
 /// Every `frame_*.exr` of the job folders reads as a whole 32x24 frame, and no temp file
 /// (a dot file) is left in the job or tile folders; returns how many frames there are.
@@ -73,10 +58,11 @@ fn post_job(farm: &Farm, spec: &JobSpec) -> Answer {
 fn a_full_disk_answers_507_and_the_job_finishes_once_space_returns() {
     let started = Instant::now();
     let mut farm = Farm::new();
-    if let Err(why) = farm.start_server_on_small_disk(LEASE_SECONDS, DISK_BYTES) {
+    if let Err(why) = farm.use_small_disk(DISK_BYTES) {
         eprintln!("SKIPPED: this machine cannot give the server a small disk of its own: {why}");
         return;
     }
+    farm.start_server(LEASE_SECONDS);
     let scene = farm.demo_scene();
     let mut args = vec![scene.to_str().unwrap(), "--frames", "1-1"];
     args.extend(settings(SPP));
@@ -92,8 +78,7 @@ fn a_full_disk_answers_507_and_the_job_finishes_once_space_returns() {
     args.extend(settings(SPP));
     let job = farm.submit(&args);
     let data = farm.data_dir();
-    let filler = data.join("filler");
-    let filled = fill(&filler);
+    let filled = farm.fill_disk("filler");
     farm.workers[w].signal(libc::SIGCONT);
 
     let full_since = Instant::now();
@@ -134,7 +119,7 @@ fn a_full_disk_answers_507_and_the_job_finishes_once_space_returns() {
     );
 
     let full_for = full_since.elapsed();
-    fs::remove_file(&filler).unwrap();
+    fs::remove_file(data.join("filler")).unwrap();
     let st = farm.wait_for_job(job, Duration::from_secs(120));
     assert_eq!(st.state, JobState::Done, "{st:?}");
     assert_eq!((st.tasks.done, st.tasks.failed), (4, 0), "{st:?}");
