@@ -56,7 +56,20 @@ enum Command {
     Workers(control::WorkersArgs),
 }
 
-fn main() -> anyhow::Result<()> {
+/// Runs the command; an error is printed as one line, its causes after colons, and never
+/// with a stack backtrace (many users have `RUST_BACKTRACE` set, and a user's mistake is
+/// not a crash).
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> anyhow::Result<()> {
     // `server` and `worker` settings also come from TESSERA_* variables and a --config file.
     let (cli, layers) = settings::parse::<Cli>()?;
     match cli.command {
