@@ -372,6 +372,14 @@ pub struct JobStatus {
     pub eta_seconds: Option<f64>,
     /// A time-budget job's plan, as of its last planning.
     pub budget: Option<BudgetPlan>,
+    /// Attempts of its tasks that failed since the job was last retried; why, in
+    /// `GET /jobs/{id}/failures`.
+    #[serde(default)]
+    pub attempts_failed: u64,
+    /// Why the job cannot go on as things stand (every live worker is blocked from it or
+    /// quarantined), and what to do; absent while it can.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stuck: Option<String>,
 }
 
 /// Where a time-budget job's plan stands. The server plans again whenever a frame is

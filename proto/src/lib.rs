@@ -6,6 +6,7 @@
 //! |---|---|
 //! | [`scene`] | what an uploaded scene holds ([`SceneInfo`]) |
 //! | [`job`] | the job spec a client submits and the status it reads back, frames |
+//! | [`task`] | a job's tasks and why their attempts failed |
 //! | [`worker`] | registration, lease, heartbeat, result upload headers, failure reports |
 //! | [`event`] | server-sent events for jobs, frames and workers |
 //! | [`error`] | the JSON error body every failed request answers with |
@@ -17,6 +18,7 @@ pub mod error;
 pub mod event;
 pub mod job;
 pub mod scene;
+pub mod task;
 pub mod worker;
 
 pub use error::ErrorBody;
@@ -26,6 +28,9 @@ pub use job::{
     JobState, JobStatus, OutputLayer, TaskCounts,
 };
 pub use scene::{AnimationInfo, CameraInfo, SceneInfo};
+pub use task::{
+    FailureGroup, FailureKind, FailureList, TaskFailure, TaskInfo, TaskList, TaskState,
+};
 pub use worker::{
     FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, Rect, ResultAck,
     ResultMetadata, SampleSpan, TaskToken, WorkerInfo, WorkerLeft, WorkerList, WorkerRegistered,

@@ -56,7 +56,12 @@ impl App {
             return;
         }
         let now = now_ms();
-        if let Ok(status) = self.db.run(move |c| status::job_status(c, job, now)).await {
+        let live_since = self.timing().live_since(now);
+        if let Ok(status) = self
+            .db
+            .run(move |c| status::job_status(c, job, now, live_since))
+            .await
+        {
             self.events.send(proto::Event::Job {
                 job: Box::new(status),
             });

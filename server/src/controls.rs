@@ -8,7 +8,7 @@ use rusqlite::{Connection, Transaction};
 use crate::budget;
 use crate::db::events::log;
 use crate::db::tasks::{self, NewTask};
-use crate::db::{frames, jobs};
+use crate::db::{failures, frames, jobs};
 use crate::error::{Error, Result};
 use crate::spec::Plan;
 use crate::state::{control_transition, ControlChange, JobCommand, TaskEvent, TaskState};
@@ -109,33 +109,41 @@ pub fn cancel(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
     Ok(())
 }
 
-/// Re-queues a job's failed tasks with fresh attempts, lifts its worker blocks, and lets
-/// frames whose assembly failed be assembled again. Returns how many tasks and frames.
+/// A fresh start once the cause is mended: re-queues a job's failed tasks, gives every
+/// task its full attempts again and forgets the failed ones (the event log keeps them),
+/// lifts its worker blocks (a job every live worker is blocked from is stuck), and lets
+/// frames whose assembly failed be assembled again. Returns how many tasks, frames and
+/// blocks.
 pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
     let tx = conn.transaction()?;
     command(&tx, job, JobCommand::Retry)?;
     let failed = tasks::of_job(&tx, job, &[TaskState::Failed])?;
     let frames = frames::clear_failures(&tx, job)?;
-    if failed.is_empty() && frames == 0 {
+    let blocks = jobs::unblock_all(&tx, job)?;
+    if failed.is_empty() && frames == 0 && blocks == 0 {
         return Err(Error::Conflict(format!(
-            "job {job} has no failed tasks or frames"
+            "job {job} has no failed tasks or frames and no blocked workers"
         )));
     }
     for task in &failed {
         tasks::advance(&tx, task, TaskEvent::Retry)?;
-        tasks::forget_failures(&tx, task.id)?;
     }
-    jobs::unblock_all(&tx, job)?;
+    // Blocks count failures: kept, they would block a worker again at its next one.
+    tasks::reset_failures(&tx, job)?;
+    failures::forget(&tx, job)?;
     log(
         &tx,
         now,
         Some(job),
         "job_retried",
-        &format!("{} tasks, {frames} frames", failed.len()),
+        &format!(
+            "{} tasks, {frames} frames, {blocks} worker blocks",
+            failed.len()
+        ),
     )?;
     jobs::update_finished(&tx, job, now)?;
     tx.commit()?;
-    Ok(failed.len() + frames)
+    Ok(failed.len() + frames + blocks)
 }
 
 /// Deletes a job's rows (its files are removed by the caller after this commits).

@@ -203,7 +203,7 @@ pub fn snapshot(conn: &Connection, now: i64, live_since: i64) -> Result<Snapshot
             .iter()
             .map(|s| (s.to_string(), 0))
             .collect();
-    for job in crate::status::list_jobs(conn, now)? {
+    for job in crate::status::list_jobs(conn, now, live_since)? {
         let name = serde_json::to_value(job.state)?
             .as_str()
             .unwrap_or("")

@@ -4,13 +4,13 @@
 //! [`tasks::advance`]); times are passed in (`now`, Unix ms) so tests need no clock. The
 //! job controls are in [`crate::controls`].
 
-use proto::{FailureAck, Lease, Rect, SampleSpan, TaskToken};
+use proto::{FailureAck, FailureKind, Lease, Rect, SampleSpan, TaskToken};
 use rusqlite::{Connection, Transaction};
 
 use crate::config::Timing;
 use crate::db::events::log;
 use crate::db::tasks::{self, TaskRow};
-use crate::db::{frames, jobs, workers};
+use crate::db::{failures, frames, jobs, workers};
 use crate::error::{Error, Result};
 use crate::state::{JobControl, TaskEvent, TaskState};
 use crate::verify::{self, Verdict};
@@ -236,7 +236,7 @@ fn fail_attempt(
     tx: &Transaction,
     task: &TaskRow,
     worker: u64,
-    reason: &str,
+    kind: FailureKind,
     message: &str,
     now: i64,
     timing: Timing,
@@ -244,14 +244,14 @@ fn fail_attempt(
     let max_attempts = jobs::max_attempts(tx, task.job_id)?;
     let failures = task.failures + 1;
     let exhausted = failures >= max_attempts;
-    let event = match reason {
-        "expired" => TaskEvent::Expire { exhausted },
-        _ => TaskEvent::Fail { exhausted },
+    let event = match kind {
+        FailureKind::Expired => TaskEvent::Expire { exhausted },
+        FailureKind::Reported => TaskEvent::Fail { exhausted },
     };
     let to = tasks::advance(tx, task, event)?;
     tasks::clear_lease(tx, task.id)?;
     tasks::set_failures(tx, task.id, failures)?;
-    let by_worker = tasks::record_failure(tx, task, worker, reason, message, now)?;
+    let by_worker = failures::record(tx, task, worker, kind, message, now)?;
     let blocked = by_worker >= timing.block_after_failures;
     // Logged once, when the block is new.
     if blocked && jobs::block(tx, task.job_id, worker)? {
@@ -273,8 +273,10 @@ fn fail_attempt(
             "task_retry"
         },
         &format!(
-            "task {} attempt {} on worker {worker} ({reason}): {message}",
-            task.id, task.attempt
+            "task {} attempt {} on worker {worker} ({}): {message}",
+            task.id,
+            task.attempt,
+            kind.as_str()
         ),
     )?;
     jobs::update_finished(tx, task.job_id, now)?;
@@ -297,7 +299,15 @@ pub fn fail(
     let tx = conn.transaction()?;
     workers::touch(&tx, worker, now)?;
     let task = check_token(&tx, worker, token)?;
-    let ack = fail_attempt(&tx, &task, worker, "reported", message, now, timing)?;
+    let ack = fail_attempt(
+        &tx,
+        &task,
+        worker,
+        FailureKind::Reported,
+        message,
+        now,
+        timing,
+    )?;
     tx.commit()?;
     Ok((task.job_id, ack))
 }
@@ -313,7 +323,7 @@ pub fn expire(conn: &mut Connection, now: i64, timing: Timing) -> Result<Vec<u64
             &tx,
             task,
             worker,
-            "expired",
+            FailureKind::Expired,
             "lease expired without a heartbeat",
             now,
             timing,

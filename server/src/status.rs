@@ -1,15 +1,18 @@
-//! A job's status as clients read it: its state, tasks by state, frames done, samples per
-//! second, progress and ETA, made from what [`crate::db`] stores. Nothing here writes.
+//! A job as clients read it, made from what [`crate::db`] stores: its status (state, tasks
+//! by state, frames done, samples per second, progress, ETA, and why it is stuck if it
+//! is), its tasks, and why their attempts failed. Nothing here writes.
 
-use proto::{JobState, JobStatus};
+use proto::{FailureList, JobState, JobStatus, Rect, SampleSpan, TaskInfo, TaskList};
 use rusqlite::Connection;
 
-use crate::db::{frames, jobs, tasks};
+use crate::db::workers::Availability;
+use crate::db::{failures, frames, jobs, tasks, workers};
 use crate::error::Result;
-use crate::state::{job_state, JobFacts};
+use crate::limits::{MAX_FAILURE_GROUPS, MAX_TASKS_PER_PAGE};
+use crate::state::{job_state, JobControl, JobFacts, TaskState};
 
-/// One job's status at `now`.
-pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
+/// One job's status at `now`; workers seen since `live_since` count as live.
+pub fn job_status(conn: &Connection, job: u64, now: i64, live_since: i64) -> Result<JobStatus> {
     let jobs::JobRow {
         name,
         spec,
@@ -76,6 +79,23 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
             (running && samples_per_second > 0.0).then(|| remaining / samples_per_second),
         ),
     };
+    let attempts_failed = failures::count(conn, job)?;
+    // Stuck: work is queued, none runs, and no live worker may take it. (No live worker
+    // at all is a farm waiting for workers, not a stuck job.)
+    let stuck = if control == JobControl::Active
+        && finished_ms.is_none()
+        && tasks.queued > 0
+        && tasks.leased == 0
+    {
+        let farm = workers::availability(conn, job, live_since)?;
+        if farm.live > 0 && farm.usable() == 0 {
+            Some(stuck_reason(conn, job, farm, attempts_failed)?)
+        } else {
+            None
+        }
+    } else {
+        None
+    };
     Ok(JobStatus {
         id: job,
         name,
@@ -91,13 +111,93 @@ pub fn job_status(conn: &Connection, job: u64, now: i64) -> Result<JobStatus> {
         samples_per_second,
         eta_seconds,
         budget,
+        attempts_failed,
+        stuck,
+    })
+}
+
+/// Why no live worker may take `job`'s tasks, with its most frequent failure (of
+/// `attempts_failed`) and what to do.
+fn stuck_reason(
+    conn: &Connection,
+    job: u64,
+    farm: Availability,
+    attempts_failed: u64,
+) -> Result<String> {
+    let mut why = format!(
+        "no live worker may take its tasks: of {} live worker(s), {} blocked from this job \
+         after failing its tasks and {} quarantined",
+        farm.live, farm.blocked, farm.quarantined
+    );
+    if let Some(g) = failures::groups(conn, job, 1)?.first() {
+        why.push_str(&format!(
+            "; most frequent failure ({} of {attempts_failed} attempt(s)): {}",
+            g.attempts, g.reason
+        ));
+    }
+    if farm.blocked > 0 {
+        why.push_str(&format!(
+            "; fix the cause, then `tessera retry {job}` lifts the blocks"
+        ));
+    }
+    Ok(why)
+}
+
+/// Up to `limit` (at most [`MAX_TASKS_PER_PAGE`]) tasks of `job` with ids past `after`, in
+/// `state` when given, each with its failed attempts.
+pub fn tasks(
+    conn: &Connection,
+    job: u64,
+    state: Option<TaskState>,
+    after: u64,
+    limit: u32,
+) -> Result<TaskList> {
+    jobs::control(conn, job)?;
+    let limit = limit.clamp(1, MAX_TASKS_PER_PAGE);
+    let rows = tasks::page(conn, job, state, after, limit)?;
+    let ids: Vec<u64> = rows.iter().map(|t| t.id).collect();
+    let mut failed = failures::of_tasks(conn, job, &ids)?;
+    let next_after = (rows.len() == limit as usize).then(|| ids[ids.len() - 1]);
+    let tasks = rows
+        .into_iter()
+        .map(|t| TaskInfo {
+            id: t.id,
+            frame: t.frame,
+            tile: t.tile,
+            pass: t.pass,
+            rect: Rect {
+                x: t.rect.x,
+                y: t.rect.y,
+                width: t.rect.width,
+                height: t.rect.height,
+            },
+            samples: SampleSpan {
+                start: t.samples.start,
+                end: t.samples.end,
+            },
+            state: t.state,
+            attempt: t.attempt,
+            worker_id: t.worker_id,
+            check_of: t.check_of,
+            failures: failed.remove(&t.id).unwrap_or_default(),
+        })
+        .collect();
+    Ok(TaskList { tasks, next_after })
+}
+
+/// Why `job`'s attempts failed, grouped by reason (the [`MAX_FAILURE_GROUPS`] most
+/// frequent).
+pub fn failures(conn: &Connection, job: u64) -> Result<FailureList> {
+    jobs::control(conn, job)?;
+    Ok(FailureList {
+        groups: failures::groups(conn, job, MAX_FAILURE_GROUPS)?,
     })
 }
 
 /// Every job, newest first.
-pub fn list_jobs(conn: &Connection, now: i64) -> Result<Vec<JobStatus>> {
+pub fn list_jobs(conn: &Connection, now: i64, live_since: i64) -> Result<Vec<JobStatus>> {
     jobs::ids(conn)?
         .into_iter()
-        .map(|id| job_status(conn, id, now))
+        .map(|id| job_status(conn, id, now, live_since))
         .collect()
 }

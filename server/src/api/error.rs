@@ -244,6 +244,23 @@ impl<S: Send + Sync, T: DeserializeOwned + Send> FromRequestParts<S> for PathPar
     }
 }
 
+/// `axum::extract::Query` whose rejections are JSON errors naming the parameter.
+pub struct QueryParams<T>(pub T);
+
+impl<S: Send + Sync, T: DeserializeOwned + Send> FromRequestParts<S> for QueryParams<T> {
+    type Rejection = Error;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Error> {
+        match axum::extract::Query::<T>::from_request_parts(parts, state).await {
+            Ok(axum::extract::Query(v)) => Ok(QueryParams(v)),
+            Err(e) => Err(Error::BadRequest(format!(
+                "in the URL query: {}",
+                e.body_text()
+            ))),
+        }
+    }
+}
+
 /// A job, task or worker id in the URL path; one past [`proto::MAX_ID`] is refused (400)
 /// before it reaches the database, which could not bind it.
 #[derive(Clone, Copy, Debug, serde::Deserialize)]

@@ -28,6 +28,7 @@ pub async fn create(
 ) -> Result<(StatusCode, Json<JobStatus>)> {
     let (max_tasks, assembly_memory) = (app.config.max_tasks_per_job, app.config.assembly_memory);
     let now = now_ms();
+    let live_since = app.timing().live_since(now);
     let id = app
         .db
         .run(move |c| -> Result<u64> {
@@ -52,7 +53,10 @@ pub async fn create(
         })
         .await?;
     app.work.notify_waiters();
-    let status = app.db.run(move |c| status::job_status(c, id, now)).await?;
+    let status = app
+        .db
+        .run(move |c| status::job_status(c, id, now, live_since))
+        .await?;
     app.events.send(proto::Event::Job {
         job: Box::new(status.clone()),
     });
@@ -63,7 +67,11 @@ pub async fn create(
 #[utoipa::path(get, path = "/jobs", tag = "jobs", responses((status = 200, body = JobList)), security(("client_token" = [])))]
 pub async fn list(State(app): State<AppState>) -> Result<Json<JobList>> {
     let now = now_ms();
-    let jobs = app.db.run(move |c| status::list_jobs(c, now)).await?;
+    let live_since = app.timing().live_since(now);
+    let jobs = app
+        .db
+        .run(move |c| status::list_jobs(c, now, live_since))
+        .await?;
     Ok(Json(JobList { jobs }))
 }
 
@@ -81,8 +89,11 @@ pub async fn get(
     PathParams(Id(id)): PathParams<Id>,
 ) -> Result<Json<JobStatus>> {
     let now = now_ms();
+    let live_since = app.timing().live_since(now);
     Ok(Json(
-        app.db.run(move |c| status::job_status(c, id, now)).await?,
+        app.db
+            .run(move |c| status::job_status(c, id, now, live_since))
+            .await?,
     ))
 }
 
@@ -93,11 +104,12 @@ async fn control(
     f: impl FnOnce(&mut rusqlite::Connection, u64, i64) -> Result<()> + Send + 'static,
 ) -> Result<Json<JobStatus>> {
     let now = now_ms();
+    let live_since = app.timing().live_since(now);
     let status = app
         .db
         .run(move |c| {
             f(c, id, now)?;
-            status::job_status(c, id, now)
+            status::job_status(c, id, now, live_since)
         })
         .await?;
     app.work.notify_waiters();
@@ -156,14 +168,14 @@ pub async fn resume(
     control(app, id, controls::resume).await
 }
 
-/// Re-queues a job's failed tasks with fresh attempts, and assembles again the frames
-/// whose assembly failed.
+/// Re-queues a job's failed tasks with fresh attempts, lifts the blocks of workers that
+/// failed its tasks, and assembles again the frames whose assembly failed.
 #[utoipa::path(
     post,
     path = "/jobs/{id}/retry",
     tag = "jobs",
     params(("id" = u64, Path, description = "job id")),
-    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 409, description = "no failed tasks or frames, or cancelled", body = proto::ErrorBody)),
+    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 409, description = "no failed tasks or frames and no blocked workers, or cancelled", body = proto::ErrorBody)),
     security(("client_token" = []))
 )]
 pub async fn retry(

@@ -6,6 +6,7 @@
 //! |---|---|
 //! | `scenes.rs` | `POST /scenes`, `GET /scenes/{digest}`, `GET /scenes/{digest}/info` |
 //! | `jobs.rs` | `POST/GET /jobs`, `GET/DELETE /jobs/{id}`, `POST /jobs/{id}/{cancel,pause,resume,retry}` |
+//! | `tasks.rs` | `GET /jobs/{id}/tasks`, `GET /jobs/{id}/failures` |
 //! | `frames.rs` | `GET /jobs/{id}/frames`, `GET /jobs/{id}/frames/{frame}/{exr,png}` |
 //! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat,leave,clear}`, `POST /workers/{id}/tasks/{task}/{result,failure}` |
 //! | `events.rs` | `GET /events` (server-sent events) |
@@ -18,6 +19,7 @@ pub mod frames;
 pub mod jobs;
 pub mod scenes;
 pub mod system;
+pub mod tasks;
 pub mod workers;
 
 use axum::extract::DefaultBodyLimit;
@@ -72,6 +74,8 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .routes(routes!(jobs::pause))
         .routes(routes!(jobs::resume))
         .routes(routes!(jobs::retry))
+        .routes(routes!(tasks::list))
+        .routes(routes!(tasks::failures))
         .routes(routes!(frames::list))
         .routes(routes!(frames::exr))
         .routes(routes!(frames::png))

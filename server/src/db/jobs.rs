@@ -163,10 +163,9 @@ pub fn block(tx: &Transaction, job: u64, worker: u64) -> Result<bool> {
     )? > 0)
 }
 
-/// Lifts every worker's block from `job`.
-pub fn unblock_all(tx: &Transaction, job: u64) -> Result<()> {
-    tx.exec("DELETE FROM job_blocks WHERE job_id = ?1", [job])?;
-    Ok(())
+/// Lifts every worker's block from `job`; returns how many there were.
+pub fn unblock_all(tx: &Transaction, job: u64) -> Result<usize> {
+    Ok(tx.exec("DELETE FROM job_blocks WHERE job_id = ?1", [job])?)
 }
 
 /// The unfinished active time-budget jobs.

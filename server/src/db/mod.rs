@@ -8,7 +8,8 @@
 //! | [`migrations`] | the versioned schema |
 //! | [`jobs`] | specs, control states, finished or not, worker blocks, budget plans |
 //! | [`frames`] | task counts per frame, assembly done or failed, the frame list |
-//! | [`tasks`] | task rows and states, the lease queries, failures, check groups |
+//! | [`tasks`] | task rows and states, the lease queries, check groups |
+//! | [`failures`] | every failed attempt and its reason, per task and grouped |
 //! | [`workers`] | registration, liveness, credentials (hashed), quarantine |
 //! | [`scenes`] | uploaded scenes' summaries |
 //! | [`plans`] | what the time-budget planner measures and the passes it adds |
@@ -18,6 +19,7 @@
 //! made inside the transaction of the operation that needs it, never on its own.
 
 pub mod events;
+pub mod failures;
 pub mod frames;
 pub mod jobs;
 pub mod migrations;

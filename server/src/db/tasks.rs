@@ -276,6 +276,15 @@ pub fn clear_lease(tx: &Transaction, task: u64) -> Result<()> {
     Ok(())
 }
 
+/// Every task of `job` has all its attempts again.
+pub fn reset_failures(tx: &Transaction, job: u64) -> Result<()> {
+    tx.exec(
+        "UPDATE tasks SET failures = 0 WHERE job_id = ?1 AND failures > 0",
+        [job],
+    )?;
+    Ok(())
+}
+
 /// Sets how many attempts of a task failed.
 pub fn set_failures(tx: &Transaction, task: u64, failures: u32) -> Result<()> {
     tx.exec(
@@ -302,41 +311,26 @@ pub fn revoke(tx: &Transaction, task: &TaskRow) -> Result<()> {
     clear_lease(tx, task.id)
 }
 
-/// Records why an attempt of `task` by `worker` failed; returns how many attempts of the
-/// job's tasks that worker has failed.
-pub fn record_failure(
-    tx: &Transaction,
-    task: &TaskRow,
-    worker: u64,
-    reason: &str,
-    message: &str,
-    now: i64,
-) -> Result<u32> {
-    tx.exec(
-        "INSERT INTO task_failures (task_id, job_id, worker_id, attempt, reason, message, at_ms)
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-        params![
-            task.id,
-            task.job_id,
-            worker,
-            task.attempt,
-            reason,
-            message,
-            now
-        ],
-    )?;
-    Ok(tx.row(
-        "SELECT count(*) FROM task_failures WHERE job_id = ?1 AND worker_id = ?2",
-        params![task.job_id, worker],
-        |r| r.get(0),
-    )?)
-}
-
-/// Forgets the failures of a task queued again with fresh attempts.
-pub fn forget_failures(tx: &Transaction, task: u64) -> Result<()> {
-    set_failures(tx, task, 0)?;
-    tx.exec("DELETE FROM task_failures WHERE task_id = ?1", [task])?;
-    Ok(())
+/// Up to `limit` tasks of `job` with ids past `after`, in `state` when given, by id.
+pub fn page(
+    conn: &Connection,
+    job: u64,
+    state: Option<TaskState>,
+    after: u64,
+    limit: u32,
+) -> Result<Vec<TaskRow>> {
+    match state {
+        Some(s) => select(
+            conn,
+            "t.job_id = ?1 AND t.id > ?2 AND t.state = ?3 ORDER BY t.id LIMIT ?4",
+            params![job, after, s.as_str(), limit],
+        ),
+        None => select(
+            conn,
+            "t.job_id = ?1 AND t.id > ?2 ORDER BY t.id LIMIT ?3",
+            params![job, after, limit],
+        ),
+    }
 }
 
 /// Every leased task.

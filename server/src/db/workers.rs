@@ -155,6 +155,43 @@ pub fn live_for_job(conn: &Connection, job: u64, live_since: i64) -> Result<Vec<
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 
+/// Who could work on `job` now: the live workers (seen since `live_since`, not left), and
+/// of them those quarantined and those (not quarantined) blocked from the job.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Availability {
+    /// Live workers.
+    pub live: u64,
+    /// Of them, quarantined.
+    pub quarantined: u64,
+    /// Of them, not quarantined but blocked from the job.
+    pub blocked: u64,
+}
+
+impl Availability {
+    /// Live workers that may take the job's tasks.
+    pub fn usable(&self) -> u64 {
+        self.live - self.quarantined - self.blocked
+    }
+}
+
+/// [`Availability`] of the farm for `job`.
+pub fn availability(conn: &Connection, job: u64, live_since: i64) -> Result<Availability> {
+    Ok(conn.row(
+        "SELECT count(*), coalesce(sum(w.quarantined_ms IS NOT NULL), 0),
+                coalesce(sum(w.quarantined_ms IS NULL AND EXISTS (
+                    SELECT 1 FROM job_blocks b WHERE b.job_id = ?1 AND b.worker_id = w.id)), 0)
+         FROM workers w WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL",
+        params![job, live_since],
+        |r| {
+            Ok(Availability {
+                live: r.get(0)?,
+                quarantined: r.get(1)?,
+                blocked: r.get(2)?,
+            })
+        },
+    )?)
+}
+
 /// A worker's name and the platform it reported.
 pub fn name_and_platform(conn: &Connection, worker: u64) -> Result<(String, Option<String>)> {
     Ok(conn.row(

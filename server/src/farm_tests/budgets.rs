@@ -89,7 +89,10 @@ fn render_budget(
 fn a_time_budget_renders_every_frame_then_refines_the_noisiest_inside_the_deadline() {
     let mut c = db();
     let j = budget_job(&mut c, 3, 8, 10.0, 0);
-    let plan = job_status(&c, j, 0).unwrap().budget.unwrap();
+    let plan = job_status(&c, j, 0, TIMING.live_since(0))
+        .unwrap()
+        .budget
+        .unwrap();
     assert_eq!((plan.deadline_ms, plan.passes_added), (10_000, 0));
     assert_eq!(plan.predicted_end_ms, None);
     assert!(plan.stage.starts_with("first pass"), "{}", plan.stage);
@@ -102,7 +105,7 @@ fn a_time_budget_renders_every_frame_then_refines_the_noisiest_inside_the_deadli
         let l = render_one(&mut c, w, &mut t, 100, &error).unwrap();
         assert_eq!(l.samples, SampleSpan { start: 0, end: 4 });
     }
-    let status = job_status(&c, j, t).unwrap();
+    let status = job_status(&c, j, t, TIMING.live_since(t)).unwrap();
     assert_eq!((status.frames_done, status.finished_ms), (3, None));
     assert_eq!(status.state, JobState::Running);
     // Then a pass that doubles frame 2: 256 pixel samples per 0.1 s, less 10 %.
@@ -127,7 +130,7 @@ fn a_time_budget_renders_every_frame_then_refines_the_noisiest_inside_the_deadli
         100,
         |f| if f == 2 { 0.6 } else { 0.2 },
     );
-    let status = job_status(&c, j, t).unwrap();
+    let status = job_status(&c, j, t, TIMING.live_since(t)).unwrap();
     let finished = status.finished_ms.expect("the job finished");
     assert!(finished <= 10_000, "finished at {finished} ms");
     assert_eq!((status.state, status.frames_done), (JobState::Done, 3));
@@ -171,7 +174,7 @@ fn a_time_budget_ends_early_when_every_frame_reaches_spp() {
     let w = worker(&mut c, "w", 0);
     let mut t = 0;
     render_budget(&mut c, &[w], &mut t, 10, |_| 1.0);
-    let status = job_status(&c, j, t).unwrap();
+    let status = job_status(&c, j, t, TIMING.live_since(t)).unwrap();
     assert_eq!(status.state, JobState::Done);
     assert_eq!((reached(&c, j, 1), reached(&c, j, 2)), (64, 64));
     // 4, 4, 8, 16, 32: each pass doubles a frame.
@@ -196,10 +199,19 @@ fn a_worker_joining_or_leaving_changes_the_plan_not_the_deadline() {
     let mut t = 0;
     // Worker a renders the first pass alone.
     let error = |frame, _| 0.1 * f64::from(frame);
-    while job_status(&c, j, t).unwrap().budget.unwrap().passes_added == 0 {
+    while job_status(&c, j, t, TIMING.live_since(t))
+        .unwrap()
+        .budget
+        .unwrap()
+        .passes_added
+        == 0
+    {
         render_one(&mut c, a, &mut t, 100, &error).unwrap();
     }
-    let alone = job_status(&c, j, t).unwrap().budget.unwrap();
+    let alone = job_status(&c, j, t, TIMING.live_since(t))
+        .unwrap()
+        .budget
+        .unwrap();
     assert_eq!(alone.workers, 1);
     // Worker b joins and renders a tile as fast: the farm is measured twice as fast.
     let b = worker(&mut c, "b", t);
@@ -207,14 +219,20 @@ fn a_worker_joining_or_leaving_changes_the_plan_not_the_deadline() {
     accept(&mut c, b, l.token, 1, 1, None, t + 100, TIMING).unwrap();
     t += 100;
     assert_eq!(replan_running(&mut c, t, TIMING).unwrap(), vec![j]);
-    let both = job_status(&c, j, t).unwrap().budget.unwrap();
+    let both = job_status(&c, j, t, TIMING.live_since(t))
+        .unwrap()
+        .budget
+        .unwrap();
     assert_eq!(both.workers, 2);
     let ratio = both.samples_per_second / alone.samples_per_second;
     assert!((ratio - 2.0).abs() < 1e-9, "{both:?} {alone:?}");
     // It leaves: the plan is back to one worker's speed.
     leave(&mut c, b, t).unwrap();
     replan_running(&mut c, t, TIMING).unwrap();
-    let after = job_status(&c, j, t).unwrap().budget.unwrap();
+    let after = job_status(&c, j, t, TIMING.live_since(t))
+        .unwrap()
+        .budget
+        .unwrap();
     assert_eq!(after.workers, 1);
     assert_eq!(after.samples_per_second, alone.samples_per_second);
     assert!(
@@ -244,7 +262,7 @@ fn a_worker_joining_or_leaving_changes_the_plan_not_the_deadline() {
     heartbeat(&mut c, a, None, t, TIMING).unwrap();
     replan_running(&mut c, t, TIMING).unwrap();
     assert_eq!((queued(&c, false), queued(&c, true)), (0, started));
-    let status = job_status(&c, j, t).unwrap();
+    let status = job_status(&c, j, t, TIMING.live_since(t)).unwrap();
     let plan = status.budget.unwrap();
     assert!(plan.stage.starts_with("slowed down"), "{plan:?}");
     let open = status.tasks.queued + status.tasks.leased;

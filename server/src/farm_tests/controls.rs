@@ -15,7 +15,10 @@ fn pause_takes_leases_back_and_the_heartbeat_says_so() {
         other => panic!("{other:?}"),
     }
     assert_eq!(lease(&mut c, w, 3, TIMING).unwrap(), None);
-    assert_eq!(job_status(&c, j, 3).unwrap().state, JobState::Paused);
+    assert_eq!(
+        job_status(&c, j, 3, TIMING.live_since(3)).unwrap().state,
+        JobState::Paused
+    );
     // A revoke is not the worker's fault: no failure counted.
     assert_eq!(
         tasks::load(&c, l.token.task_id).unwrap().unwrap().failures,
@@ -45,7 +48,7 @@ fn cancel_stops_open_tasks_and_cannot_be_undone() {
         Err(Error::LeaseGone(why)) => assert!(why.contains("cancelled"), "{why}"),
         other => panic!("{other:?}"),
     }
-    let s = job_status(&c, j, 5).unwrap();
+    let s = job_status(&c, j, 5, TIMING.live_since(5)).unwrap();
     assert_eq!(
         (s.state, s.tasks.done, s.tasks.cancelled),
         (JobState::Cancelled, 1, 3)

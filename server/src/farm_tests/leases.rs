@@ -126,7 +126,7 @@ fn failures_requeue_until_max_attempts_then_fail_the_job_while_others_finish() {
     let (_, ack) = fail(&mut c, ws[1], l2.token, "out of memory", 3, TIMING).unwrap();
     assert!(ack.task_failed && !ack.requeued);
     assert_eq!(state_of(&c, l.token.task_id), TaskState::Failed);
-    let status = job_status(&c, j, 4).unwrap();
+    let status = job_status(&c, j, 4, TIMING.live_since(4)).unwrap();
     assert_eq!(status.state, JobState::Failed);
     assert_eq!(
         (
@@ -146,7 +146,7 @@ fn failures_requeue_until_max_attempts_then_fail_the_job_while_others_finish() {
         done += 1;
     }
     assert_eq!(done, 7);
-    let status = job_status(&c, j, 12).unwrap();
+    let status = job_status(&c, j, 12, TIMING.live_since(12)).unwrap();
     assert_eq!((status.state, status.tasks.done), (JobState::Failed, 7));
     // Frame 2 is complete but not yet written: the job is not finished until it is.
     assert_eq!(status.finished_ms, None);
@@ -157,7 +157,7 @@ fn failures_requeue_until_max_attempts_then_fail_the_job_while_others_finish() {
         mean_noise: Some(0.05),
     };
     mark_assembled(&mut c, j, 2, 13, &reached, TIMING).unwrap();
-    let status = job_status(&c, j, 14).unwrap();
+    let status = job_status(&c, j, 14, TIMING.live_since(14)).unwrap();
     assert_eq!(
         (status.state, status.frames_done, status.finished_ms),
         (JobState::Failed, 1, Some(13))

@@ -4,6 +4,7 @@
 mod budgets;
 mod checks;
 mod controls;
+mod failures;
 mod identity;
 mod leases;
 

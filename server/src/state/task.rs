@@ -12,20 +12,8 @@
 
 use std::fmt;
 
-/// Where one task stands.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum TaskState {
-    /// Waiting for a worker.
-    Queued,
-    /// Held by a worker until its lease deadline.
-    Leased,
-    /// Its tile is accepted.
-    Done,
-    /// Out of attempts.
-    Failed,
-    /// Its job was cancelled.
-    Cancelled,
-}
+/// Where one task stands: the wire's type, which the table below moves.
+pub use proto::TaskState;
 
 /// What happens to a task.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -96,33 +84,6 @@ pub fn transition(from: TaskState, event: TaskEvent) -> Result<TaskState, Invali
         | (S::Cancelled, _) => return Err(InvalidTransition { from, event }),
     };
     Ok(to)
-}
-
-impl TaskState {
-    /// Every state.
-    pub const ALL: [TaskState; 5] = [
-        TaskState::Queued,
-        TaskState::Leased,
-        TaskState::Done,
-        TaskState::Failed,
-        TaskState::Cancelled,
-    ];
-
-    /// The name stored in the database.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            TaskState::Queued => "queued",
-            TaskState::Leased => "leased",
-            TaskState::Done => "done",
-            TaskState::Failed => "failed",
-            TaskState::Cancelled => "cancelled",
-        }
-    }
-
-    /// The state named `s` in the database.
-    pub fn parse(s: &str) -> Option<TaskState> {
-        TaskState::ALL.into_iter().find(|t| t.as_str() == s)
-    }
 }
 
 #[cfg(test)]

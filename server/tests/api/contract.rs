@@ -1,7 +1,7 @@
 //! The API contract, checked from outside: requests generated from the served OpenAPI
 //! document hit every operation for a bounded time, valid ones and hostile ones (ids past
 //! 64 bits, unicode, negative and huge numbers, wrong types, huge JSON, wrong content
-//! types, every kind of token). Each answer must be a status the document lists for its
+//! types, every kind of token, in the path, the query and the body). Each answer must be a status the document lists for its
 //! operation, never a 5xx, and an error must carry the JSON error body.
 //!
 //! `TESSERA_CONTRACT_SECONDS` sets how long it runs (default 10); `TESSERA_CONTRACT_SEED`
@@ -241,6 +241,27 @@ fn generate(
         };
         path = path.replace("{digest}", &digest);
     }
+    // Query parameters: each one left out, valid for its schema or hostile.
+    let mut query = Vec::new();
+    for param in op["parameters"].as_array().into_iter().flatten() {
+        if param["in"] != "query" || rng.bool() {
+            continue;
+        }
+        let value = match value_of(rng, &param["schema"], doc, 0) {
+            Value::String(s) => s,
+            other => other.to_string(),
+        };
+        let value = if rng.u8(..100) < 20 {
+            hostile_path(rng)
+        } else {
+            value
+        };
+        let name = param["name"].as_str().unwrap();
+        query.push(format!("{name}={}", urlencode(&value)));
+    }
+    if !query.is_empty() {
+        path = format!("{path}?{}", query.join("&"));
+    }
     let token = match rng.u8(..10) {
         0 => None,
         1 => Some("not-a-token".to_string()),
@@ -330,6 +351,19 @@ fn generate(
         content_type,
         body,
     }
+}
+
+/// `value` percent-encoded for a URL query (every byte but unreserved ones).
+fn urlencode(value: &str) -> String {
+    value
+        .bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'_' | b'.' | b'~' => {
+                (b as char).to_string()
+            }
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
 }
 
 fn hostile_path(rng: &mut fastrand::Rng) -> String {

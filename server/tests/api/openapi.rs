@@ -42,6 +42,8 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         ("POST", "/api/v1/jobs/{id}/pause"),
         ("POST", "/api/v1/jobs/{id}/resume"),
         ("POST", "/api/v1/jobs/{id}/retry"),
+        ("GET", "/api/v1/jobs/{id}/tasks"),
+        ("GET", "/api/v1/jobs/{id}/failures"),
         ("GET", "/api/v1/jobs/{id}/frames"),
         ("GET", "/api/v1/jobs/{id}/frames/{frame}/exr"),
         ("GET", "/api/v1/jobs/{id}/frames/{frame}/png"),
@@ -72,6 +74,8 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         "SceneInfo",
         "Event",
         "WorkerInfo",
+        "TaskList",
+        "FailureList",
     ] {
         assert!(
             served["components"]["schemas"].get(schema).is_some(),
