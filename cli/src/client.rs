@@ -8,7 +8,10 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use proto::{ErrorBody, FrameList, JobList, JobSpec, JobStatus, SceneInfo, WorkerInfo, WorkerList};
+use proto::{
+    ErrorBody, FailureList, FrameList, JobList, JobSpec, JobStatus, SceneInfo, WorkerInfo,
+    WorkerList,
+};
 use reqwest::{Method, RequestBuilder, StatusCode};
 use serde::de::DeserializeOwned;
 
@@ -328,6 +331,11 @@ impl Client {
     pub async fn control(&self, id: u64, control: Control) -> Result<JobStatus, ClientError> {
         let (req, what) = self.request(Method::POST, &format!("/jobs/{id}/{}", control.verb()));
         self.json(req, &what).await
+    }
+
+    /// `GET /jobs/{id}/failures`: why its attempts failed, grouped by reason.
+    pub async fn failures(&self, id: u64) -> Result<FailureList, ClientError> {
+        self.get(&format!("/jobs/{id}/failures")).await
     }
 
     /// `GET /jobs/{id}/frames`.

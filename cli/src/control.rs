@@ -3,7 +3,9 @@
 
 use anyhow::Context;
 use clap::Args;
-use proto::{FrameList, FrameState, JobList, JobStatus, WorkerList};
+use proto::{
+    FailureGroup, FailureKind, FailureList, FrameList, FrameState, JobList, JobStatus, WorkerList,
+};
 use serde::Serialize;
 
 use crate::client::{Client, Control, ServerOpts};
@@ -61,11 +63,12 @@ where
         .block_on(f(client))
 }
 
-/// `status JOB --json`: the job and its frames, in that order.
+/// `status JOB --json`: the job, its frames, and why its attempts failed.
 #[derive(Serialize)]
 struct JobDetails<'a> {
     job: &'a JobStatus,
     frames: &'a [proto::FrameStatus],
+    failures: &'a [FailureGroup],
 }
 
 fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
@@ -128,7 +131,10 @@ pub fn jobs_table(jobs: &JobList) -> String {
             vec![
                 j.id.to_string(),
                 j.name.clone(),
-                state_name(j.state).to_string(),
+                match j.stuck {
+                    Some(_) => format!("{} (stuck)", state_name(j.state)),
+                    None => state_name(j.state).to_string(),
+                },
                 format!("{}/{}", j.frames_done, j.frames_total),
                 format!("{:.1}%", j.progress * 100.0),
                 j.eta_seconds.map_or("-".into(), duration),
@@ -148,8 +154,14 @@ fn frame_state_name(state: FrameState) -> &'static str {
     }
 }
 
-/// One job in detail: settings, tasks by state, progress, then every frame.
-pub fn job_details(j: &JobStatus, frames: &FrameList, now_ms: i64) -> String {
+/// One job in detail: settings, tasks by state, progress, why it is stuck, every frame,
+/// then why its attempts failed (`failures`, grouped by reason).
+pub fn job_details(
+    j: &JobStatus,
+    frames: &FrameList,
+    failures: &[FailureGroup],
+    now_ms: i64,
+) -> String {
     let s = &j.spec;
     let frames_range = s.frames.map_or("-".into(), |f| {
         if f.step == 1 {
@@ -239,6 +251,9 @@ pub fn job_details(j: &JobStatus, frames: &FrameList, now_ms: i64) -> String {
             ),
         ));
     }
+    if let Some(why) = &j.stuck {
+        fields.push(("STUCK", why.clone()));
+    }
     let mut out = format!("job {} \"{}\": {}\n", j.id, j.name, state_name(j.state));
     for (k, v) in fields {
         out.push_str(&format!("  {k:<9} {v}\n"));
@@ -265,6 +280,26 @@ pub fn job_details(j: &JobStatus, frames: &FrameList, now_ms: i64) -> String {
     for f in &frames.frames {
         if let Some(why) = &f.failure {
             out.push_str(&format!("\nframe {} failed to assemble: {why}", f.frame));
+        }
+    }
+    if !failures.is_empty() {
+        out.push_str(&format!(
+            "\n\n{} failed attempt(s), by reason:",
+            j.attempts_failed
+        ));
+        for g in failures {
+            let kind = match g.kind {
+                FailureKind::Reported => "reported",
+                FailureKind::Expired => "lease expired",
+            };
+            out.push_str(&format!(
+                "\n  {} attempt(s) of {} task(s) on {}, {kind} (last {}): {}",
+                g.attempts,
+                g.tasks,
+                g.workers.join(", "),
+                ago(g.last_ms, now_ms),
+                g.reason
+            ));
         }
     }
     out
@@ -333,13 +368,18 @@ pub fn status(args: StatusArgs) -> anyhow::Result<()> {
             Some(id) => {
                 let job = client.job(id).await?;
                 let frames = client.frames(id).await?;
+                let failures = match job.attempts_failed {
+                    0 => FailureList::default(),
+                    _ => client.failures(id).await?,
+                };
                 if args.json {
                     print_json(&JobDetails {
                         job: &job,
                         frames: &frames.frames,
+                        failures: &failures.groups,
                     })
                 } else {
-                    println!("{}", job_details(&job, &frames, now_ms()));
+                    println!("{}", job_details(&job, &frames, &failures.groups, now_ms()));
                     Ok(())
                 }
             }
@@ -431,6 +471,8 @@ mod tests {
             samples_per_second: 2.5e6,
             eta_seconds: eta,
             budget: None,
+            attempts_failed: 0,
+            stuck: None,
         }
     }
 
@@ -453,17 +495,21 @@ mod tests {
 
     #[test]
     fn the_job_table_shows_frames_progress_and_eta() {
+        let mut stuck = job(13, "shot 2", JobState::Queued, None);
+        stuck.stuck = Some("no live worker may take its tasks".into());
         let jobs = JobList {
             jobs: vec![
+                stuck,
                 job(12, "shot 1", JobState::Running, Some(65.0)),
                 job(3, "job 3", JobState::Done, None),
             ],
         };
         assert_eq!(
             jobs_table(&jobs),
-            "ID  NAME    STATE    FRAMES  PROGRESS  ETA\n\
-             12  shot 1  running  3/24    12.5%     1m 05s\n\
-             3   job 3   done     3/24    12.5%     -"
+            "ID  NAME    STATE           FRAMES  PROGRESS  ETA\n\
+             13  shot 2  queued (stuck)  3/24    12.5%     -\n\
+             12  shot 1  running         3/24    12.5%     1m 05s\n\
+             3   job 3   done            3/24    12.5%     -"
         );
     }
 
@@ -496,6 +542,7 @@ mod tests {
         let text = job_details(
             &job(7, "walk", JobState::Running, Some(30.0)),
             &frames,
+            &[],
             61_000,
         );
         assert!(text.starts_with("job 7 \"walk\": running\n"), "{text}");
@@ -516,6 +563,48 @@ mod tests {
     }
 
     #[test]
+    fn a_stuck_job_and_its_failures_are_shown_by_reason() {
+        let mut j = job(7, "walk", JobState::Running, None);
+        j.stuck = Some("no live worker may take its tasks".into());
+        j.attempts_failed = 3;
+        let failures = [
+            FailureGroup {
+                kind: FailureKind::Reported,
+                reason: "loading the scene: bad PNG".into(),
+                attempts: 2,
+                tasks: 2,
+                workers: vec!["a".into(), "b".into()],
+                example_task: 4,
+                last_ms: 1_000,
+            },
+            FailureGroup {
+                kind: FailureKind::Expired,
+                reason: "lease expired without a heartbeat".into(),
+                attempts: 1,
+                tasks: 1,
+                workers: vec!["c".into()],
+                example_task: 5,
+                last_ms: 31_000,
+            },
+        ];
+        let text = job_details(&j, &FrameList { frames: vec![] }, &failures, 61_000);
+        assert!(
+            text.contains("\n  STUCK     no live worker may take its tasks\n"),
+            "{text}"
+        );
+        assert!(
+            text.ends_with(
+                "3 failed attempt(s), by reason:\n  \
+                 2 attempt(s) of 2 task(s) on a, b, reported (last 1m 00s ago): loading the \
+                 scene: bad PNG\n  \
+                 1 attempt(s) of 1 task(s) on c, lease expired (last 30s ago): lease expired \
+                 without a heartbeat"
+            ),
+            "{text}"
+        );
+    }
+
+    #[test]
     fn a_time_budget_job_shows_its_plan() {
         let mut j = job(7, "camp", JobState::Running, Some(12.0));
         j.budget = Some(proto::BudgetPlan {
@@ -528,7 +617,7 @@ mod tests {
             passes_added: 17,
             stage: "refining: the noisiest frames get more samples".into(),
         });
-        let text = job_details(&j, &FrameList { frames: vec![] }, 61_000);
+        let text = job_details(&j, &FrameList { frames: vec![] }, &[], 61_000);
         assert!(
             text.contains(
                 "budget    4m 16s: predicted to end 4m 10s after submission; 17 passes added; \
@@ -537,7 +626,7 @@ mod tests {
             "{text}"
         );
         j.budget.as_mut().unwrap().predicted_end_ms = Some(j.created_ms + 300_000);
-        let text = job_details(&j, &FrameList { frames: vec![] }, 61_000);
+        let text = job_details(&j, &FrameList { frames: vec![] }, &[], 61_000);
         assert!(
             text.contains("5m 00s after submission, past the deadline;"),
             "{text}"

@@ -50,9 +50,11 @@ pub struct Downloaded {
     pub bytes: u64,
 }
 
-/// Whether nothing more will happen to the job without a person acting (retry, resume).
+/// Whether nothing more will happen to the job without a person acting (retry, resume,
+/// or a worker that may take a stuck job's tasks).
 pub fn has_ended(s: &JobStatus) -> bool {
     s.finished_ms.is_some()
+        || s.stuck.is_some()
         || s.state == JobState::Done
         || (s.state == JobState::Cancelled && s.tasks.leased == 0)
 }
@@ -282,6 +284,11 @@ pub fn require_done(
         status.frames_total,
         downloaded.dir.display()
     );
+    if let Some(why) = &status.stuck {
+        anyhow::bail!(
+            "job {id} cannot go on: {why}; {kept}. See `tessera status {id} --server {server}`"
+        );
+    }
     match status.state {
         JobState::Done => Ok(()),
         JobState::Failed => anyhow::bail!(
@@ -323,6 +330,8 @@ mod tests {
             samples_per_second: 1_234_567.0,
             eta_seconds: Some(65.2),
             budget: None,
+            attempts_failed: 0,
+            stuck: None,
         }
     }
 
@@ -365,6 +374,26 @@ mod tests {
         assert!(!has_ended(&s), "the other frames still finish");
         s.finished_ms = Some(1);
         assert!(has_ended(&s));
+        let mut s = status(JobState::Running);
+        s.stuck = Some("no live worker may take its tasks".into());
+        assert!(has_ended(&s), "nothing happens until a person acts");
+    }
+
+    #[test]
+    fn a_stuck_job_is_an_error_that_says_why() {
+        let mut s = status(JobState::Running);
+        s.stuck = Some("no live worker may take its tasks: of 1 live worker(s), 1 blocked".into());
+        let d = Downloaded {
+            dir: PathBuf::from("out"),
+            frames: vec![1],
+            bytes: 10,
+        };
+        let e = require_done(&s, &d, "http://s").unwrap_err().to_string();
+        assert!(
+            e.starts_with("job 3 cannot go on: no live worker may take its tasks: of 1 live")
+                && e.contains("1 of 4 frames finished"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -65,6 +65,10 @@ pub struct JobArgs {
     /// Higher runs first [default: 0].
     #[arg(long, allow_hyphen_values = true)]
     pub priority: Option<i32>,
+    /// Attempts each task gets before it fails for good (a worker that fails 3 of the
+    /// job's tasks is kept off it) [default: 3].
+    #[arg(long)]
+    pub max_attempts: Option<u32>,
     /// Camera by glTF index or name [default: the scene's first].
     #[arg(long, value_parser = parse_camera)]
     pub camera: Option<CameraChoice>,
@@ -139,6 +143,9 @@ impl JobArgs {
         }
         if let Some(priority) = self.priority {
             spec.priority = priority;
+        }
+        if let Some(attempts) = self.max_attempts {
+            spec.max_attempts = attempts;
         }
         spec.camera = match &self.camera {
             None | Some(CameraChoice::Default) => CameraSpec::Default,
@@ -416,6 +423,8 @@ mod tests {
             "4",
             "--priority",
             "-3",
+            "--max-attempts",
+            "7",
             "--camera",
             "Main",
             "--max-depth",
@@ -444,6 +453,7 @@ mod tests {
         want.shutter = [-0.25, 0.25];
         want.sample_passes = 4;
         want.priority = -3;
+        want.max_attempts = 7;
         want.camera = CameraSpec::Name("Main".into());
         want.max_depth = 5;
         want.seed = 9;

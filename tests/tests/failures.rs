@@ -1,0 +1,109 @@
+//! Why a job does not finish, as its user meets it: a worker that cannot render a job's
+//! tasks says why; the reason reaches the API and `tessera status` word for word, the job
+//! says it is stuck once every live worker is kept off it, `submit --wait` stops with that
+//! reason instead of waiting forever, and `tessera retry` lets the worker try again.
+
+use std::time::Duration;
+
+use proto::{FailureKind, FailureList, JobStatus, TaskList};
+use tests::{http, settings, Farm};
+
+#[test]
+fn a_job_no_worker_can_render_says_why_everywhere_and_wait_stops() {
+    let mut farm = Farm::new();
+    farm.start_server(60);
+    // The first job on a fresh server is job 1: the only worker fails all its tasks.
+    farm.start_worker_with("broken", 1, &["--inject-fault", "fail-job=1"]);
+    let reason = "injected fault: every task of job 1 fails";
+    let scene = farm.demo_scene();
+    let url = farm.url();
+    let mut args = vec![
+        "submit",
+        scene.to_str().unwrap(),
+        "--server",
+        &url,
+        "--frames",
+        "1-2",
+        "--tile",
+        "32",
+        "--max-attempts",
+        "5",
+        "--wait",
+        "--out",
+        "frames",
+    ];
+    args.extend(settings("1"));
+    let out = std::process::Command::new(tests::tessera_bin())
+        .args(&args)
+        .current_dir(farm.path())
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    // Three failures keep the worker off the job; five attempts a task, so none ran out.
+    assert!(
+        stderr.contains(
+            "job 1 cannot go on: no live worker may take its tasks: of 1 live \
+                         worker(s), 1 blocked from this job after failing its tasks"
+        ) && stderr.contains(&format!(
+            "most frequent failure (3 of 3 attempt(s)): {reason}"
+        )),
+        "{stderr}"
+    );
+    // One line, no backtrace, even with RUST_BACKTRACE set.
+    let last = stderr.trim_end().lines().last().unwrap_or_default();
+    assert!(last.starts_with("error: job 1 cannot go on"), "{stderr}");
+    assert!(!stderr.to_lowercase().contains("backtrace"), "{stderr}");
+
+    let status: JobStatus = http::get(farm.port, "/api/v1/jobs/1").json();
+    assert_eq!(status.attempts_failed, 3);
+    assert!(status.stuck.as_deref().unwrap_or_default().contains(reason));
+    let failures: FailureList = http::get(farm.port, "/api/v1/jobs/1/failures").json();
+    assert_eq!(failures.groups.len(), 1, "{failures:?}");
+    let g = &failures.groups[0];
+    assert_eq!(
+        (g.kind, g.reason.as_str(), g.attempts, g.workers.clone()),
+        (FailureKind::Reported, reason, 3, vec!["broken".to_string()])
+    );
+    let tasks: TaskList = http::get(farm.port, "/api/v1/jobs/1/tasks?state=queued").json();
+    let failed: Vec<_> = tasks.tasks.iter().flat_map(|t| &t.failures).collect();
+    assert_eq!(failed.len(), 3);
+    assert!(failed
+        .iter()
+        .all(|f| f.reason == reason && f.worker == "broken"));
+    let bad = http::get(farm.port, "/api/v1/jobs/1/tasks?state=sideways");
+    assert_eq!(bad.status, 400, "{}", bad.text());
+
+    let text = farm.client(&["status", "1"]);
+    assert!(
+        text.contains("  STUCK     no live worker may take its tasks"),
+        "{text}"
+    );
+    assert!(
+        text.contains(
+            "3 failed attempt(s), by reason:\n  3 attempt(s) of 2 task(s) on broken, reported"
+        ) && text.contains(&format!("): {reason}")),
+        "{text}"
+    );
+
+    // Retry lifts the block (no task ran out of attempts, yet it is not refused) and
+    // forgets the failures: the worker tries again, fails three more times, and the job
+    // is stuck again.
+    let retried = farm.client(&["retry", "1"]);
+    assert!(retried.contains("job 1"), "{retried}");
+    tests::wait_until(
+        "the worker to fail three more attempts",
+        Duration::from_secs(60),
+        || {
+            let st: JobStatus = http::get(farm.port, "/api/v1/jobs/1").json();
+            st.attempts_failed == 3 && st.stuck.is_some()
+        },
+        || farm.logs(),
+    );
+    // A healthy worker joins: the job can go on, and finishes.
+    farm.start_worker("healthy", 1);
+    let done = farm.wait_for_job(1, Duration::from_secs(120));
+    assert_eq!(done.state, proto::JobState::Done, "{done:?}");
+    assert_eq!(done.stuck, None);
+}
