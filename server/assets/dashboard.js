@@ -50,7 +50,11 @@ function jobCard(job) {
     title.append(el("span", "name"), el("span", "state"), el("span", "stats"));
     const bar = el("div", "bar");
     bar.append(el("div"));
-    card.append(title, bar, el("div", "frames"));
+    const stuck = el("p", "stuck");
+    stuck.hidden = true;
+    const failures = el("ul", "failures");
+    failures.hidden = true;
+    card.append(title, bar, stuck, failures, el("div", "frames"));
     const jobs = document.getElementById("jobs");
     jobs.prepend(card);
   }
@@ -66,8 +70,30 @@ function jobCard(job) {
     `${pct}% · frames ${job.frames_done}/${job.frames_total} · tasks ${job.tasks.done}/` +
     `${job.tasks.queued + job.tasks.leased + job.tasks.done + job.tasks.failed + job.tasks.cancelled}` +
     ` · ${rate(job.samples_per_second)} samples/s · ETA ${duration(job.eta_seconds)}`;
+  const stuck = card.querySelector(".stuck");
+  stuck.hidden = !job.stuck;
+  stuck.textContent = job.stuck ? "Stuck: " + job.stuck : "";
+  showFailures(card, job);
   document.getElementById("no-jobs").hidden = true;
   return card;
+}
+
+// Why a job's attempts failed, grouped by reason; read again only when the count changes.
+function showFailures(card, job) {
+  const list = card.querySelector(".failures");
+  if (card.dataset.attemptsFailed === String(job.attempts_failed)) return;
+  card.dataset.attemptsFailed = String(job.attempts_failed);
+  if (!job.attempts_failed) {
+    list.hidden = true;
+    list.replaceChildren();
+    return;
+  }
+  get(`/jobs/${job.id}/failures`).then(({ groups }) => {
+    list.replaceChildren(...groups.map((g) => el("li", null,
+      `${g.attempts} failed attempt(s) of ${g.tasks} task(s) on ${g.workers.join(", ")}` +
+      ` (${g.kind === "expired" ? "lease expired" : "reported"}): ${g.reason}`)));
+    list.hidden = groups.length === 0;
+  }).catch(showError);
 }
 
 function frameThumb(jobId, frame) {

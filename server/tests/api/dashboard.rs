@@ -185,6 +185,7 @@ const SUMMARY: &str = r#"JSON.stringify((() => {
     frames: card ? [...card.querySelectorAll('.frames figure')].map(f => Number(f.dataset.frame)) : [],
     thumbs: card ? [...card.querySelectorAll('.frames img')].map(i => i.complete ? i.naturalWidth : 0) : [],
     worker: row ? [...row.children].map(td => td.textContent) : [],
+    failures: card ? [...card.querySelectorAll('.failures li')].map(li => li.textContent) : [],
     live: document.getElementById('live').className,
   };
 })())"#;
@@ -193,8 +194,11 @@ fn summary(b: &mut Browser) -> Value {
     serde_json::from_str(b.eval(SUMMARY).as_str().unwrap()).unwrap()
 }
 
+/// The reason a worker gives for a failed attempt.
+const REASON: &str = "preparing frame 1: texture 2 <img> cannot be decoded";
+
 #[tokio::test(flavor = "multi_thread")]
-async fn dashboard_shows_jobs_frames_and_workers_live_in_chromium() {
+async fn dashboard_shows_jobs_frames_failures_and_workers_live_in_chromium() {
     let dir = tempfile::tempdir().unwrap();
     let s = TestServer::start(config(dir.path()));
     let c = client();
@@ -209,6 +213,10 @@ async fn dashboard_shows_jobs_frames_and_workers_live_in_chromium() {
     (spec.width, spec.height, spec.tile_size, spec.spp) = (64, 48, Some(32), 4);
     let job = create_job(&s, &c, &spec).await;
     let mut w = SimWorker::register(&s, "render-node-7").await;
+    // One attempt fails, with a reason the page must show word for word (the task is
+    // tried again: no other worker could take it).
+    let first = w.lease(&s).await.unwrap();
+    assert_eq!(w.fail(&s, &first, REASON).await.status(), StatusCode::OK);
     // Frame 1 done before the page loads; frame 2's tiles rendered but held back, their
     // leases live, so the worker has a current task.
     let mut held = vec![];
@@ -227,6 +235,7 @@ async fn dashboard_shows_jobs_frames_and_workers_live_in_chromium() {
         let mut b = Browser::open(&url);
         b.wait_for("document.body.dataset.loaded === 'true' && document.getElementById('live').className === 'on'", "the loaded, live page");
         b.wait_for("[...document.querySelectorAll('.frames img')].every(i => i.complete && i.naturalWidth > 0)", "the thumbnails");
+        b.wait_for("document.querySelectorAll('.failures li').length === 1", "the failure");
         let before = summary(&mut b);
         (b, before)
     })
@@ -236,6 +245,13 @@ async fn dashboard_shows_jobs_frames_and_workers_live_in_chromium() {
     assert_eq!(before["name"], json!(format!("#{} hallway", job.id)));
     assert_eq!(before["bar"], json!("50%"), "{before}");
     assert_eq!(before["frames"], json!([1]), "{before}");
+    assert_eq!(
+        before["failures"],
+        json!([format!(
+            "1 failed attempt(s) of 1 task(s) on render-node-7 (reported): {REASON}"
+        )]),
+        "{before}"
+    );
     assert_eq!(before["thumbs"], json!([64]), "{before}");
     let worker = before["worker"].as_array().unwrap();
     assert_eq!(worker[0], json!("render-node-7"));
