@@ -410,6 +410,15 @@ pub struct BudgetPlan {
     pub stage: String,
 }
 
+/// `POST /jobs/{id}/priority`: the job's new priority (higher runs first).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct PriorityChange {
+    /// The priority, as [`JobSpec::priority`].
+    pub priority: i32,
+}
+
 /// `GET /jobs`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]

@@ -25,7 +25,7 @@ pub use error::ErrorBody;
 pub use event::Event;
 pub use job::{
     BudgetPlan, CameraSpec, FrameList, FrameRange, FrameState, FrameStatus, JobList, JobSpec,
-    JobState, JobStatus, OutputLayer, TaskCounts,
+    JobState, JobStatus, OutputLayer, PriorityChange, TaskCounts,
 };
 pub use scene::{AnimationInfo, CameraInfo, SceneInfo};
 pub use task::{

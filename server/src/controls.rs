@@ -1,5 +1,5 @@
-//! Job controls, each one database transaction: submit, pause, resume, cancel, retry and
-//! delete. A command asks the job's control state machine
+//! Job controls, each one database transaction: submit, pause, resume, cancel, retry,
+//! priority and delete. A command asks the job's control state machine
 //! ([`state::control_transition`](crate::state::control_transition)) first; a refusal is a
 //! 409 naming the job and why.
 
@@ -10,7 +10,7 @@ use crate::db::events::log;
 use crate::db::tasks::{self, NewTask};
 use crate::db::{failures, frames, jobs};
 use crate::error::{Error, Result};
-use crate::spec::Plan;
+use crate::spec::{self, Plan};
 use crate::state::{control_transition, ControlChange, JobCommand, TaskEvent, TaskState};
 
 /// Stores a new job and its tasks; returns its id.
@@ -144,6 +144,20 @@ pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
     jobs::update_finished(&tx, job, now)?;
     tx.commit()?;
     Ok(failed.len() + frames + blocks)
+}
+
+/// Changes a job's priority (higher runs first); its next leases follow it.
+pub fn set_priority(conn: &mut Connection, job: u64, priority: i32, now: i64) -> Result<()> {
+    spec::check_priority(priority).map_err(|e| Error::Invalid {
+        field: e.field,
+        message: e.message,
+    })?;
+    let tx = conn.transaction()?;
+    jobs::control(&tx, job)?;
+    jobs::set_priority(&tx, job, priority)?;
+    log(&tx, now, Some(job), "job_priority", &priority.to_string())?;
+    tx.commit()?;
+    Ok(())
 }
 
 /// Deletes a job's rows (its files are removed by the caller after this commits).

@@ -101,6 +101,17 @@ pub fn default_tile_size(spp_per_pass: u32) -> u32 {
     s
 }
 
+/// A job's priority is within [`MAX_PRIORITY`] either way.
+pub fn check_priority(priority: i32) -> Result<(), FieldError> {
+    if priority.abs() > MAX_PRIORITY {
+        return bad(
+            "priority",
+            format!("must be -{MAX_PRIORITY} to {MAX_PRIORITY}, got {priority}"),
+        );
+    }
+    Ok(())
+}
+
 /// Checks `spec` against the limits and `scene`, and plans its tasks.
 pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan, FieldError> {
     if spec.scene != scene.digest {
@@ -335,15 +346,7 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
         None => default_tile_size(spec.spp.div_ceil(spec.sample_passes)),
     };
     spec.tile_size = Some(tile_size);
-    if spec.priority.abs() > MAX_PRIORITY {
-        return bad(
-            "priority",
-            format!(
-                "must be -{MAX_PRIORITY} to {MAX_PRIORITY}, got {}",
-                spec.priority
-            ),
-        );
-    }
+    check_priority(spec.priority)?;
     if spec.max_attempts == 0 || spec.max_attempts > MAX_ATTEMPTS {
         return bad(
             "max_attempts",

@@ -3,7 +3,7 @@
 use axum::extract::State;
 use axum::http::StatusCode;
 use axum::Json;
-use proto::{JobList, JobSpec, JobStatus};
+use proto::{JobList, JobSpec, JobStatus, PriorityChange};
 
 use super::error::{Id, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
@@ -184,6 +184,27 @@ pub async fn retry(
 ) -> Result<Json<JobStatus>> {
     control(app, id, |c, id, now| {
         controls::retry(c, id, now).map(|_| ())
+    })
+    .await
+}
+
+/// Changes a job's priority (higher runs first): its next tasks are leased by it.
+#[utoipa::path(
+    post,
+    path = "/jobs/{id}/priority",
+    tag = "jobs",
+    params(("id" = u64, Path, description = "job id")),
+    request_body = PriorityChange,
+    responses((status = 200, body = JobStatus), (status = 404, body = proto::ErrorBody), (status = 422, description = "the priority is out of bounds", body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn priority(
+    State(app): State<AppState>,
+    PathParams(Id(id)): PathParams<Id>,
+    JsonBody(change): JsonBody<PriorityChange>,
+) -> Result<Json<JobStatus>> {
+    control(app, id, move |c, id, now| {
+        controls::set_priority(c, id, change.priority, now)
     })
     .await
 }

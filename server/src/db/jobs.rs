@@ -187,6 +187,15 @@ pub fn add_pixel_samples(tx: &Transaction, job: u64, samples: i64) -> Result<()>
     Ok(())
 }
 
+/// Sets a job's priority, in its row and its spec.
+pub fn set_priority(tx: &Transaction, job: u64, priority: i32) -> Result<()> {
+    tx.exec(
+        "UPDATE jobs SET priority = ?2, spec = json_set(spec, '$.priority', ?2) WHERE id = ?1",
+        params![job, priority],
+    )?;
+    Ok(())
+}
+
 /// Stores a time-budget job's latest plan.
 pub fn set_budget_plan(tx: &Transaction, job: u64, plan: &BudgetPlan) -> Result<()> {
     tx.exec(

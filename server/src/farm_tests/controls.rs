@@ -1,4 +1,4 @@
-//! Job controls: pause, resume, cancel, retry.
+//! Job controls: pause, resume, cancel, retry, priority.
 
 use super::*;
 
@@ -75,4 +75,25 @@ fn retry_requeues_failed_tasks_with_fresh_attempts() {
     let t = tasks::load(&c, l.token.task_id).unwrap().unwrap();
     assert_eq!((t.state, t.failures), (TaskState::Queued, 0));
     assert!(matches!(retry(&mut c, j, 3), Err(Error::Conflict(_))));
+}
+
+#[test]
+fn a_new_priority_decides_the_next_lease_and_is_checked() {
+    let mut c = db();
+    let first = job(&mut c, 1, 0, 3, 0);
+    let second = job(&mut c, 1, 0, 3, 1);
+    let w = worker(&mut c, "w", 0);
+    assert_eq!(lease(&mut c, w, 2, TIMING).unwrap().unwrap().job_id, first);
+    crate::controls::set_priority(&mut c, second, 5, 3).unwrap();
+    assert_eq!(lease(&mut c, w, 4, TIMING).unwrap().unwrap().job_id, second);
+    let status = job_status(&c, second, 4, TIMING.live_since(4)).unwrap();
+    assert_eq!(status.spec.priority, 5);
+    assert!(matches!(
+        crate::controls::set_priority(&mut c, second, 1_001, 5),
+        Err(Error::Invalid { field, .. }) if field == "priority"
+    ));
+    assert!(matches!(
+        crate::controls::set_priority(&mut c, second + 1, 1, 5),
+        Err(Error::NotFound(_))
+    ));
 }

@@ -42,6 +42,7 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         ("POST", "/api/v1/jobs/{id}/pause"),
         ("POST", "/api/v1/jobs/{id}/resume"),
         ("POST", "/api/v1/jobs/{id}/retry"),
+        ("POST", "/api/v1/jobs/{id}/priority"),
         ("GET", "/api/v1/jobs/{id}/tasks"),
         ("GET", "/api/v1/jobs/{id}/failures"),
         ("GET", "/api/v1/jobs/{id}/frames"),
