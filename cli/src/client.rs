@@ -9,11 +9,47 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use proto::{
-    ErrorBody, FailureList, FrameList, JobList, JobSpec, JobStatus, SceneInfo, WorkerInfo,
-    WorkerList,
+    ErrorBody, FailureList, FrameList, JobList, JobSpec, JobStatus, PriorityChange, SceneInfo,
+    WorkerInfo, WorkerList,
 };
 use reqwest::{Method, RequestBuilder, StatusCode};
 use serde::de::DeserializeOwned;
+
+/// A job as the command line names it: by id, or by the name it was given.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum JobRef {
+    /// Its id.
+    Id(u64),
+    /// Its name (`--name` at submission, or `job <id>`).
+    Name(String),
+}
+
+impl std::str::FromStr for JobRef {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<JobRef, String> {
+        let s = s.trim();
+        if s.is_empty() {
+            return Err("give a job id or name".into());
+        }
+        if s.bytes().all(|b| b.is_ascii_digit()) {
+            return s
+                .parse()
+                .map(JobRef::Id)
+                .map_err(|_| format!("job id {s} is too large"));
+        }
+        Ok(JobRef::Name(s.to_string()))
+    }
+}
+
+impl fmt::Display for JobRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            JobRef::Id(id) => write!(f, "{id}"),
+            JobRef::Name(name) => write!(f, "`{name}`"),
+        }
+    }
+}
 
 /// Where `submit`, `status` and the rest look for the server when not told.
 pub const DEFAULT_SERVER: &str = "http://127.0.0.1:8700";
@@ -333,6 +369,55 @@ impl Client {
         self.json(req, &what).await
     }
 
+    /// `POST /jobs/{id}/priority`.
+    pub async fn set_priority(&self, id: u64, priority: i32) -> Result<JobStatus, ClientError> {
+        let (req, what) = self.request(Method::POST, &format!("/jobs/{id}/priority"));
+        self.json(req.json(&PriorityChange { priority }), &what)
+            .await
+    }
+
+    /// `DELETE /jobs/{id}`: the job and every file it made.
+    pub async fn delete_job(&self, id: u64) -> Result<(), ClientError> {
+        let (req, what) = self.request(Method::DELETE, &format!("/jobs/{id}"));
+        self.send(req, &what).await.map(|_| ())
+    }
+
+    /// `GET /scenes/{digest}/info`.
+    pub async fn scene_info(&self, digest: &str) -> Result<SceneInfo, ClientError> {
+        self.get(&format!("/scenes/{digest}/info")).await
+    }
+
+    /// The id of the job `job` names: its id, or the one job of that name.
+    pub async fn resolve(&self, job: &JobRef) -> anyhow::Result<u64> {
+        let name = match job {
+            JobRef::Id(id) => return Ok(*id),
+            JobRef::Name(name) => name,
+        };
+        let ids: Vec<u64> = self
+            .jobs()
+            .await?
+            .jobs
+            .iter()
+            .filter(|j| &j.name == name)
+            .map(|j| j.id)
+            .collect();
+        match ids.as_slice() {
+            [id] => Ok(*id),
+            [] => anyhow::bail!(
+                "no job named `{name}` on {} (`tessera status` lists the jobs)",
+                self.base()
+            ),
+            _ => anyhow::bail!(
+                "{} jobs are named `{name}` (ids {}): give the id",
+                ids.len(),
+                ids.iter()
+                    .map(u64::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    }
+
     /// `GET /jobs/{id}/failures`: why its attempts failed, grouped by reason.
     pub async fn failures(&self, id: u64) -> Result<FailureList, ClientError> {
         self.get(&format!("/jobs/{id}/failures")).await
@@ -404,6 +489,16 @@ mod tests {
             request: "GET /api/v1/jobs".into(),
         };
         assert!(e.to_string().contains("--token"), "{e}");
+    }
+
+    #[test]
+    fn a_job_is_named_by_id_or_by_name() {
+        assert_eq!("12".parse(), Ok(JobRef::Id(12)));
+        assert_eq!(" 12 ".parse(), Ok(JobRef::Id(12)));
+        assert_eq!("shot 12".parse(), Ok(JobRef::Name("shot 12".into())));
+        assert_eq!("-3".parse(), Ok(JobRef::Name("-3".into())));
+        assert!("99999999999999999999".parse::<JobRef>().is_err());
+        assert!("".parse::<JobRef>().is_err());
     }
 
     #[test]

@@ -1,5 +1,5 @@
 //! `tessera status [JOB]`, `tessera cancel|pause|resume|retry JOB` and `tessera workers`:
-//! read and steer the farm. Plain aligned tables, or the JSON with `--json`.
+//! read and steer the farm (a job by id or name). Plain aligned tables, or the JSON with `--json`.
 
 use anyhow::Context;
 use clap::Args;
@@ -8,14 +8,15 @@ use proto::{
 };
 use serde::Serialize;
 
-use crate::client::{Client, Control, ServerOpts};
+use crate::client::{Client, Control, JobRef, ServerOpts};
 use crate::progress::{duration, rate, state_name};
 
 /// Show the jobs on the farm, or one job in detail.
 #[derive(Args, Debug)]
 pub struct StatusArgs {
-    /// A job id: its settings, tasks by state and every frame's state.
-    pub job: Option<u64>,
+    /// A job, by id or name: its settings, tasks by state, every frame's state and why
+    /// attempts failed.
+    pub job: Option<JobRef>,
     #[command(flatten)]
     pub server: ServerOpts,
     /// Print JSON instead: the job list, or `{"job": ..., "frames": [...]}` for one job.
@@ -26,8 +27,8 @@ pub struct StatusArgs {
 /// Cancel, pause, resume or retry a job.
 #[derive(Args, Debug)]
 pub struct ControlArgs {
-    /// The job id.
-    pub job: u64,
+    /// The job, by id or name.
+    pub job: JobRef,
     #[command(flatten)]
     pub server: ServerOpts,
     /// Print the job's new status as JSON.
@@ -50,7 +51,7 @@ pub struct WorkersArgs {
 }
 
 /// Runs `f` with a client on a small single-threaded runtime.
-fn with_client<F, Fut>(opts: &ServerOpts, f: F) -> anyhow::Result<()>
+pub fn with_client<F, Fut>(opts: &ServerOpts, f: F) -> anyhow::Result<()>
 where
     F: FnOnce(Client) -> Fut,
     Fut: std::future::Future<Output = anyhow::Result<()>>,
@@ -71,7 +72,7 @@ struct JobDetails<'a> {
     failures: &'a [FailureGroup],
 }
 
-fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
+pub fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
     println!("{}", serde_json::to_string_pretty(value)?);
     Ok(())
 }
@@ -365,7 +366,8 @@ pub fn status(args: StatusArgs) -> anyhow::Result<()> {
                     Ok(())
                 }
             }
-            Some(id) => {
+            Some(job) => {
+                let id = client.resolve(&job).await?;
                 let job = client.job(id).await?;
                 let frames = client.frames(id).await?;
                 let failures = match job.attempts_failed {
@@ -389,10 +391,11 @@ pub fn status(args: StatusArgs) -> anyhow::Result<()> {
 
 pub fn control(args: ControlArgs, control: Control) -> anyhow::Result<()> {
     with_client(&args.server, |client| async move {
+        let id = client.resolve(&args.job).await?;
         let job = client
-            .control(args.job, control)
+            .control(id, control)
             .await
-            .with_context(|| format!("{} job {}", control.verb(), args.job))?;
+            .with_context(|| format!("{} job {id}", control.verb()))?;
         if args.json {
             return print_json(&job);
         }

@@ -6,6 +6,7 @@ mod client;
 mod control;
 mod demo;
 mod logs;
+mod manage;
 mod progress;
 mod render;
 mod server;
@@ -52,6 +53,14 @@ enum Command {
     /// Queue a job's failed tasks again, with fresh attempts, and assemble again the
     /// frames whose assembly failed.
     Retry(control::ControlArgs),
+    /// Change a job's priority (higher runs first).
+    Priority(manage::PriorityArgs),
+    /// Download a job's finished frames; run again, it fetches only what is missing.
+    Download(manage::DownloadArgs),
+    /// Submit a job again with the same scene and settings, the given ones changed.
+    Clone(manage::CloneArgs),
+    /// Delete a job with every file it made.
+    Delete(manage::DeleteArgs),
     /// List the farm's workers.
     Workers(control::WorkersArgs),
 }
@@ -89,6 +98,10 @@ fn run() -> anyhow::Result<()> {
         Command::Pause(args) => control::control(args, client::Control::Pause),
         Command::Resume(args) => control::control(args, client::Control::Resume),
         Command::Retry(args) => control::control(args, client::Control::Retry),
+        Command::Priority(args) => manage::priority(args),
+        Command::Download(args) => manage::download(args),
+        Command::Clone(args) => manage::clone(args),
+        Command::Delete(args) => manage::delete(args),
         Command::Workers(args) => control::workers(args),
         Command::Demo(args) => demo::run(args),
     }

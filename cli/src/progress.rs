@@ -48,6 +48,8 @@ pub struct Downloaded {
     pub frames: Vec<i32>,
     /// Bytes written.
     pub bytes: u64,
+    /// Files already there and kept (when resuming).
+    pub kept: u64,
 }
 
 /// Whether nothing more will happen to the job without a person acting (retry, resume,
@@ -203,8 +205,15 @@ pub async fn watch(
 }
 
 /// Downloads every done frame of job `id` into `dir` (created when missing) as
-/// `frame_0001.exr` and `frame_0001.png`.
-pub async fn download_frames(client: &Client, id: u64, dir: &Path) -> anyhow::Result<Downloaded> {
+/// `frame_0001.exr` and `frame_0001.png`. Each file is written whole or not at all (a
+/// temp file renamed), so with `resume` a file already there is kept and not fetched
+/// again: an interrupted download goes on where it stopped.
+pub async fn download_frames(
+    client: &Client,
+    id: u64,
+    dir: &Path,
+    resume: bool,
+) -> anyhow::Result<Downloaded> {
     let frames = client.frames(id).await?;
     let done: Vec<&FrameStatus> = frames
         .frames
@@ -228,6 +237,12 @@ pub async fn download_frames(client: &Client, id: u64, dir: &Path) -> anyhow::Re
     for status in done {
         let frame = status.frame;
         for file in [FrameFile::Exr, FrameFile::Png] {
+            // The server's name: as wide as the job's last frame, so the files sort.
+            let path = dir.join(Path::new(&status.file).with_extension(file.extension()));
+            if resume && path.is_file() {
+                downloaded.kept += 1;
+                continue;
+            }
             let bytes = match client.frame_file(id, frame, file).await {
                 Ok(bytes) => bytes,
                 // The preview is a convenience: a frame without one is still a frame.
@@ -240,9 +255,10 @@ pub async fn download_frames(client: &Client, id: u64, dir: &Path) -> anyhow::Re
                     return Err(e).with_context(|| format!("downloading frame {frame}"));
                 }
             };
-            // The server's name: as wide as the job's last frame, so the files sort.
-            let path = dir.join(Path::new(&status.file).with_extension(file.extension()));
-            std::fs::write(&path, &bytes).with_context(|| format!("writing {}", path.display()))?;
+            let part = path.with_extension(format!("{}.part", file.extension()));
+            std::fs::write(&part, &bytes)
+                .and_then(|()| std::fs::rename(&part, &path))
+                .with_context(|| format!("writing {}", path.display()))?;
             downloaded.bytes += bytes.len() as u64;
         }
         downloaded.frames.push(frame);
@@ -264,7 +280,7 @@ pub async fn follow(
     match watch(client, job, check).await? {
         Watched::Interrupted(status) => Ok(Followed::Interrupted(status)),
         Watched::Ended(status) => {
-            let downloaded = download_frames(client, id, dir).await?;
+            let downloaded = download_frames(client, id, dir, false).await?;
             Ok(Followed::Ended { status, downloaded })
         }
     }
@@ -387,6 +403,7 @@ mod tests {
             dir: PathBuf::from("out"),
             frames: vec![1],
             bytes: 10,
+            kept: 0,
         };
         let e = require_done(&s, &d, "http://s").unwrap_err().to_string();
         assert!(
@@ -402,6 +419,7 @@ mod tests {
             dir: PathBuf::from("out"),
             frames: vec![1, 2, 3],
             bytes: 10,
+            kept: 0,
         };
         assert!(require_done(&status(JobState::Done), &d, "http://x").is_ok());
         let mut s = status(JobState::Failed);

@@ -95,8 +95,19 @@ impl JobArgs {
     /// turned into that animation's name (the spec names animations).
     pub fn to_spec(&self, scene: &SceneInfo) -> anyhow::Result<JobSpec> {
         let mut spec = JobSpec::new(scene.digest.clone());
-        spec.name = self.name.clone();
-        spec.frames = self.frames;
+        self.overlay(&mut spec, scene)?;
+        Ok(spec)
+    }
+
+    /// Changes in `spec` (of a job of `scene`) what these settings give, and nothing else:
+    /// how `tessera clone` changes a job's settings.
+    pub fn overlay(&self, spec: &mut JobSpec, scene: &SceneInfo) -> anyhow::Result<()> {
+        if self.name.is_some() {
+            spec.name = self.name.clone();
+        }
+        if self.frames.is_some() {
+            spec.frames = self.frames;
+        }
         if let Some(fps) = self.fps {
             spec.fps = fps;
         }
@@ -147,20 +158,26 @@ impl JobArgs {
         if let Some(attempts) = self.max_attempts {
             spec.max_attempts = attempts;
         }
-        spec.camera = match &self.camera {
-            None | Some(CameraChoice::Default) => CameraSpec::Default,
-            Some(CameraChoice::Index(i)) => CameraSpec::Index(
-                u32::try_from(*i).with_context(|| format!("--camera {i}: index too large"))?,
-            ),
-            Some(CameraChoice::Name(n)) => CameraSpec::Name(n.clone()),
-        };
-        spec.motion_steps = self.motion_steps;
-        spec.tile_size = self.tile;
-        spec.animation = match &self.animation {
-            None => None,
-            Some(a) => Some(animation_name(a, scene)?),
-        };
-        Ok(spec)
+        match &self.camera {
+            None => {}
+            Some(CameraChoice::Default) => spec.camera = CameraSpec::Default,
+            Some(CameraChoice::Index(i)) => {
+                spec.camera = CameraSpec::Index(
+                    u32::try_from(*i).with_context(|| format!("--camera {i}: index too large"))?,
+                )
+            }
+            Some(CameraChoice::Name(n)) => spec.camera = CameraSpec::Name(n.clone()),
+        }
+        if self.motion_steps.is_some() {
+            spec.motion_steps = self.motion_steps;
+        }
+        if self.tile.is_some() {
+            spec.tile_size = self.tile;
+        }
+        if let Some(a) = &self.animation {
+            spec.animation = Some(animation_name(a, scene)?);
+        }
+        Ok(())
     }
 }
 
@@ -395,6 +412,27 @@ mod tests {
             materials: 1,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_clone_changes_only_the_settings_given() {
+        let mut spec = parse(&[
+            "--spp", "16", "--frames", "3-9", "--tile", "32", "--seed", "4",
+        ])
+        .to_spec(&scene())
+        .unwrap();
+        spec.name = Some("shot".into());
+        spec.camera = CameraSpec::Name("Main".into());
+        let before = spec.clone();
+        parse(&[]).overlay(&mut spec, &scene()).unwrap();
+        assert_eq!(spec, before, "no flag changes nothing");
+        parse(&["--spp", "64", "--name", "shot v2"])
+            .overlay(&mut spec, &scene())
+            .unwrap();
+        let mut want = before;
+        want.spp = 64;
+        want.name = Some("shot v2".into());
+        assert_eq!(spec, want);
     }
 
     #[test]

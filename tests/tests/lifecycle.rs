@@ -1,0 +1,107 @@
+//! A job's life after submission, as its user drives it from the command line, naming the
+//! job by its name: download its frames (again, fetching only what is missing), clone it
+//! with one setting changed (the clone's frames equal a direct render at that setting,
+//! bit for bit), change its priority, delete it.
+
+use std::time::Duration;
+
+use proto::JobState;
+use tests::{http, render_directly, settings, Farm};
+use tracer::output::read_exr;
+
+#[test]
+fn download_clone_priority_and_delete_by_name() {
+    let mut farm = Farm::new();
+    farm.start_server(60);
+    farm.start_worker("w", 2);
+    let scene = farm.demo_scene();
+    let mut args = vec![scene.to_str().unwrap(), "--frames", "1-2", "--name", "walk"];
+    args.extend(settings("2"));
+    let first = farm.submit(&args);
+    assert_eq!(
+        farm.wait_for_job(first, Duration::from_secs(120)).state,
+        JobState::Done
+    );
+
+    // Download by name; again after losing a file: only that one is fetched.
+    let out = farm.client(&["download", "walk", "--out", "walk-frames"]);
+    assert!(
+        out.starts_with(&format!(
+            "2 of 2 frame(s) of job {first} in walk-frames (0 file(s) already there"
+        )),
+        "{out}"
+    );
+    let dir = farm.path().join("walk-frames");
+    let frame1 = dir.join("frame_0001.exr");
+    assert_eq!(
+        read_exr(&frame1).unwrap().layers,
+        farm.server_frame(first, 1)
+    );
+    assert!(dir.join("frame_0002.png").is_file());
+    std::fs::remove_file(&frame1).unwrap();
+    let out = farm.client(&["download", "walk", "--out", "walk-frames"]);
+    assert!(out.contains("(3 file(s) already there"), "{out}");
+    assert_eq!(
+        read_exr(&frame1).unwrap().layers,
+        farm.server_frame(first, 1)
+    );
+
+    // Clone with more samples and a name of its own: everything else is the job's.
+    let out = farm.client(&["clone", "walk", "--spp", "4", "--name", "walk-4spp"]);
+    let clone: u64 = out
+        .split_whitespace()
+        .nth(1)
+        .and_then(|id| id.parse().ok())
+        .unwrap_or_else(|| panic!("no job id in {out}"));
+    assert!(out.contains(&format!("a clone of job {first}")), "{out}");
+    let st = farm.wait_for_job(clone, Duration::from_secs(120));
+    assert_eq!(st.state, JobState::Done, "{st:?}");
+    assert_eq!((st.name.as_str(), st.spec.spp), ("walk-4spp", 4));
+    let original = farm.job(first).spec;
+    assert_eq!(
+        (st.spec.frames, st.spec.shutter, st.spec.seed, st.spec.width),
+        (
+            original.frames,
+            original.shutter,
+            original.seed,
+            original.width
+        )
+    );
+    for frame in 1..=2 {
+        assert!(
+            farm.server_frame(clone, frame) == render_directly(&scene, frame, "4", farm.path()),
+            "the clone's frame {frame} differs from tessera render at 4 spp"
+        );
+    }
+
+    // Priority and delete, by name.
+    let out = farm.client(&["priority", "walk-4spp", "-7"]);
+    assert_eq!(out.trim(), format!("job {clone} now has priority -7"));
+    assert_eq!(farm.job(clone).spec.priority, -7);
+    let out = farm.client(&["delete", "walk-4spp"]);
+    assert_eq!(out.trim(), format!("job {clone} deleted with its files"));
+    let gone = http::get(farm.port, &format!("/api/v1/jobs/{clone}"));
+    assert_eq!(gone.status, 404);
+    assert!(!farm
+        .data_dir()
+        .join("jobs")
+        .join(clone.to_string())
+        .exists());
+    // A name that is not there, or that two jobs share, is a clear error.
+    let o = tests::tessera(
+        &["delete", "walk-4spp", "--server", &farm.url()],
+        farm.path(),
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("no job named `walk-4spp`"),
+        "{err}"
+    );
+    farm.submit(&args);
+    let o = tests::tessera(&["status", "walk", "--server", &farm.url()], farm.path());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("2 jobs are named `walk`"),
+        "{err}"
+    );
+}
