@@ -29,7 +29,8 @@ struct Cli {
 enum Command {
     /// Run a whole farm on this machine and render a short animation with it.
     Demo(demo::DemoArgs),
-    /// Render one frame of a glTF scene (or the built-in demo) to a multi-layer EXR.
+    /// Render a frame or a sequence of a glTF scene (or the built-in demo) on this machine,
+    /// to multi-layer EXRs.
     Render(render::RenderArgs),
     /// Measure the tracer and the farm: a report (markdown and JSON) of rays per second, error
     /// against time, the presets, what each feature costs and the farm against a direct render

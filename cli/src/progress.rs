@@ -314,7 +314,10 @@ pub fn require_done(
             status.tasks.failed,
             status.frames_failed
         ),
-        JobState::Cancelled => anyhow::bail!("job {id} was cancelled; {kept}"),
+        JobState::Cancelled => anyhow::bail!(
+            "job {id} was cancelled; {kept}. `tessera clone {id} --server {server}` submits it \
+             again"
+        ),
         other => anyhow::bail!("job {id} stopped while {}; {kept}", state_name(other)),
     }
 }

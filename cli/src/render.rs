@@ -32,14 +32,19 @@ pub struct RenderArgs {
     /// scene when left out.
     scene: Option<PathBuf>,
     /// Frame number; it sets the time (frame / fps) and keys the random numbers.
-    #[arg(long, default_value_t = 1, conflicts_with = "frames")]
+    #[arg(
+        long,
+        default_value_t = 1,
+        conflicts_with = "frames",
+        allow_hyphen_values = true
+    )]
     frame: i32,
     /// A sequence instead of one frame: A-B or A-B:STEP. `--out` is then a folder that
     /// receives frame_0001.exr, frame_0001.png, ...
     #[arg(long, value_parser = parse_frames)]
     frames: Option<FrameRange>,
     /// Frames per second.
-    #[arg(long, default_value_t = 24.0)]
+    #[arg(long, default_value_t = 24.0, allow_hyphen_values = true)]
     fps: f64,
     /// Shutter OPEN,CLOSE in frames relative to each frame's time (e.g. -0.25,0.25 for a
     /// 180° shutter); 0,0 renders without motion blur.
@@ -362,6 +367,16 @@ mod tests {
 
     fn error_of(args: &[&str]) -> String {
         format!("{:#}", sampling_of(args).unwrap_err())
+    }
+
+    /// A negative number is a value, not a flag: its range is checked (with a message
+    /// naming the flag), not refused by the parser.
+    #[test]
+    fn negative_numbers_reach_the_range_checks() {
+        let cli = Cli::try_parse_from(["render", "--fps", "-5", "--frame", "-3"]).unwrap();
+        assert_eq!((cli.render.fps, cli.render.frame), (-5.0, -3));
+        let e = format!("{:#}", run(cli.render).unwrap_err());
+        assert!(e.starts_with("--fps -5: must be in (0, "), "{e}");
     }
 
     #[test]

@@ -24,7 +24,7 @@ pub struct JobArgs {
     #[arg(long, value_parser = parse_frames)]
     pub frames: Option<FrameRange>,
     /// Frames per second: frame f shows time f / fps [default: 24].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub fps: Option<f64>,
     /// A quality preset: draft, preview or final (README.md lists what each sets);
     /// --spp, --max-depth, --noise-threshold and --min-spp override its parts.
@@ -35,7 +35,7 @@ pub struct JobArgs {
     pub spp: Option<u32>,
     /// Adaptive sampling: a pixel stops once its estimated relative error is at most
     /// this (0.01 is clean, 0.1 rough) [default: off].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub noise_threshold: Option<f64>,
     /// With a noise threshold, the samples every pixel takes before it may stop
     /// [default: 16, or the preset's; at most --spp]. With a time budget, the first
@@ -46,7 +46,7 @@ pub struct JobArgs {
     /// frame first at --min-spp, then more samples for the noisiest frames while the
     /// farm's measured speed says they end in time (--spp caps a pixel; a preset gives
     /// the cap and the bounces, not its noise threshold) [default: off].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub time_budget: Option<f64>,
     /// Image size WIDTHxHEIGHT [default: 1280x720].
     #[arg(long, value_parser = parse_size)]
@@ -412,6 +412,17 @@ mod tests {
             materials: 1,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn negative_numbers_are_values_for_the_server_to_check() {
+        let spec = parse(&["--fps", "-5", "--time-budget", "-1", "--priority", "-3"])
+            .to_spec(&scene())
+            .unwrap();
+        assert_eq!(
+            (spec.fps, spec.time_budget, spec.priority),
+            (-5.0, Some(-1.0), -3)
+        );
     }
 
     #[test]
