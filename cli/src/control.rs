@@ -330,6 +330,11 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
                 current,
                 w.tasks_done.to_string(),
                 ago(w.last_seen_ms, now_ms),
+                if w.tags.is_empty() {
+                    "-".into()
+                } else {
+                    w.tags.join(",")
+                },
             ]
         })
         .collect();
@@ -343,6 +348,7 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
             "CURRENT",
             "TASKS DONE",
             "LAST SEEN",
+            "TAGS",
         ],
         &rows,
     )
@@ -655,8 +661,10 @@ mod tests {
             suspect: false,
             quarantined: None,
             platform: None,
+            tags: vec![],
         };
         let mut bad = worker(3, "c", true, None, None);
+        bad.tags = vec!["gpu".into(), "studio-a".into()];
         bad.quarantined = Some("its tile of task 9 differs".into());
         let list = WorkerList {
             workers: vec![
@@ -667,10 +675,10 @@ mod tests {
         };
         assert_eq!(
             workers_table(&list, 60_000),
-            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  LAST SEEN\n\
-             1   render-01  8        yes     ok           job 3 frame 12  17          2s ago\n\
-             2   b          8        no      ok           -               17          2s ago\n\
-             3   c          8        yes     quarantined  -               17          2s ago"
+            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  LAST SEEN  TAGS\n\
+             1   render-01  8        yes     ok           job 3 frame 12  17          2s ago     -\n\
+             2   b          8        no      ok           -               17          2s ago     -\n\
+             3   c          8        yes     quarantined  -               17          2s ago     gpu,studio-a"
         );
     }
 }

@@ -279,6 +279,12 @@ fn arg_text(value: &toml::Value) -> anyhow::Result<String> {
         toml::Value::Integer(i) => i.to_string(),
         toml::Value::Float(f) => f.to_string(),
         toml::Value::Boolean(b) => b.to_string(),
+        // A list flag (`tags = ["gpu", "fast"]`) takes its values comma-separated.
+        toml::Value::Array(items) => items
+            .iter()
+            .map(arg_text)
+            .collect::<anyhow::Result<Vec<_>>>()?
+            .join(","),
         other => bail!("expected a string or a number, found {}", other.type_str()),
     })
 }
@@ -330,6 +336,26 @@ mod tests {
             Sub::Server(args) => Ok((args, layers)),
             Sub::Worker(_) => unreachable!(),
         }
+    }
+
+    fn worker(argv: &[&str]) -> anyhow::Result<crate::worker::WorkerArgs> {
+        let argv = ["tessera", "worker"].iter().chain(argv);
+        let (cli, _) = parse_from::<Cli, _, _>(argv)?;
+        match cli.command {
+            Sub::Worker(args) => Ok(args),
+            Sub::Server(_) => unreachable!(),
+        }
+    }
+
+    #[test]
+    fn a_list_setting_comes_from_a_toml_array_a_variable_or_the_flag() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = config_file(dir.path(), "[worker]\ntags = [\"gpu\", \"studio-a\"]\n");
+        let args = worker(&["--config", &file]).unwrap();
+        assert_eq!(args.tags, ["gpu", "studio-a"]);
+        let args = with_env(&[("TESSERA_TAGS", "fast,big")], || worker(&[]).unwrap());
+        assert_eq!(args.tags, ["fast", "big"]);
+        assert_eq!(worker(&["--tags", "a,b"]).unwrap().tags, ["a", "b"]);
     }
 
     fn config_file(dir: &Path, text: &str) -> String {
@@ -435,7 +461,7 @@ mod tests {
             m.contains("[server] lease_seconds") && m.contains("5..=86400"),
             "{m}"
         );
-        let m = error("[server]\nlisten = [1]\n");
+        let m = error("[server]\nlisten = { port = 1 }\n");
         assert!(m.contains("expected a string or a number"), "{m}");
         let m = error("[server\n");
         assert!(m.contains("not valid TOML"), "{m}");
@@ -501,6 +527,6 @@ mod tests {
             let config = sc.get_arguments().find(|a| a.get_id() == CONFIG).unwrap();
             assert_eq!(config.get_env().unwrap(), "TESSERA_CONFIG");
         }
-        assert_eq!(seen, 13 + 9);
+        assert_eq!(seen, 13 + 10);
     }
 }

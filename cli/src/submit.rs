@@ -87,6 +87,10 @@ pub struct JobArgs {
     /// A name for the job [default: `job <id>`].
     #[arg(long)]
     pub name: Option<String>,
+    /// Only workers with every one of these tags (comma-separated, as given to
+    /// `tessera worker --tags`) take the job [default: any worker].
+    #[arg(long, value_delimiter = ',')]
+    pub require_tags: Option<Vec<String>>,
 }
 
 impl JobArgs {
@@ -176,6 +180,9 @@ impl JobArgs {
         }
         if let Some(a) = &self.animation {
             spec.animation = Some(animation_name(a, scene)?);
+        }
+        if let Some(tags) = &self.require_tags {
+            spec.require_tags = tags.clone();
         }
         Ok(())
     }

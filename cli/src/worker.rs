@@ -42,6 +42,11 @@ pub struct WorkerArgs {
     /// A name shown on the dashboard (default: the host name).
     #[arg(long, env = "TESSERA_NAME")]
     pub name: Option<String>,
+    /// What this machine offers, comma-separated (`gpu,studio-a`): it takes only jobs
+    /// whose every `--require-tags` tag it has.
+    #[arg(long, env = "TESSERA_TAGS", value_delimiter = ',')]
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub tags: Vec<String>,
     /// How tiles are compressed for upload: `zip` (a third of the bytes, about 25 ms of
     /// CPU per 128x128 tile), `none`, or `auto`: none for a server on this machine, zip
     /// for any other.
@@ -77,6 +82,7 @@ pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
         cache_dir: cache,
         cache_limit_bytes: args.cache_limit_mb << 20,
         name,
+        tags: args.tags,
         upload_compression: args.upload_compression,
         fault: args.inject_fault,
     };

@@ -225,6 +225,9 @@ pub struct JobSpec {
     /// The animation that plays, by name (default: all of them).
     #[serde(default)]
     pub animation: Option<String>,
+    /// Only workers with every one of these tags take the job's tasks (default: any).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub require_tags: Vec<String>,
     /// Tile side in pixels (default: chosen so one task is a few seconds of work).
     #[serde(default)]
     pub tile_size: Option<u32>,
@@ -263,6 +266,7 @@ impl JobSpec {
             shutter: [0.0, 0.0],
             motion_steps: None,
             animation: None,
+            require_tags: Vec::new(),
             tile_size: None,
             sample_passes: 1,
             priority: 0,

@@ -34,6 +34,10 @@ pub struct WorkerRegistration {
     /// platforms disagreed.
     #[serde(default)]
     pub platform: Option<String>,
+    /// What the machine offers, as words a job can require (`gpu`, `studio-a`): it takes
+    /// only jobs whose every required tag it has.
+    #[serde(default)]
+    pub tags: Vec<String>,
 }
 
 /// The answer to a registration: the worker's id and the timing it must keep.
@@ -87,6 +91,9 @@ pub struct WorkerInfo {
     /// The machine and build it registered with ([`WorkerRegistration::platform`]).
     #[serde(default)]
     pub platform: Option<String>,
+    /// Its tags ([`WorkerRegistration::tags`]).
+    #[serde(default)]
+    pub tags: Vec<String>,
 }
 
 /// `GET /workers`.

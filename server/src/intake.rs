@@ -403,6 +403,7 @@ mod tests {
                     threads: 1,
                     version: "t",
                     platform: None,
+                    tags: &[],
                 },
                 credential: None,
             };

@@ -46,6 +46,10 @@ pub const BUDGET_TILE_SPP: u32 = 64;
 /// Pixel samples one task should hold by default: a few seconds on a worker (64×64
 /// pixels at 256 samples, about 1M camera paths).
 pub const TARGET_TASK_PIXEL_SAMPLES: u64 = 1 << 20;
+/// Tags one worker offers or one job requires.
+pub const MAX_TAGS: usize = 32;
+/// Length of one tag, bytes (ASCII letters, digits, `-`, `_` and `.`).
+pub const MAX_TAG_BYTES: usize = 64;
 /// Tasks one page of `GET /jobs/{id}/tasks` holds at most (and by default).
 pub const MAX_TASKS_PER_PAGE: u32 = 1_000;
 /// Reasons `GET /jobs/{id}/failures` lists at most: the most frequent.

@@ -101,6 +101,30 @@ pub fn default_tile_size(spp_per_pass: u32) -> u32 {
     s
 }
 
+/// Tags (a worker's, or those a job requires) are at most [`MAX_TAGS`] words of 1 to
+/// [`MAX_TAG_BYTES`] ASCII letters, digits, `-`, `_` and `.`; `field` names them.
+pub fn check_tags(field: &str, tags: &[String]) -> Result<(), FieldError> {
+    if tags.len() > MAX_TAGS {
+        return bad(
+            field,
+            format!("at most {MAX_TAGS} tags, got {}", tags.len()),
+        );
+    }
+    for tag in tags {
+        let fine = |b: u8| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.');
+        if tag.is_empty() || tag.len() > MAX_TAG_BYTES || !tag.bytes().all(fine) {
+            return bad(
+                field,
+                format!(
+                    "`{tag}`: a tag is 1 to {MAX_TAG_BYTES} ASCII letters, digits, `-`, `_` \
+                     and `.`"
+                ),
+            );
+        }
+    }
+    Ok(())
+}
+
 /// A job's priority is within [`MAX_PRIORITY`] either way.
 pub fn check_priority(priority: i32) -> Result<(), FieldError> {
     if priority.abs() > MAX_PRIORITY {
@@ -347,6 +371,7 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
     };
     spec.tile_size = Some(tile_size);
     check_priority(spec.priority)?;
+    check_tags("require_tags", &spec.require_tags)?;
     if spec.max_attempts == 0 || spec.max_attempts > MAX_ATTEMPTS {
         return bad(
             "max_attempts",

@@ -129,6 +129,15 @@ fn stuck_reason(
          after failing its tasks and {} quarantined",
         farm.live, farm.blocked, farm.quarantined
     );
+    if farm.untagged > 0 {
+        let spec = jobs::spec(conn, job)?;
+        why.push_str(&format!(
+            ", {} without the tags it requires ({}); start a worker with `--tags {}`",
+            farm.untagged,
+            spec.require_tags.join(", "),
+            spec.require_tags.join(",")
+        ));
+    }
     if let Some(g) = failures::groups(conn, job, 1)?.first() {
         why.push_str(&format!(
             "; most frequent failure ({} of {attempts_failed} attempt(s)): {}",

@@ -128,7 +128,7 @@ pub fn sample(
     if task.check_of.is_some() || !sampled(task.id, fraction) {
         return Ok(());
     }
-    if workers::another_live(tx, worker, live_since)? {
+    if workers::another_live(tx, task.job_id, worker, live_since)? {
         add_check(tx, task, now, "sampled")?;
     }
     Ok(())

@@ -173,6 +173,7 @@ impl Rogue {
             version: "test".into(),
             credential: None,
             platform: None,
+            tags: vec![],
         };
         let mut rogue = Rogue {
             port: farm.port,

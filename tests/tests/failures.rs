@@ -107,3 +107,42 @@ fn a_job_no_worker_can_render_says_why_everywhere_and_wait_stops() {
     assert_eq!(done.state, proto::JobState::Done, "{done:?}");
     assert_eq!(done.stuck, None);
 }
+
+#[test]
+fn a_job_that_requires_tags_no_live_worker_has_says_so_until_one_comes() {
+    let mut farm = Farm::new();
+    farm.start_server(60);
+    farm.start_worker_with("cpu-box", 1, &["--tags", "cpu,studio-a"]);
+    let scene = farm.demo_scene();
+    let url = farm.url();
+    let mut args = vec![
+        "submit",
+        scene.to_str().unwrap(),
+        "--server",
+        &url,
+        "--frames",
+        "1",
+        "--require-tags",
+        "gpu,studio-a",
+        "--wait",
+    ];
+    args.extend(settings("1"));
+    let out = tests::tessera(&args, farm.path());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(
+            "1 without the tags it requires (gpu, studio-a); start a worker with \
+                         `--tags gpu,studio-a`"
+        ),
+        "{stderr}"
+    );
+    let workers = farm.client(&["workers"]);
+    assert!(workers.contains("cpu,studio-a"), "{workers}");
+    farm.start_worker_with("gpu-box", 1, &["--tags", "gpu,studio-a,fast"]);
+    let done = farm.wait_for_job(1, Duration::from_secs(120));
+    assert_eq!(done.state, proto::JobState::Done, "{done:?}");
+    let workers = farm.worker_list().workers;
+    let by = |name: &str| workers.iter().find(|w| w.name == name).unwrap().tasks_done;
+    assert_eq!((by("cpu-box"), by("gpu-box")), (0, 1));
+}

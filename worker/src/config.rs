@@ -27,6 +27,9 @@ pub struct WorkerConfig {
     pub cache_limit_bytes: u64,
     /// A name for people: shown in `GET /workers` and the dashboard.
     pub name: String,
+    /// What this machine offers (`gpu`, `studio-a`): it takes only the jobs whose every
+    /// required tag it has.
+    pub tags: Vec<String>,
     /// How uploaded tiles are compressed.
     pub upload_compression: UploadCompression,
     /// A fault to inject, for testing how the farm copes with a bad worker; `None` for
@@ -188,6 +191,7 @@ mod tests {
             cache_dir: PathBuf::from("cache"),
             cache_limit_bytes: u64::MAX,
             name: "w".into(),
+            tags: vec![],
             upload_compression: UploadCompression::Auto,
             fault: None,
         }

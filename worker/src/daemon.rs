@@ -123,6 +123,7 @@ pub async fn run(
             credential: identity::load(&config.cache_dir, &config.server, &config.name)
                 .map(|i| i.credential),
             platform: Some(crate::config::platform()),
+            tags: config.tags.clone(),
         },
         identity_dir: config.cache_dir.clone(),
         registered: None,

@@ -727,6 +727,7 @@ async fn load(
                 version: env!("CARGO_PKG_VERSION").into(),
                 credential: None,
                 platform: None,
+                tags: vec![],
             };
             let id = api.register(&reg).await?.worker_id;
             Ok::<_, ApiError>((api, id))

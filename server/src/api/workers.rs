@@ -55,6 +55,10 @@ pub async fn register(
             });
         }
     }
+    crate::spec::check_tags("tags", &reg.tags).map_err(|e| Error::Invalid {
+        field: e.field,
+        message: e.message,
+    })?;
     if reg.threads == 0 || reg.threads > 4096 {
         return Err(Error::Invalid {
             field: "threads".into(),
@@ -75,6 +79,7 @@ pub async fn register(
                     threads: reg.threads,
                     version: &reg.version,
                     platform: reg.platform.as_deref(),
+                    tags: &reg.tags,
                 },
                 credential: reg.credential.as_deref(),
             };

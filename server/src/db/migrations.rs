@@ -128,6 +128,8 @@ const MIGRATIONS: &[&str] = &[
     // 8: the machine and build a worker registered with, for the events of checks that
     // disagree.
     "ALTER TABLE workers ADD COLUMN platform TEXT;",
+    // 9: worker tags (a job's required tags are in its spec).
+    "ALTER TABLE workers ADD COLUMN tags TEXT NOT NULL DEFAULT '[]';  -- JSON array",
 ];
 
 /// The schema version this build writes.

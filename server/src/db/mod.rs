@@ -84,6 +84,15 @@ impl Cached for Connection {
     }
 }
 
+/// SQL: the worker whose tags are the JSON array `worker_tags` has every tag the job whose
+/// spec is `job_spec` requires (`require_tags`; none required: any worker).
+pub(crate) fn has_required_tags(job_spec: &str, worker_tags: &str) -> String {
+    format!(
+        "NOT EXISTS (SELECT 1 FROM json_each({job_spec}, '$.require_tags') r
+                     WHERE r.value NOT IN (SELECT value FROM json_each({worker_tags})))"
+    )
+}
+
 /// Whether the database answers (for the health check).
 pub fn ping(conn: &Connection) -> rusqlite::Result<()> {
     conn.row("SELECT 1", [], |r| r.get::<_, i64>(0)).map(|_| ())

@@ -5,7 +5,7 @@
 use rusqlite::{params, Connection, OptionalExtension, Transaction};
 use tracer::film::{SampleRange, TileRect};
 
-use super::Cached;
+use super::{has_required_tags, Cached};
 use crate::error::{Error, Result};
 use crate::state::{transition, TaskEvent, TaskState};
 
@@ -157,17 +157,19 @@ pub fn insert(tx: &Transaction, t: &NewTask) -> Result<()> {
     Ok(())
 }
 
-/// Active jobs with a queued task that `worker` is not blocked from, with whether each is
-/// a time-budget job: by priority (highest first), then age.
+/// Active jobs with a queued task that `worker` has the tags for and is not blocked from,
+/// with whether each is a time-budget job: by priority (highest first), then age.
 pub fn leasable_jobs(tx: &Transaction, worker: u64) -> Result<Vec<(u64, bool)>> {
-    let mut stmt = tx.prepare_cached(
+    let mut stmt = tx.prepare_cached(&format!(
         "SELECT j.id, j.budget_plan IS NOT NULL FROM jobs j
          WHERE j.control = 'active'
            AND EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = j.id AND t.state = 'queued')
            AND NOT EXISTS (SELECT 1 FROM job_blocks b
                            WHERE b.job_id = j.id AND b.worker_id = ?1)
+           AND {}
          ORDER BY j.priority DESC, j.created_ms, j.id",
-    )?;
+        has_required_tags("j.spec", "(SELECT tags FROM workers WHERE id = ?1)")
+    ))?;
     let rows = stmt.query_map([worker], |r| Ok((r.get(0)?, r.get(1)?)))?;
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
@@ -194,6 +196,7 @@ pub fn next_for(
     } else {
         "t.frame, t.pass, t.tile"
     };
+    let tagged = has_required_tags("(SELECT spec FROM jobs WHERE id = t.job_id)", "w.tags");
     let fresh: Option<u64> = tx
         .row(
             &format!(
@@ -219,6 +222,7 @@ pub fn next_for(
                    SELECT 1 FROM workers w
                    WHERE w.id != ?2 AND w.last_seen_ms >= ?3 AND w.left_ms IS NULL
                      AND w.quarantined_ms IS NULL
+                     AND {tagged}
                      AND NOT EXISTS (SELECT 1 FROM task_failures f
                                      WHERE f.task_id = t.id AND f.worker_id = w.id)
                      AND NOT EXISTS (SELECT 1 FROM job_blocks b

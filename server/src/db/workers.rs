@@ -5,7 +5,7 @@
 use proto::{TaskToken, WorkerInfo, WorkerList};
 use rusqlite::{params, Connection, OptionalExtension, Transaction};
 
-use super::Cached;
+use super::{has_required_tags, Cached};
 use crate::error::{Error, Result};
 
 /// What a worker says of itself when it joins.
@@ -19,21 +19,24 @@ pub struct Profile<'a> {
     pub version: &'a str,
     /// Its machine and build.
     pub platform: Option<&'a str>,
+    /// What it offers, for jobs that require tags.
+    pub tags: &'a [String],
 }
 
 /// Stores a new worker with its credential's hash; returns its id.
 pub fn insert(tx: &Transaction, p: &Profile, credential_hash: &str, now: i64) -> Result<u64> {
     tx.exec(
         "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms,
-                              credential, platform)
-         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6)",
+                              credential, platform, tags)
+         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6, ?7)",
         params![
             p.name,
             p.threads,
             p.version,
             now,
             credential_hash,
-            p.platform
+            p.platform,
+            serde_json::to_string(p.tags)?
         ],
     )?;
     Ok(tx.last_insert_rowid() as u64)
@@ -49,7 +52,7 @@ pub fn set_returned(
 ) -> Result<()> {
     tx.exec(
         "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
-                left_ms = NULL, credential = ?6, platform = ?7 WHERE id = ?1",
+                left_ms = NULL, credential = ?6, platform = ?7, tags = ?8 WHERE id = ?1",
         params![
             id,
             p.name,
@@ -57,7 +60,8 @@ pub fn set_returned(
             p.version,
             now,
             credential_hash,
-            p.platform
+            p.platform,
+            serde_json::to_string(p.tags)?
         ],
     )?;
     Ok(())
@@ -131,62 +135,76 @@ pub fn set_left(tx: &Transaction, worker: u64, now: i64) -> Result<()> {
     Ok(())
 }
 
-/// Whether a worker other than `except`, live (seen since `live_since`, not left) and not
-/// quarantined, exists.
-pub fn another_live(conn: &Connection, except: u64, live_since: i64) -> Result<bool> {
+/// Whether a worker other than `except`, live (seen since `live_since`, not left), not
+/// quarantined and with the tags `job` requires, exists.
+pub fn another_live(conn: &Connection, job: u64, except: u64, live_since: i64) -> Result<bool> {
     Ok(conn.row(
-        "SELECT EXISTS (SELECT 1 FROM workers WHERE id != ?1 AND last_seen_ms >= ?2
-                          AND left_ms IS NULL AND quarantined_ms IS NULL)",
-        params![except, live_since],
+        &format!(
+            "SELECT EXISTS (SELECT 1 FROM workers w WHERE w.id != ?1 AND w.last_seen_ms >= ?2
+                              AND w.left_ms IS NULL AND w.quarantined_ms IS NULL AND {})",
+            has_required_tags("(SELECT spec FROM jobs WHERE id = ?3)", "w.tags")
+        ),
+        params![except, live_since, job],
         |r| r.get(0),
     )?)
 }
 
-/// The live workers (seen since `live_since`, not left, not quarantined) not blocked from
-/// `job`.
+/// The live workers (seen since `live_since`, not left, not quarantined) with the tags
+/// `job` requires and not blocked from it.
 pub fn live_for_job(conn: &Connection, job: u64, live_since: i64) -> Result<Vec<u64>> {
-    let mut stmt = conn.prepare_cached(
+    let mut stmt = conn.prepare_cached(&format!(
         "SELECT w.id FROM workers w
          WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL AND w.quarantined_ms IS NULL
+           AND {}
            AND NOT EXISTS (SELECT 1 FROM job_blocks b
                            WHERE b.job_id = ?1 AND b.worker_id = w.id)",
-    )?;
+        has_required_tags("(SELECT spec FROM jobs WHERE id = ?1)", "w.tags")
+    ))?;
     let rows = stmt.query_map(params![job, live_since], |r| r.get(0))?;
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 
 /// Who could work on `job` now: the live workers (seen since `live_since`, not left), and
-/// of them those quarantined and those (not quarantined) blocked from the job.
+/// of them those quarantined, those (not quarantined) without the tags it requires, and
+/// those (neither) blocked from it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Availability {
     /// Live workers.
     pub live: u64,
     /// Of them, quarantined.
     pub quarantined: u64,
-    /// Of them, not quarantined but blocked from the job.
+    /// Of them, not quarantined but without a tag the job requires.
+    pub untagged: u64,
+    /// Of them, neither but blocked from the job.
     pub blocked: u64,
 }
 
 impl Availability {
     /// Live workers that may take the job's tasks.
     pub fn usable(&self) -> u64 {
-        self.live - self.quarantined - self.blocked
+        self.live - self.quarantined - self.untagged - self.blocked
     }
 }
 
 /// [`Availability`] of the farm for `job`.
 pub fn availability(conn: &Connection, job: u64, live_since: i64) -> Result<Availability> {
+    let tagged = has_required_tags("(SELECT spec FROM jobs WHERE id = ?1)", "w.tags");
     Ok(conn.row(
-        "SELECT count(*), coalesce(sum(w.quarantined_ms IS NOT NULL), 0),
-                coalesce(sum(w.quarantined_ms IS NULL AND EXISTS (
-                    SELECT 1 FROM job_blocks b WHERE b.job_id = ?1 AND b.worker_id = w.id)), 0)
-         FROM workers w WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL",
+        &format!(
+            "SELECT count(*), coalesce(sum(w.quarantined_ms IS NOT NULL), 0),
+                    coalesce(sum(w.quarantined_ms IS NULL AND NOT {tagged}), 0),
+                    coalesce(sum(w.quarantined_ms IS NULL AND {tagged} AND EXISTS (
+                        SELECT 1 FROM job_blocks b WHERE b.job_id = ?1 AND b.worker_id = w.id)),
+                        0)
+             FROM workers w WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL"
+        ),
         params![job, live_since],
         |r| {
             Ok(Availability {
                 live: r.get(0)?,
                 quarantined: r.get(1)?,
-                blocked: r.get(2)?,
+                untagged: r.get(2)?,
+                blocked: r.get(3)?,
             })
         },
     )?)
@@ -257,7 +275,7 @@ pub fn counts(conn: &Connection, live_since: i64) -> Result<(u64, u64)> {
 
 const INFO_QUERY: &str = "SELECT w.id, w.name, w.threads, w.version, w.last_seen_ms, w.tasks_done,
         t.id, t.attempt, t.job_id, t.frame, w.left_ms, w.suspect_ms, w.quarantine_reason,
-        w.platform
+        w.platform, w.tags
      FROM workers w
      LEFT JOIN tasks t ON t.id = (SELECT id FROM tasks WHERE worker_id = w.id AND state = 'leased'
                                   ORDER BY leased_ms DESC LIMIT 1)";
@@ -285,6 +303,9 @@ fn info_from_row(r: &rusqlite::Row, live_since: i64) -> rusqlite::Result<WorkerI
         suspect: r.get::<_, Option<i64>>(11)?.is_some(),
         quarantined: r.get(12)?,
         platform: r.get(13)?,
+        tags: serde_json::from_str(&r.get::<_, String>(14)?).map_err(|e| {
+            rusqlite::Error::FromSqlConversionFailure(14, rusqlite::types::Type::Text, e.into())
+        })?,
     })
 }
 

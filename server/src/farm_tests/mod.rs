@@ -7,6 +7,7 @@ mod controls;
 mod failures;
 mod identity;
 mod leases;
+mod tags;
 
 use proto::{
     FailureAck, FrameRange, JobSpec, JobState, Lease, Rect, SampleSpan, SceneInfo, TaskToken,
@@ -98,6 +99,7 @@ pub(super) fn joining<'a>(name: &'a str, credential: Option<&'a str>) -> Joining
             threads: 4,
             version: "test",
             platform: None,
+            tags: &[],
         },
         credential,
     }

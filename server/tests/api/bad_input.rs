@@ -353,6 +353,7 @@ async fn worker_calls_with_bad_ids_or_fields_are_refused() {
                 version: "1".into(),
                 credential: None,
                 platform: None,
+                tags: vec![],
             })
             .send()
             .await

@@ -114,6 +114,7 @@ impl SimWorker {
             version: "test".into(),
             credential: None,
             platform: None,
+            tags: vec![],
         });
         if let Some(t) = token {
             req = req.bearer_auth(t);

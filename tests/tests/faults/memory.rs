@@ -56,6 +56,7 @@ impl Painter {
             version: "test".into(),
             credential: None,
             platform: None,
+            tags: vec![],
         };
         let answer = post_json(port, "/api/v1/workers", &reg, None);
         assert_eq!(answer.status, 201, "{}", answer.text());

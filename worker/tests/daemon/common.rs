@@ -44,6 +44,7 @@ pub fn worker_config(server: &str, cache: &Path) -> WorkerConfig {
         cache_dir: cache.to_path_buf(),
         cache_limit_bytes: u64::MAX,
         name: "test-worker".into(),
+        tags: vec![],
         upload_compression: UploadCompression::Auto,
         fault: None,
     }
