@@ -148,10 +148,7 @@ pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
 
 /// Changes a job's priority (higher runs first); its next leases follow it.
 pub fn set_priority(conn: &mut Connection, job: u64, priority: i32, now: i64) -> Result<()> {
-    spec::check_priority(priority).map_err(|e| Error::Invalid {
-        field: e.field,
-        message: e.message,
-    })?;
+    spec::check_priority(priority)?;
     let tx = conn.transaction()?;
     jobs::control(&tx, job)?;
     jobs::set_priority(&tx, job, priority)?;

@@ -170,6 +170,15 @@ impl From<serde_json::Error> for Error {
     }
 }
 
+impl From<crate::spec::FieldError> for Error {
+    fn from(e: crate::spec::FieldError) -> Self {
+        Error::Invalid {
+            field: e.field,
+            message: e.message,
+        }
+    }
+}
+
 impl From<crate::state::InvalidTransition> for Error {
     fn from(e: crate::state::InvalidTransition) -> Self {
         Error::Conflict(e.to_string())

@@ -89,7 +89,13 @@ pub fn job_status(conn: &Connection, job: u64, now: i64, live_since: i64) -> Res
     {
         let farm = workers::availability(conn, job, live_since)?;
         if farm.live > 0 && farm.usable() == 0 {
-            Some(stuck_reason(conn, job, farm, attempts_failed)?)
+            Some(stuck_reason(
+                conn,
+                job,
+                &spec.require_tags,
+                farm,
+                attempts_failed,
+            )?)
         } else {
             None
         }
@@ -116,11 +122,12 @@ pub fn job_status(conn: &Connection, job: u64, now: i64, live_since: i64) -> Res
     })
 }
 
-/// Why no live worker may take `job`'s tasks, with its most frequent failure (of
-/// `attempts_failed`) and what to do.
+/// Why no live worker may take `job`'s tasks (it requires `tags`), with its most frequent
+/// failure (of `attempts_failed`) and what to do.
 fn stuck_reason(
     conn: &Connection,
     job: u64,
+    tags: &[String],
     farm: Availability,
     attempts_failed: u64,
 ) -> Result<String> {
@@ -130,12 +137,11 @@ fn stuck_reason(
         farm.live, farm.blocked, farm.quarantined
     );
     if farm.untagged > 0 {
-        let spec = jobs::spec(conn, job)?;
         why.push_str(&format!(
             ", {} without the tags it requires ({}); start a worker with `--tags {}`",
             farm.untagged,
-            spec.require_tags.join(", "),
-            spec.require_tags.join(",")
+            tags.join(", "),
+            tags.join(",")
         ));
     }
     if let Some(g) = failures::groups(conn, job, 1)?.first() {

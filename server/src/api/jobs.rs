@@ -44,10 +44,7 @@ pub async fn create(
                     })
                 }
             };
-            let plan = spec::plan(spec, &scene, max_tasks).map_err(|e| Error::Invalid {
-                field: e.field,
-                message: e.message,
-            })?;
+            let plan = spec::plan(spec, &scene, max_tasks)?;
             assembly::check_assembly_memory(&plan.spec, assembly_memory)?;
             controls::submit(c, &plan, now)
         })

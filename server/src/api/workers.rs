@@ -55,10 +55,7 @@ pub async fn register(
             });
         }
     }
-    crate::spec::check_tags("tags", &reg.tags).map_err(|e| Error::Invalid {
-        field: e.field,
-        message: e.message,
-    })?;
+    crate::spec::check_tags("tags", &reg.tags)?;
     if reg.threads == 0 || reg.threads > 4096 {
         return Err(Error::Invalid {
             field: "threads".into(),
