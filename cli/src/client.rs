@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use proto::{
-    ErrorBody, FailureList, FrameList, JobList, JobSpec, JobStatus, PriorityChange, SceneInfo,
-    WorkerInfo, WorkerList,
+    ErrorBody, FailureList, FrameList, JobEvent, JobEventList, JobList, JobSpec, JobStatus,
+    PriorityChange, SceneInfo, TaskLog, WorkerInfo, WorkerList,
 };
 use reqwest::{Method, RequestBuilder, StatusCode};
 use serde::de::DeserializeOwned;
@@ -421,6 +421,24 @@ impl Client {
     /// `GET /jobs/{id}/failures`: why its attempts failed, grouped by reason.
     pub async fn failures(&self, id: u64) -> Result<FailureList, ClientError> {
         self.get(&format!("/jobs/{id}/failures")).await
+    }
+
+    /// `GET /jobs/{id}/tasks/{task}/log`: what the workers logged while they held it.
+    pub async fn task_log(&self, id: u64, task: u64) -> Result<TaskLog, ClientError> {
+        self.get(&format!("/jobs/{id}/tasks/{task}/log")).await
+    }
+
+    /// `GET /jobs/{id}/log`: every event of the job, oldest first (every page).
+    pub async fn job_log(&self, id: u64) -> Result<Vec<JobEvent>, ClientError> {
+        let (mut events, mut after) = (Vec::new(), 0);
+        loop {
+            let page: JobEventList = self.get(&format!("/jobs/{id}/log?after={after}")).await?;
+            events.extend(page.events);
+            match page.next_after {
+                Some(next) => after = next,
+                None => return Ok(events),
+            }
+        }
     }
 
     /// `GET /jobs/{id}/frames`.

@@ -302,6 +302,12 @@ pub fn job_details(
                 g.reason
             ));
         }
+        let example = failures[0].example_task;
+        out.push_str(&format!(
+            "
+  what the worker logged: tessera logs {} --task {example}",
+            j.id
+        ));
     }
     out
 }
@@ -607,7 +613,8 @@ mod tests {
                  2 attempt(s) of 2 task(s) on a, b, reported (last 1m 00s ago): loading the \
                  scene: bad PNG\n  \
                  1 attempt(s) of 1 task(s) on c, lease expired (last 30s ago): lease expired \
-                 without a heartbeat"
+                 without a heartbeat\n  \
+                 what the worker logged: tessera logs 7 --task 4"
             ),
             "{text}"
         );

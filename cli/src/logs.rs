@@ -7,7 +7,10 @@ use std::io::IsTerminal;
 
 use clap::ValueEnum;
 use serde::Serialize;
-use tracing_subscriber::EnvFilter;
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
+use tracing_subscriber::{fmt, EnvFilter};
+use worker::task_log::TaskLogLayer;
 
 /// How log lines are written.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum, Serialize)]
@@ -21,20 +24,26 @@ pub enum LogFormat {
     Json,
 }
 
-/// Installs the global subscriber: `RUST_LOG` when set, else `default_filter`.
-pub fn init(format: LogFormat, default_filter: &str) {
+/// Installs the global subscriber: `RUST_LOG` when set, else `default_filter`. A worker
+/// also keeps each task's lines for the server (`task_log`).
+pub fn init(format: LogFormat, default_filter: &str, task_log: Option<TaskLogLayer>) {
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| default_filter.into());
-    let builder = tracing_subscriber::fmt().with_env_filter(filter);
+    let registry = tracing_subscriber::registry().with(filter).with(task_log);
     match format {
         // Colours only on a terminal: journald and `docker logs` would keep the escapes.
-        LogFormat::Human => builder.with_ansi(std::io::stdout().is_terminal()).init(),
+        LogFormat::Human => registry
+            .with(fmt::layer().with_ansi(std::io::stdout().is_terminal()))
+            .init(),
         // The message beside the level rather than under "fields", and every enclosing
         // span (request, then task) with its fields.
-        LogFormat::Json => builder
-            .json()
-            .flatten_event(true)
-            .with_current_span(false)
-            .with_span_list(true)
+        LogFormat::Json => registry
+            .with(
+                fmt::layer()
+                    .json()
+                    .flatten_event(true)
+                    .with_current_span(false)
+                    .with_span_list(true),
+            )
             .init(),
     }
 }

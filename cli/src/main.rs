@@ -5,6 +5,7 @@ mod bench;
 mod client;
 mod control;
 mod demo;
+mod history;
 mod logs;
 mod manage;
 mod progress;
@@ -64,6 +65,8 @@ enum Command {
     Delete(manage::DeleteArgs),
     /// List the farm's workers.
     Workers(control::WorkersArgs),
+    /// A job's event log, or what the workers logged for one of its tasks (`--task N`).
+    Logs(history::LogsArgs),
 }
 
 /// Runs the command; an error is printed as one line, its causes after colons, and never
@@ -104,6 +107,7 @@ fn run() -> anyhow::Result<()> {
         Command::Clone(args) => manage::clone(args),
         Command::Delete(args) => manage::delete(args),
         Command::Workers(args) => control::workers(args),
+        Command::Logs(args) => history::run(args),
         Command::Demo(args) => demo::run(args),
     }
 }

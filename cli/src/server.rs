@@ -87,7 +87,7 @@ pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
         print!("{}", layers.to_toml(&args)?);
         return Ok(());
     }
-    crate::logs::init(args.common.log_format, "info,tower_http=warn");
+    crate::logs::init(args.common.log_format, "info,tower_http=warn", None);
     let mut config = server::Config::new(&args.data);
     config.listen = args.listen;
     config.worker_token = args.worker_token;

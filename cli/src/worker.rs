@@ -73,7 +73,11 @@ pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
         print!("{}", layers.to_toml(&args)?);
         return Ok(());
     }
-    crate::logs::init(args.common.log_format, "info");
+    crate::logs::init(
+        args.common.log_format,
+        "info",
+        Some(worker::task_log::layer()),
+    );
     let config = worker::WorkerConfig {
         server: args.server,
         token: args.token,

@@ -8,6 +8,7 @@
 //! | [`job`] | the job spec a client submits and the status it reads back, frames |
 //! | [`task`] | a job's tasks and why their attempts failed |
 //! | [`worker`] | registration, lease, heartbeat, result upload headers, failure reports |
+//! | [`log`] | the lines a worker logged per task, a job's event log |
 //! | [`event`] | server-sent events for jobs, frames and workers |
 //! | [`error`] | the JSON error body every failed request answers with |
 //!
@@ -17,6 +18,7 @@
 pub mod error;
 pub mod event;
 pub mod job;
+pub mod log;
 pub mod scene;
 pub mod task;
 pub mod worker;
@@ -27,6 +29,7 @@ pub use job::{
     BudgetPlan, CameraSpec, FrameList, FrameRange, FrameState, FrameStatus, JobList, JobSpec,
     JobState, JobStatus, OutputLayer, PriorityChange, TaskCounts,
 };
+pub use log::{AttemptLog, JobEvent, JobEventList, LogLevel, LogLine, TaskLog};
 pub use scene::{AnimationInfo, CameraInfo, SceneInfo};
 pub use task::{
     FailureGroup, FailureKind, FailureList, TaskFailure, TaskInfo, TaskList, TaskState,

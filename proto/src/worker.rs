@@ -12,6 +12,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::job::CameraSpec;
+use crate::log::LogLine;
 
 /// `POST /workers`: a worker introduces itself.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -205,6 +206,10 @@ pub struct Heartbeat {
     /// The lease being worked on; `None` for an idle worker saying it is alive.
     #[serde(default)]
     pub token: Option<TaskToken>,
+    /// Lines the worker logged for the lease since its last heartbeat (at most
+    /// [`crate::log::MAX_TASK_LOG_LINES`] are kept per attempt).
+    #[serde(default)]
+    pub log: Vec<LogLine>,
 }
 
 /// The answer to a heartbeat that extended the lease.
@@ -224,6 +229,9 @@ pub struct FailureReport {
     pub attempt: u32,
     /// What went wrong, for the job's event log.
     pub message: String,
+    /// Lines the worker logged for the lease since its last heartbeat.
+    #[serde(default)]
+    pub log: Vec<LogLine>,
 }
 
 /// What the server did with a failure.

@@ -4,13 +4,13 @@
 //! [`tasks::advance`]); times are passed in (`now`, Unix ms) so tests need no clock. The
 //! job controls are in [`crate::controls`].
 
-use proto::{FailureAck, FailureKind, Lease, Rect, SampleSpan, TaskToken};
+use proto::{FailureAck, FailureKind, Lease, LogLine, Rect, SampleSpan, TaskToken};
 use rusqlite::{Connection, Transaction};
 
 use crate::config::Timing;
 use crate::db::events::log;
 use crate::db::tasks::{self, TaskRow};
-use crate::db::{failures, frames, jobs, workers};
+use crate::db::{failures, frames, jobs, logs, workers};
 use crate::error::{Error, Result};
 use crate::state::{JobControl, TaskEvent, TaskState};
 use crate::verify::{self, Verdict};
@@ -113,12 +113,14 @@ pub fn check_token(conn: &Connection, worker: u64, token: TaskToken) -> Result<T
     Err(Error::LeaseGone(format!("task {}: {why}", token.task_id)))
 }
 
-/// A heartbeat: extends `token`'s lease and returns the new deadline, or says the lease
-/// is gone (paused, cancelled, expired). Without a token it only marks the worker alive.
+/// A heartbeat: extends `token`'s lease, keeps the lines the worker logged for it, and
+/// returns the new deadline, or says the lease is gone (paused, cancelled, expired).
+/// Without a token it only marks the worker alive.
 pub fn heartbeat(
     conn: &mut Connection,
     worker: u64,
     token: Option<TaskToken>,
+    log: &[LogLine],
     now: i64,
     timing: Timing,
 ) -> Result<Option<i64>> {
@@ -131,6 +133,7 @@ pub fn heartbeat(
     let result = check_token(&tx, worker, token).and_then(|task| {
         let deadline = now + timing.lease_ms;
         tasks::extend_lease(&tx, task.id, deadline)?;
+        logs::append(&tx, task.id, token.attempt, worker, log)?;
         Ok(deadline)
     });
     // The worker's last-seen time is kept even when the lease is gone.
@@ -293,12 +296,14 @@ pub fn fail(
     worker: u64,
     token: TaskToken,
     message: &str,
+    log: &[LogLine],
     now: i64,
     timing: Timing,
 ) -> Result<(u64, FailureAck)> {
     let tx = conn.transaction()?;
     workers::touch(&tx, worker, now)?;
     let task = check_token(&tx, worker, token)?;
+    logs::append(&tx, task.id, token.attempt, worker, log)?;
     let ack = fail_attempt(
         &tx,
         &task,

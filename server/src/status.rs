@@ -1,13 +1,17 @@
 //! A job as clients read it, made from what [`crate::db`] stores: its status (state, tasks
 //! by state, frames done, samples per second, progress, ETA, and why it is stuck if it
-//! is), its tasks, and why their attempts failed. Nothing here writes.
+//! is), its tasks, why their attempts failed, what workers logged and the job's event
+//! log. Nothing here writes.
 
-use proto::{FailureList, JobState, JobStatus, Rect, SampleSpan, TaskInfo, TaskList};
+use proto::log::MAX_EVENTS_PER_PAGE;
+use proto::{
+    FailureList, JobEventList, JobState, JobStatus, Rect, SampleSpan, TaskInfo, TaskList, TaskLog,
+};
 use rusqlite::Connection;
 
 use crate::db::workers::Availability;
-use crate::db::{failures, frames, jobs, tasks, workers};
-use crate::error::Result;
+use crate::db::{events, failures, frames, jobs, logs, tasks, workers};
+use crate::error::{Error, Result};
 use crate::limits::{MAX_FAILURE_GROUPS, MAX_TASKS_PER_PAGE};
 use crate::state::{job_state, JobControl, JobFacts, TaskState};
 
@@ -207,6 +211,25 @@ pub fn failures(conn: &Connection, job: u64) -> Result<FailureList> {
     Ok(FailureList {
         groups: failures::groups(conn, job, MAX_FAILURE_GROUPS)?,
     })
+}
+
+/// What the workers logged while they held `task` of `job`, per attempt.
+pub fn task_log(conn: &Connection, job: u64, task: u64) -> Result<TaskLog> {
+    jobs::control(conn, job)?;
+    let row = tasks::load(conn, task)?
+        .filter(|t| t.job_id == job)
+        .ok_or_else(|| Error::NotFound(format!("job {job} has no task {task}")))?;
+    Ok(TaskLog {
+        task_id: task,
+        frame: row.frame,
+        attempts: logs::of_task(conn, task)?,
+    })
+}
+
+/// A page of `job`'s event log: events past `after`, oldest first.
+pub fn job_log(conn: &Connection, job: u64, after: u64, limit: u32) -> Result<JobEventList> {
+    jobs::control(conn, job)?;
+    events::of_job(conn, job, after, limit.clamp(1, MAX_EVENTS_PER_PAGE))
 }
 
 /// Every job, newest first.

@@ -217,6 +217,7 @@ impl Rogue {
         let path = format!("/api/v1/workers/{}/heartbeat", self.id);
         let beat = Heartbeat {
             token: Some(lease.token),
+            log: Vec::new(),
         };
         let answer = self.post_json(&path, &beat);
         assert_eq!(answer.status, 200, "{}", answer.text());

@@ -75,6 +75,28 @@ fn a_job_no_worker_can_render_says_why_everywhere_and_wait_stops() {
     let bad = http::get(farm.port, "/api/v1/jobs/1/tasks?state=sideways");
     assert_eq!(bad.status, 400, "{}", bad.text());
 
+    // What the worker logged for a failed task reached the server with its failure report,
+    // and `tessera logs` shows it; the job's own log lists the failures.
+    let task = tasks.tasks.iter().find(|t| !t.failures.is_empty()).unwrap();
+    let text = farm.client(&["logs", "1", "--task", &task.id.to_string()]);
+    assert!(
+        text.contains(&format!(
+            "attempt {} on worker broken:",
+            task.failures[0].attempt
+        )) && text.contains(&format!("INFO  lease taken: job 1 frame {}", task.frame))
+            && text.contains(&format!(
+                "WARN  task {} (job 1 frame {}) failed: {reason}",
+                task.id, task.frame
+            )),
+        "{text}"
+    );
+    let text = farm.client(&["logs", "1"]);
+    assert!(
+        text.contains("job_created") && text.contains("worker_blocked"),
+        "{text}"
+    );
+    assert_eq!(text.matches("task_retry").count(), 3, "{text}");
+
     let text = farm.client(&["status", "1"]);
     assert!(
         text.contains("  STUCK     no live worker may take its tasks"),
@@ -83,7 +105,8 @@ fn a_job_no_worker_can_render_says_why_everywhere_and_wait_stops() {
     assert!(
         text.contains(
             "3 failed attempt(s), by reason:\n  3 attempt(s) of 2 task(s) on broken, reported"
-        ) && text.contains(&format!("): {reason}")),
+        ) && text.contains(&format!("): {reason}"))
+            && text.contains("what the worker logged: tessera logs 1 --task "),
         "{text}"
     );
 

@@ -15,8 +15,8 @@ use std::time::Duration;
 
 use anyhow::Context;
 use proto::{
-    ErrorBody, FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, ResultAck,
-    ResultMetadata, TaskToken, WorkerLeft, WorkerRegistered, WorkerRegistration,
+    ErrorBody, FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, LogLine,
+    ResultAck, ResultMetadata, TaskToken, WorkerLeft, WorkerRegistered, WorkerRegistration,
 };
 use reqwest::{RequestBuilder, Response, StatusCode};
 
@@ -318,15 +318,20 @@ impl Api {
         }
     }
 
-    /// `POST /workers/{id}/heartbeat` for the lease `token`.
+    /// `POST /workers/{id}/heartbeat` for the lease `token`, with the lines logged for it
+    /// since the last one.
     pub async fn heartbeat(
         &self,
         worker: u64,
         token: TaskToken,
+        log: Vec<LogLine>,
     ) -> Result<HeartbeatAnswer, ApiError> {
         let req = self
             .post(&format!("/workers/{worker}/heartbeat"), CALL_TIMEOUT)
-            .json(&Heartbeat { token: Some(token) });
+            .json(&Heartbeat {
+                token: Some(token),
+                log,
+            });
         let res = self.send(req).await?;
         match res.status() {
             StatusCode::OK => Ok(HeartbeatAnswer::Extended(
@@ -385,12 +390,14 @@ impl Api {
         }
     }
 
-    /// `POST /workers/{id}/tasks/{task}/failure`.
+    /// `POST /workers/{id}/tasks/{task}/failure`, with the lines logged for the lease since
+    /// its last heartbeat.
     pub async fn failure(
         &self,
         worker: u64,
         token: TaskToken,
         message_text: &str,
+        log: Vec<LogLine>,
     ) -> Result<FailureAnswer, ApiError> {
         let req = self
             .post(
@@ -400,6 +407,7 @@ impl Api {
             .json(&FailureReport {
                 attempt: token.attempt,
                 message: message_text.to_string(),
+                log,
             });
         let res = self.send(req).await?;
         match res.status() {

@@ -34,7 +34,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use proto::{Lease, TaskToken, WorkerRegistered, WorkerRegistration};
+use proto::{Lease, LogLevel, TaskToken, WorkerRegistered, WorkerRegistration};
 use tokio::task::JoinHandle;
 use tracer::film::TileBuffer;
 use tracer::output::ExrCompression;
@@ -51,6 +51,7 @@ use crate::config::{Fault, WorkerConfig};
 use crate::identity;
 use crate::render::{encode_tile, frame_key, frame_options, render_lease};
 use crate::stop::Stop;
+use crate::task_log::{self, TaskLog};
 
 /// How long the goodbye (`leave`) may take in all before the worker exits anyway; its
 /// leases then expire on the server after one lease period.
@@ -427,6 +428,9 @@ impl Daemon {
     /// the ones the main loop acts on (unknown worker, 401, unexpected answers).
     async fn work(&mut self, reg: &WorkerRegistered, lease: Lease) -> Result<(), ApiError> {
         let task = lease.token.task_id;
+        // What is logged about the lease from here on goes to the server with its
+        // heartbeats or failure report (the upload's own lines stay in this log only).
+        let _log = TaskLog::open(task);
         tracing::info!(
             "lease taken: job {} frame {} tile {}x{} at ({}, {}) samples {}..{} (task {}, \
              attempt {})",
@@ -490,7 +494,10 @@ impl Daemon {
                 );
                 return Ok(());
             }
-            Some(Ok(r)) => r,
+            Some(Ok(r)) => {
+                self.send_warnings(reg.worker_id, lease.token).await;
+                r
+            }
             Some(Err(TaskError::Api(e))) => {
                 self.count(Fate::Abandoned);
                 return Err(e);
@@ -508,6 +515,19 @@ impl Daemon {
         let delivery = courier.deliver(lease, tile, render_ms, self.compression);
         self.delivery = Some(tokio::spawn(delivery.in_current_span()));
         Ok(())
+    }
+
+    /// Sends the lines logged for a rendered lease when one is a warning or an error: a
+    /// task that ends before its next heartbeat would otherwise keep them from the server.
+    /// Lines of a task that went well stay here (one more call per tile is not worth them).
+    async fn send_warnings(&self, worker: u64, token: TaskToken) {
+        let log = task_log::take(token.task_id);
+        if log.iter().all(|l| l.level > LogLevel::Warn) {
+            return;
+        }
+        if let Err(e) = self.api.heartbeat(worker, token, log).await {
+            tracing::debug!("sending the log of task {}: {e}", token.task_id);
+        }
     }
 
     /// Scene, frame, render: `Ok` with the tile and its render time in milliseconds.
@@ -789,10 +809,12 @@ impl Courier {
             lease.job_id,
             lease.frame
         );
+        let log = task_log::take(task);
         let answer = self
             .api
             .retry("failure report", &self.stop, InFlight::Finish, || {
-                self.api.failure(self.worker, lease.token, message)
+                self.api
+                    .failure(self.worker, lease.token, message, log.clone())
             })
             .await?;
         match answer {
@@ -815,8 +837,9 @@ impl Courier {
     }
 }
 
-/// Heartbeats the lease every `every` until the server says it is gone (409) or refuses
-/// the worker; a heartbeat that fails on the network is tried again at the next beat.
+/// Heartbeats the lease every `every`, with the lines logged for it since the last beat,
+/// until the server says it is gone (409) or refuses the worker; a heartbeat that fails
+/// on the network is tried again at the next beat (its lines are lost).
 async fn heartbeat_until_gone(
     api: Api,
     worker: u64,
@@ -827,7 +850,10 @@ async fn heartbeat_until_gone(
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         ticker.tick().await;
-        match api.heartbeat(worker, token).await {
+        match api
+            .heartbeat(worker, token, task_log::take(token.task_id))
+            .await
+        {
             Ok(HeartbeatAnswer::Extended(_)) => {}
             Ok(HeartbeatAnswer::LeaseGone(why)) => return HeartbeatEnd::LeaseGone(why),
             Err(e) if e.is_transient() => tracing::warn!(

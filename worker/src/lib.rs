@@ -11,6 +11,7 @@
 //! | [`cache`] | scenes on disk as `<digest>.glb`: verified on read, written atomically |
 //! | [`identity`] | the credential a registration answered, kept for the next start |
 //! | [`render`] | a [`proto::Lease`] into tracer frame options, a tile render, its EXR bytes |
+//! | [`task_log`] | the lines logged per task, sent with its heartbeats and failure report |
 //! | `stop` | the shutdown signal every wait listens to |
 //! | `daemon` | [`run`]: the register / lease / render / upload loop |
 //!
@@ -25,6 +26,7 @@ mod daemon;
 pub mod identity;
 pub mod render;
 mod stop;
+pub mod task_log;
 
 pub use api::{http_client, tls_hint};
 pub use config::{platform, Fault, UploadCompression, WorkerConfig};

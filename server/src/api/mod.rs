@@ -77,6 +77,8 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .routes(routes!(jobs::priority))
         .routes(routes!(tasks::list))
         .routes(routes!(tasks::failures))
+        .routes(routes!(tasks::log))
+        .routes(routes!(tasks::job_log))
         .routes(routes!(frames::list))
         .routes(routes!(frames::exr))
         .routes(routes!(frames::png))

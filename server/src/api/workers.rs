@@ -160,7 +160,8 @@ pub async fn lease(
     }
 }
 
-/// Extends a lease (or, without a token, says the worker is alive). 409 means the lease
+/// Extends a lease and keeps the lines the worker logged for it since the last beat (or,
+/// without a token, says the worker is alive). 409 means the lease
 /// is gone — the job was paused or cancelled, or the lease expired: stop rendering.
 #[utoipa::path(
     post,
@@ -184,7 +185,7 @@ pub async fn heartbeat(
     let (now, timing) = (now_ms(), app.timing());
     let deadline = app
         .db
-        .run(move |c| scheduler::heartbeat(c, worker, hb.token, now, timing))
+        .run(move |c| scheduler::heartbeat(c, worker, hb.token, &hb.log, now, timing))
         .await?;
     Ok(Json(HeartbeatAck {
         deadline_ms: deadline,
@@ -325,7 +326,7 @@ pub async fn failure(
     let (now, timing) = (now_ms(), app.timing());
     let (job, ack) = app
         .db
-        .run(move |c| scheduler::fail(c, worker, token, &message, now, timing))
+        .run(move |c| scheduler::fail(c, worker, token, &message, &report.log, now, timing))
         .await?;
     app.work.notify_waiters();
     app.publish_job(job).await;

@@ -130,6 +130,21 @@ const MIGRATIONS: &[&str] = &[
     "ALTER TABLE workers ADD COLUMN platform TEXT;",
     // 9: worker tags (a job's required tags are in its spec).
     "ALTER TABLE workers ADD COLUMN tags TEXT NOT NULL DEFAULT '[]';  -- JSON array",
+    // 10: the lines a worker logged per attempt at a task. `seq` numbers them from 0; a
+    // row at seq = proto::log::MAX_TASK_LOG_LINES says later lines were dropped.
+    r#"
+    CREATE TABLE task_logs (
+        task_id    INTEGER NOT NULL REFERENCES tasks(id) ON DELETE CASCADE,
+        attempt    INTEGER NOT NULL,
+        seq        INTEGER NOT NULL,
+        worker_id  INTEGER NOT NULL,
+        at_ms      INTEGER NOT NULL,
+        level      TEXT NOT NULL,
+        text       TEXT NOT NULL,
+        PRIMARY KEY (task_id, attempt, seq)
+    ) WITHOUT ROWID;
+    CREATE INDEX events_by_job ON events (job_id, id);
+    "#,
 ];
 
 /// The schema version this build writes.

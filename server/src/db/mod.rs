@@ -10,10 +10,11 @@
 //! | [`frames`] | task counts per frame, assembly done or failed, the frame list |
 //! | [`tasks`] | task rows and states, the lease queries, check groups |
 //! | [`failures`] | every failed attempt and its reason, per task and grouped |
+//! | [`logs`] | the lines workers logged per attempt at a task |
 //! | [`workers`] | registration, liveness, credentials (hashed), quarantine |
 //! | [`scenes`] | uploaded scenes' summaries |
 //! | [`plans`] | what the time-budget planner measures and the passes it adds |
-//! | [`events`] | the event log |
+//! | [`events`] | the event log, and a job's part of it |
 //!
 //! Functions take a `&Connection` to read and a `&Transaction` to write: a change is
 //! made inside the transaction of the operation that needs it, never on its own.
@@ -22,6 +23,7 @@ pub mod events;
 pub mod failures;
 pub mod frames;
 pub mod jobs;
+pub mod logs;
 pub mod migrations;
 pub mod plans;
 pub mod scenes;

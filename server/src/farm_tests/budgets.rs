@@ -259,7 +259,7 @@ fn a_worker_joining_or_leaving_changes_the_plan_not_the_deadline() {
     let started = queued(&c, true);
     assert!(queued(&c, false) > 0);
     t = after.deadline_ms - 100;
-    heartbeat(&mut c, a, None, t, TIMING).unwrap();
+    heartbeat(&mut c, a, None, &[], t, TIMING).unwrap();
     replan_running(&mut c, t, TIMING).unwrap();
     assert_eq!((queued(&c, false), queued(&c, true)), (0, started));
     let status = job_status(&c, j, t, TIMING.live_since(t)).unwrap();

@@ -10,7 +10,7 @@ fn pause_takes_leases_back_and_the_heartbeat_says_so() {
     let l = lease(&mut c, w, 0, TIMING).unwrap().unwrap();
     pause(&mut c, j, 1).unwrap();
     assert_eq!(state_of(&c, l.token.task_id), TaskState::Queued);
-    match heartbeat(&mut c, w, Some(l.token), 2, TIMING) {
+    match heartbeat(&mut c, w, Some(l.token), &[], 2, TIMING) {
         Err(Error::LeaseGone(why)) => assert!(why.contains("paused"), "{why}"),
         other => panic!("{other:?}"),
     }
@@ -44,7 +44,7 @@ fn cancel_stops_open_tasks_and_cannot_be_undone() {
     accept(&mut c, w, l.token, 1, 1, None, 1, TIMING).unwrap();
     let l = lease(&mut c, w, 2, TIMING).unwrap().unwrap();
     cancel(&mut c, j, 3).unwrap();
-    match heartbeat(&mut c, w, Some(l.token), 4, TIMING) {
+    match heartbeat(&mut c, w, Some(l.token), &[], 4, TIMING) {
         Err(Error::LeaseGone(why)) => assert!(why.contains("cancelled"), "{why}"),
         other => panic!("{other:?}"),
     }
@@ -65,7 +65,7 @@ fn retry_requeues_failed_tasks_with_fresh_attempts() {
     let w = worker(&mut c, "w", 0);
     let l = lease(&mut c, w, 0, TIMING).unwrap().unwrap();
     assert!(
-        fail(&mut c, w, l.token, "x", 1, TIMING)
+        fail(&mut c, w, l.token, "x", &[], 1, TIMING)
             .unwrap()
             .1
             .task_failed

@@ -18,7 +18,7 @@ fn reasons_are_kept_per_task_and_grouped_and_a_blocked_out_job_is_stuck_until_re
     let mut failed = Vec::new();
     for now in [1, 2] {
         let l = lease(&mut c, w, now, TIMING).unwrap().unwrap();
-        fail(&mut c, w, l.token, REASON, now, TIMING).unwrap();
+        fail(&mut c, w, l.token, REASON, &[], now, TIMING).unwrap();
         failed.push(l.token.task_id);
     }
     // Another attempt's lease expires: a reason of its own.
@@ -71,7 +71,7 @@ fn reasons_are_kept_per_task_and_grouped_and_a_blocked_out_job_is_stuck_until_re
     // `other` is live but not blocked: the job can go on. Once it is gone (two lease
     // periods silent), every live worker is blocked: stuck, saying why.
     assert_eq!(status(&c, now).stuck, None);
-    heartbeat(&mut c, w, None, 3 * LEASE_MS, TIMING).unwrap();
+    heartbeat(&mut c, w, None, &[], 3 * LEASE_MS, TIMING).unwrap();
     let st = status(&c, 3 * LEASE_MS);
     assert_eq!(st.attempts_failed, 3);
     let stuck = st.stuck.expect("every live worker is blocked");

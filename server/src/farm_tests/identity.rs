@@ -21,7 +21,7 @@ fn a_worker_that_comes_back_keeps_its_identity_and_a_live_name_is_refused() {
     // Blocked from j (block_after_failures is 2), then quarantined, holding a lease.
     for t in [1, 2] {
         let l = lease(&mut c, first.id, t, TIMING).unwrap().unwrap();
-        fail(&mut c, first.id, l.token, "x", t, TIMING).unwrap();
+        fail(&mut c, first.id, l.token, "x", &[], t, TIMING).unwrap();
     }
     let other = job(&mut c, 1, -1, 5, 3);
     let held = lease(&mut c, first.id, 3, TIMING).unwrap().unwrap();

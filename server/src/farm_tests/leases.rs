@@ -50,7 +50,7 @@ fn heartbeat_extends_the_lease_and_a_stale_token_is_refused() {
     let w = worker(&mut c, "w", 0);
     let l = lease(&mut c, w, 0, TIMING).unwrap().unwrap();
     assert_eq!(
-        heartbeat(&mut c, w, Some(l.token), 4_000, TIMING).unwrap(),
+        heartbeat(&mut c, w, Some(l.token), &[], 4_000, TIMING).unwrap(),
         Some(4_000 + LEASE_MS)
     );
     // Not expired at the first deadline, thanks to the heartbeat.
@@ -60,13 +60,13 @@ fn heartbeat_extends_the_lease_and_a_stale_token_is_refused() {
         ..l.token
     };
     assert!(matches!(
-        heartbeat(&mut c, w, Some(stale), 5_000, TIMING),
+        heartbeat(&mut c, w, Some(stale), &[], 5_000, TIMING),
         Err(Error::LeaseGone(_))
     ));
     // Another worker's heartbeat for this lease is refused too.
     let other = worker(&mut c, "other", 0);
     assert!(matches!(
-        heartbeat(&mut c, other, Some(l.token), 5_000, TIMING),
+        heartbeat(&mut c, other, Some(l.token), &[], 5_000, TIMING),
         Err(Error::LeaseGone(_))
     ));
 }
@@ -94,7 +94,7 @@ fn expired_lease_requeues_and_the_next_lease_fences_the_old_one() {
     );
     // The presumed-dead worker's heartbeat and upload are refused and change nothing.
     assert!(matches!(
-        heartbeat(&mut c, a, Some(first.token), LEASE_MS + 3, TIMING),
+        heartbeat(&mut c, a, Some(first.token), &[], LEASE_MS + 3, TIMING),
         Err(Error::LeaseGone(_))
     ));
     assert!(matches!(
@@ -112,7 +112,7 @@ fn failures_requeue_until_max_attempts_then_fail_the_job_while_others_finish() {
         .map(|i| worker(&mut c, &format!("w{i}"), 0))
         .collect();
     let l = lease(&mut c, ws[0], 0, TIMING).unwrap().unwrap();
-    let (_, ack) = fail(&mut c, ws[0], l.token, "out of memory", 1, TIMING).unwrap();
+    let (_, ack) = fail(&mut c, ws[0], l.token, "out of memory", &[], 1, TIMING).unwrap();
     assert_eq!(
         ack,
         FailureAck {
@@ -123,7 +123,7 @@ fn failures_requeue_until_max_attempts_then_fail_the_job_while_others_finish() {
     );
     let l2 = lease(&mut c, ws[1], 2, TIMING).unwrap().unwrap();
     assert_eq!(l2.token.task_id, l.token.task_id);
-    let (_, ack) = fail(&mut c, ws[1], l2.token, "out of memory", 3, TIMING).unwrap();
+    let (_, ack) = fail(&mut c, ws[1], l2.token, "out of memory", &[], 3, TIMING).unwrap();
     assert!(ack.task_failed && !ack.requeued);
     assert_eq!(state_of(&c, l.token.task_id), TaskState::Failed);
     let status = job_status(&c, j, 4, TIMING.live_since(4)).unwrap();
@@ -170,7 +170,7 @@ fn a_failed_task_goes_to_another_worker_while_one_can_take_it() {
     job(&mut c, 1, 0, 5, 0);
     let (a, b) = (worker(&mut c, "a", 0), worker(&mut c, "b", 0));
     let l = lease(&mut c, a, 0, TIMING).unwrap().unwrap();
-    fail(&mut c, a, l.token, "crash", 1, TIMING).unwrap();
+    fail(&mut c, a, l.token, "crash", &[], 1, TIMING).unwrap();
     // a gets the other three tasks, never the one it failed, while b is live.
     let mut got = vec![];
     while let Some(next) = lease(&mut c, a, 2, TIMING).unwrap() {
@@ -193,7 +193,7 @@ fn a_failed_task_goes_back_to_the_same_worker_when_no_other_is_live() {
     // b registered long ago and has not been seen for more than two lease periods.
     let _b = worker(&mut c, "b", -3 * LEASE_MS);
     let l = lease(&mut c, a, 0, TIMING).unwrap().unwrap();
-    fail(&mut c, a, l.token, "crash", 1, TIMING).unwrap();
+    fail(&mut c, a, l.token, "crash", &[], 1, TIMING).unwrap();
     let ids: Vec<u64> = std::iter::from_fn(|| lease(&mut c, a, 2, TIMING).unwrap())
         .map(|l| l.token.task_id)
         .collect();
@@ -210,7 +210,7 @@ fn a_worker_that_fails_n_tasks_of_a_job_is_blocked_from_it() {
     let (a, _b) = (worker(&mut c, "a", 0), worker(&mut c, "b", 0));
     let l = lease(&mut c, a, 0, TIMING).unwrap().unwrap();
     assert!(
-        !fail(&mut c, a, l.token, "x", 1, TIMING)
+        !fail(&mut c, a, l.token, "x", &[], 1, TIMING)
             .unwrap()
             .1
             .blocked_from_job
@@ -218,7 +218,7 @@ fn a_worker_that_fails_n_tasks_of_a_job_is_blocked_from_it() {
     let l = lease(&mut c, a, 2, TIMING).unwrap().unwrap();
     assert_eq!(l.job_id, j);
     assert!(
-        fail(&mut c, a, l.token, "x", 3, TIMING)
+        fail(&mut c, a, l.token, "x", &[], 3, TIMING)
             .unwrap()
             .1
             .blocked_from_job

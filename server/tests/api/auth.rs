@@ -200,6 +200,7 @@ async fn a_worker_may_only_touch_its_own_leases() {
     let lease = a.lease(&s).await.expect("a task for a");
     let heartbeat = proto::Heartbeat {
         token: Some(lease.token),
+        log: Vec::new(),
     };
     let on = |who: u64, what: &str| s.url(&format!("/workers/{who}/{what}"));
 

@@ -432,10 +432,14 @@ async fn ids_past_the_largest_row_id_are_client_errors_everywhere() {
             let req = w.auth(c.request(method.parse().unwrap(), s.url(&path)));
             let req = match path.rsplit('/').next().unwrap() {
                 "lease" => req.json(&proto::LeaseRequest::default()),
-                "heartbeat" => req.json(&proto::Heartbeat { token: None }),
+                "heartbeat" => req.json(&proto::Heartbeat {
+                    token: None,
+                    log: Vec::new(),
+                }),
                 "failure" => req.json(&proto::FailureReport {
                     attempt: 1,
                     message: "x".into(),
+                    log: Vec::new(),
                 }),
                 "result" => req
                     .header(ResultMetadata::ATTEMPT, "1")

@@ -243,12 +243,23 @@ impl SimWorker {
     }
 
     pub async fn heartbeat(&self, s: &TestServer, lease: &Lease) -> reqwest::Response {
+        self.heartbeat_logging(s, lease, Vec::new()).await
+    }
+
+    /// A heartbeat that carries log lines of the lease.
+    pub async fn heartbeat_logging(
+        &self,
+        s: &TestServer,
+        lease: &Lease,
+        log: Vec<proto::LogLine>,
+    ) -> reqwest::Response {
         self.auth(
             self.client
                 .post(s.url(&format!("/workers/{}/heartbeat", self.id))),
         )
         .json(&proto::Heartbeat {
             token: Some(lease.token),
+            log,
         })
         .send()
         .await
@@ -256,6 +267,17 @@ impl SimWorker {
     }
 
     pub async fn fail(&self, s: &TestServer, lease: &Lease, message: &str) -> reqwest::Response {
+        self.fail_logging(s, lease, message, Vec::new()).await
+    }
+
+    /// A failure report that carries log lines of the lease.
+    pub async fn fail_logging(
+        &self,
+        s: &TestServer,
+        lease: &Lease,
+        message: &str,
+        log: Vec<proto::LogLine>,
+    ) -> reqwest::Response {
         self.auth(self.client.post(s.url(&format!(
             "/workers/{}/tasks/{}/failure",
             self.id, lease.token.task_id
@@ -263,6 +285,7 @@ impl SimWorker {
         .json(&proto::FailureReport {
             attempt: lease.token.attempt,
             message: message.into(),
+            log,
         })
         .send()
         .await

@@ -3,7 +3,11 @@
 use std::collections::HashSet;
 use std::time::Duration;
 
-use proto::{FailureAck, FrameRange, JobSpec, JobState, JobStatus, ResultAck};
+use proto::log::{MAX_LOG_LINE_BYTES, MAX_TASK_LOG_LINES};
+use proto::{
+    FailureAck, FrameRange, JobEventList, JobSpec, JobState, JobStatus, LogLevel, LogLine,
+    ResultAck, TaskLog,
+};
 use reqwest::StatusCode;
 
 use crate::common::*;
@@ -342,6 +346,120 @@ async fn failures_past_max_attempts_fail_the_job_and_retry_finishes_it() {
     assert_eq!(w.work_until_idle(&s).await.len(), 1);
     let st = status(&s, &c, job.id).await;
     assert_eq!((st.state, st.frames_done), (JobState::Done, 2));
+}
+
+fn line(at_ms: i64, level: LogLevel, text: &str) -> LogLine {
+    LogLine {
+        at_ms,
+        level,
+        text: text.into(),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_task_log_keeps_the_lines_of_each_attempt_bounded_and_the_job_log_lists_events() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    // One task, so that the failed one is the one leased next.
+    let mut spec = small(&scene.digest, 1);
+    spec.tile_size = Some(16);
+    let job = create_job(&s, &c, &spec).await;
+    let w = SimWorker::register(&s, "sim").await;
+    let first = w.lease(&s).await.unwrap();
+    let task = first.token.task_id;
+    let beat = w
+        .heartbeat_logging(&s, &first, vec![line(1, LogLevel::Info, "lease taken")])
+        .await;
+    assert_eq!(beat.status(), StatusCode::OK);
+    let long = "x".repeat(MAX_LOG_LINE_BYTES + 10);
+    let report = vec![
+        line(2, LogLevel::Error, "scene: mesh 3 has no positions"),
+        line(3, LogLevel::Warn, &long),
+    ];
+    assert_eq!(
+        w.fail_logging(&s, &first, "scene: mesh 3 has no positions", report)
+            .await
+            .status(),
+        StatusCode::OK
+    );
+    // The second attempt logs more lines than are kept.
+    let second = w.lease(&s).await.unwrap();
+    assert_eq!(second.token.task_id, task);
+    let flood: Vec<LogLine> = (0..MAX_TASK_LOG_LINES + 5)
+        .map(|i| line(10 + i as i64, LogLevel::Info, &format!("line {i}")))
+        .collect();
+    for part in flood.chunks(90) {
+        let beat = w.heartbeat_logging(&s, &second, part.to_vec()).await;
+        assert_eq!(beat.status(), StatusCode::OK);
+    }
+    // Lines for a lease that is gone are refused with it, not kept.
+    let stale = w
+        .heartbeat_logging(&s, &first, vec![line(9, LogLevel::Info, "late")])
+        .await;
+    assert_eq!(stale.status(), StatusCode::CONFLICT);
+
+    let log: TaskLog = c
+        .get(s.url(&format!("/jobs/{}/tasks/{task}/log", job.id)))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(log.task_id, task);
+    assert_eq!(log.attempts.len(), 2);
+    let (a, b) = (&log.attempts[0], &log.attempts[1]);
+    assert_eq!(
+        (a.attempt, a.worker.as_str(), a.truncated),
+        (1, "sim", false)
+    );
+    let texts: Vec<&str> = a.lines.iter().map(|l| &l.text[..]).collect();
+    assert_eq!(
+        texts[..2],
+        ["lease taken", "scene: mesh 3 has no positions"]
+    );
+    assert_eq!(a.lines[1].level, LogLevel::Error);
+    assert_eq!(texts[2].len(), MAX_LOG_LINE_BYTES, "a long line is cut");
+    assert_eq!(
+        (b.attempt, b.lines.len(), b.truncated),
+        (2, MAX_TASK_LOG_LINES, true)
+    );
+    assert_eq!(
+        b.lines.last().unwrap().text,
+        format!("line {}", MAX_TASK_LOG_LINES - 1)
+    );
+
+    // A task of another job, and a job that does not exist: 404.
+    let other = create_job(&s, &c, &small(&scene.digest, 1)).await;
+    for path in [
+        format!("/jobs/{}/tasks/{task}/log", other.id),
+        format!("/jobs/999/tasks/{task}/log"),
+        "/jobs/999/log".to_string(),
+    ] {
+        let res = c.get(s.url(&path)).send().await.unwrap();
+        assert_eq!(res.status(), StatusCode::NOT_FOUND, "{path}");
+    }
+
+    // The job's event log, a page at a time.
+    let page = |after: u64, limit: u32| {
+        let url = s.url(&format!("/jobs/{}/log?after={after}&limit={limit}", job.id));
+        let c = c.clone();
+        async move {
+            let list: JobEventList = c.get(url).send().await.unwrap().json().await.unwrap();
+            list
+        }
+    };
+    let first_page = page(0, 1).await;
+    assert_eq!(first_page.events[0].kind, "job_created");
+    let rest = page(first_page.next_after.unwrap(), 1000).await;
+    assert_eq!(rest.next_after, None);
+    let kinds: Vec<&str> = rest.events.iter().map(|e| &e.kind[..]).collect();
+    assert_eq!(kinds, ["task_retry"]);
+    assert!(rest.events[0]
+        .detail
+        .contains("scene: mesh 3 has no positions"));
 }
 
 #[tokio::test(flavor = "multi_thread")]

@@ -45,6 +45,8 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         ("POST", "/api/v1/jobs/{id}/priority"),
         ("GET", "/api/v1/jobs/{id}/tasks"),
         ("GET", "/api/v1/jobs/{id}/failures"),
+        ("GET", "/api/v1/jobs/{id}/tasks/{task}/log"),
+        ("GET", "/api/v1/jobs/{id}/log"),
         ("GET", "/api/v1/jobs/{id}/frames"),
         ("GET", "/api/v1/jobs/{id}/frames/{frame}/exr"),
         ("GET", "/api/v1/jobs/{id}/frames/{frame}/png"),
