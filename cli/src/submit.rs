@@ -62,6 +62,10 @@ pub struct JobArgs {
     /// [default: 1].
     #[arg(long)]
     pub passes: Option<u32>,
+    /// Preview first: render every Nth frame of the range before the others fill in, so
+    /// the whole shot can be seen early [default: frame order].
+    #[arg(long, value_name = "N")]
+    pub preview_every: Option<u32>,
     /// Higher runs first [default: 0].
     #[arg(long, allow_hyphen_values = true)]
     pub priority: Option<i32>,
@@ -155,6 +159,9 @@ impl JobArgs {
         }
         if let Some(passes) = self.passes {
             spec.sample_passes = passes;
+        }
+        if self.preview_every.is_some() {
+            spec.preview_every = self.preview_every;
         }
         if let Some(priority) = self.priority {
             spec.priority = priority;
@@ -477,6 +484,8 @@ mod tests {
             "-0.25,0.25",
             "--passes",
             "4",
+            "--preview-every",
+            "8",
             "--priority",
             "-3",
             "--max-attempts",
@@ -508,6 +517,7 @@ mod tests {
         want.tile_size = Some(64);
         want.shutter = [-0.25, 0.25];
         want.sample_passes = 4;
+        want.preview_every = Some(8);
         want.priority = -3;
         want.max_attempts = 7;
         want.camera = CameraSpec::Name("Main".into());

@@ -235,6 +235,11 @@ pub struct JobSpec {
     /// (default 1).
     #[serde(default = "one")]
     pub sample_passes: u32,
+    /// Preview first: every Nth frame of the range (the first, the N+1th, ...) is rendered
+    /// before the others fill in, so the whole shot can be seen early (2 or more; default:
+    /// frame order). A time budget already renders every frame first.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preview_every: Option<u32>,
     /// Higher runs first (default 0).
     #[serde(default)]
     pub priority: i32,
@@ -269,6 +274,7 @@ impl JobSpec {
             require_tags: Vec::new(),
             tile_size: None,
             sample_passes: 1,
+            preview_every: None,
             priority: 0,
             max_attempts: default_max_attempts(),
             layers: default_layers(),

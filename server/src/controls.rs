@@ -32,6 +32,7 @@ pub fn submit(conn: &mut Connection, plan: &Plan, now: i64) -> Result<u64> {
                 rect: t.rect,
                 samples: t.samples,
                 check_of: None,
+                round: t.round,
             },
         )?;
     }

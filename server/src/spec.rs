@@ -49,6 +49,8 @@ pub struct PlannedTask {
     pub rect: TileRect,
     /// The samples.
     pub samples: SampleRange,
+    /// Tasks of round 0 are leased before those of round 1 ([`JobSpec::preview_every`]).
+    pub round: u32,
 }
 
 impl Plan {
@@ -68,9 +70,19 @@ impl Plan {
         self.frames.len() as u64 * self.spec.width as u64 * self.spec.height as u64 * per_pixel
     }
 
+    /// The round of the `index`th frame: 0 for every `preview_every`th, else 1 (all 0
+    /// without it).
+    pub fn round(&self, index: usize) -> u32 {
+        match self.spec.preview_every {
+            Some(n) if index % n as usize != 0 => 1,
+            _ => 0,
+        }
+    }
+
     /// Every task, frame by frame, pass by pass, tile by tile.
     pub fn tasks(&self) -> impl Iterator<Item = PlannedTask> + '_ {
-        self.frames.iter().flat_map(move |&frame| {
+        self.frames.iter().enumerate().flat_map(move |(i, &frame)| {
+            let round = self.round(i);
             self.passes
                 .iter()
                 .enumerate()
@@ -84,6 +96,7 @@ impl Plan {
                             pass: p as u32,
                             rect,
                             samples,
+                            round,
                         })
                 })
         })
@@ -291,6 +304,17 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
                 spec.sample_passes
             ),
         );
+    }
+    if let Some(n) = spec.preview_every {
+        if n < 2 {
+            return bad("preview_every", format!("must be 2 or more, got {n}"));
+        }
+        if spec.time_budget.is_some() {
+            return bad(
+                "preview_every",
+                "cannot be combined with a time_budget, which renders every frame first",
+            );
+        }
     }
     if let Some(budget) = spec.time_budget {
         if !(budget.is_finite() && budget > 0.0 && budget <= MAX_TIME_BUDGET_SECONDS) {
@@ -595,6 +619,14 @@ mod tests {
                 }),
             ),
             ("min_spp", Box::new(|s| s.min_spp = Some(4))),
+            ("preview_every", Box::new(|s| s.preview_every = Some(1))),
+            (
+                "preview_every",
+                Box::new(|s| {
+                    s.preview_every = Some(4);
+                    s.time_budget = Some(60.0);
+                }),
+            ),
             ("time_budget", Box::new(|s| s.time_budget = Some(0.0))),
             (
                 "time_budget",

@@ -145,6 +145,8 @@ const MIGRATIONS: &[&str] = &[
     ) WITHOUT ROWID;
     CREATE INDEX events_by_job ON events (job_id, id);
     "#,
+    // 11: preview-first order: tasks of round 0 are leased before those of round 1.
+    "ALTER TABLE tasks ADD COLUMN round INTEGER NOT NULL DEFAULT 0;",
 ];
 
 /// The schema version this build writes.

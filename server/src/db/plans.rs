@@ -152,6 +152,7 @@ pub fn add_pass(
                 rect,
                 samples,
                 check_of: None,
+                round: 0,
             },
         )?;
     }

@@ -117,6 +117,8 @@ pub struct NewTask {
     pub samples: SampleRange,
     /// The render task it checks, for a check task.
     pub check_of: Option<u64>,
+    /// Leased before tasks of higher rounds (preview-first order).
+    pub round: u32,
 }
 
 impl NewTask {
@@ -130,6 +132,8 @@ impl NewTask {
             rect: task.rect,
             samples: task.samples,
             check_of: Some(task.id),
+            // A check goes early: a worker found wrong should be found soon.
+            round: 0,
         }
     }
 }
@@ -138,8 +142,8 @@ impl NewTask {
 pub fn insert(tx: &Transaction, t: &NewTask) -> Result<()> {
     tx.exec(
         "INSERT INTO tasks (job_id, frame, tile, pass, x, y, w, h, sample_start, sample_end,
-                            state, check_of)
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued', ?11)",
+                            state, check_of, round)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued', ?11, ?12)",
         params![
             t.job,
             t.frame,
@@ -151,7 +155,8 @@ pub fn insert(tx: &Transaction, t: &NewTask) -> Result<()> {
             t.rect.height,
             t.samples.start,
             t.samples.end,
-            t.check_of
+            t.check_of,
+            t.round
         ],
     )?;
     Ok(())
@@ -181,8 +186,8 @@ const NOT_IN_CHECK_GROUP: &str = "(t.check_of IS NULL OR NOT EXISTS (
 
 /// The next queued task for `worker` in job `job`: tasks it has not failed first; a task
 /// it failed only when no other live worker (seen since `live_since`) could take it.
-/// Frame by frame, pass by pass; a time-budget job's (`budget`) in the order its plan
-/// issued them (frame order would starve a late frame's pass behind the passes planned
+/// Round by round (preview-first frames, then the rest), frame by frame, pass by pass; a
+/// time-budget job's (`budget`) in the order its plan issued them (frame order would starve a late frame's pass behind the passes planned
 /// for earlier frames after it).
 pub fn next_for(
     tx: &Transaction,
@@ -194,7 +199,7 @@ pub fn next_for(
     let order = if budget {
         "t.id"
     } else {
-        "t.frame, t.pass, t.tile"
+        "t.round, t.frame, t.pass, t.tile"
     };
     let tagged = has_required_tags("(SELECT spec FROM jobs WHERE id = t.job_id)", "w.tags");
     let fresh: Option<u64> = tx

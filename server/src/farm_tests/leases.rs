@@ -19,6 +19,30 @@ fn lease_takes_priority_then_age_then_frame_order() {
 }
 
 #[test]
+fn preview_first_leases_every_nth_frame_before_the_rest_fill_in() {
+    let mut c = db();
+    let mut spec = JobSpec::new(scene().digest);
+    (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 16, Some(16), 4);
+    spec.sample_passes = 2;
+    // Frames 10, 12, ..., 24: every third of them (10, 16, 22) first.
+    spec.frames = Some(FrameRange {
+        start: 10,
+        end: 24,
+        step: 2,
+    });
+    spec.preview_every = Some(3);
+    let plan = crate::spec::plan(spec, &scene(), 1_000).unwrap();
+    submit(&mut c, &plan, 0).unwrap();
+    let w = worker(&mut c, "w", 0);
+    let order: Vec<(i32, u32)> = std::iter::from_fn(|| lease(&mut c, w, 1_000, TIMING).unwrap())
+        .map(|l| (l.frame, l.samples.start))
+        .collect();
+    let frames = [10, 16, 22, 12, 14, 18, 20, 24];
+    let expected: Vec<(i32, u32)> = frames.iter().flat_map(|&f| [(f, 0), (f, 2)]).collect();
+    assert_eq!(order, expected);
+}
+
+#[test]
 fn lease_carries_what_the_tracer_needs() {
     let mut c = db();
     let j = job(&mut c, 2, 0, 3, 0);
