@@ -74,7 +74,7 @@ impl Plan {
     /// without it).
     pub fn round(&self, index: usize) -> u32 {
         match self.spec.preview_every {
-            Some(n) if index % n as usize != 0 => 1,
+            Some(n) if !index.is_multiple_of(n as usize) => 1,
             _ => 0,
         }
     }
