@@ -80,6 +80,29 @@ pub fn parse_frames(s: &str) -> anyhow::Result<FrameRange> {
     Ok(range)
 }
 
+/// Frame numbers picked one by one or by range (`--frames 12,40-42`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FrameList(pub Vec<i32>);
+
+/// Frames as a list of single frames and ranges, `12,40-42,100-200:10`, each once in the
+/// order given (each item as [`parse_frames`] reads it).
+pub fn parse_frame_list(s: &str) -> anyhow::Result<FrameList> {
+    let mut frames = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for item in s.split(',') {
+        let range = parse_frames(item)?;
+        for frame in (range.start..=range.end).step_by(range.step as usize) {
+            if seen.insert(frame) {
+                frames.push(frame);
+            }
+            if frames.len() as u64 > MAX_FRAMES {
+                bail!("frames {s}: more than {MAX_FRAMES} frames");
+            }
+        }
+    }
+    Ok(FrameList(frames))
+}
+
 /// `OPEN,CLOSE` in frames relative to each frame's time, e.g. `-0.25,0.25`.
 pub fn parse_shutter(s: &str) -> anyhow::Result<Shutter> {
     let v: Vec<f64> = s
@@ -114,6 +137,15 @@ pub fn parse_camera(s: &str) -> anyhow::Result<CameraChoice> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frame_lists_mix_frames_and_ranges_each_frame_once() {
+        assert_eq!(parse_frame_list("12,40-42").unwrap().0, [12, 40, 41, 42]);
+        assert_eq!(parse_frame_list("-2,1-5:2,3").unwrap().0, [-2, 1, 3, 5]);
+        assert!(parse_frame_list("12,").is_err());
+        assert!(parse_frame_list("5-1").is_err());
+        assert!(parse_frame_list("0-100000,100001-200001").is_err());
+    }
 
     #[test]
     fn sizes_and_regions_parse_with_limits() {

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use proto::{
     ErrorBody, FailureList, FrameList, JobEvent, JobEventList, JobList, JobSpec, JobStatus,
-    PriorityChange, SceneInfo, TaskLog, WorkerInfo, WorkerList,
+    PriorityChange, Rerender, SceneInfo, TaskLog, WorkerInfo, WorkerList,
 };
 use reqwest::{Method, RequestBuilder, StatusCode};
 use serde::de::DeserializeOwned;
@@ -374,6 +374,12 @@ impl Client {
         let (req, what) = self.request(Method::POST, &format!("/jobs/{id}/priority"));
         self.json(req.json(&PriorityChange { priority }), &what)
             .await
+    }
+
+    /// `POST /jobs/{id}/rerender`: renders `frames` again from scratch.
+    pub async fn rerender(&self, id: u64, frames: Vec<i32>) -> Result<JobStatus, ClientError> {
+        let (req, what) = self.request(Method::POST, &format!("/jobs/{id}/rerender"));
+        self.json(req.json(&Rerender { frames }), &what).await
     }
 
     /// `DELETE /jobs/{id}`: the job and every file it made.

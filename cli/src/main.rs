@@ -55,6 +55,8 @@ enum Command {
     /// Queue a job's failed tasks again, with fresh attempts, and assemble again the
     /// frames whose assembly failed.
     Retry(control::ControlArgs),
+    /// Render some frames of a job again from scratch, in the same job.
+    Rerender(manage::RerenderArgs),
     /// Change a job's priority (higher runs first).
     Priority(manage::PriorityArgs),
     /// Download a job's finished frames; run again, it fetches only what is missing.
@@ -103,6 +105,7 @@ fn run() -> anyhow::Result<()> {
         Command::Resume(args) => control::control(args, client::Control::Resume),
         Command::Retry(args) => control::control(args, client::Control::Retry),
         Command::Priority(args) => manage::priority(args),
+        Command::Rerender(args) => manage::rerender(args),
         Command::Download(args) => manage::download(args),
         Command::Clone(args) => manage::clone(args),
         Command::Delete(args) => manage::delete(args),

@@ -1,4 +1,5 @@
-//! A job's life after submission: `tessera download`, `clone`, `priority` and `delete`.
+//! A job's life after submission: `tessera download`, `clone`, `rerender`, `priority`
+//! and `delete`.
 //! Each takes the job by id or by name.
 
 use std::path::PathBuf;
@@ -6,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
+use crate::args::{parse_frame_list, FrameList};
 use crate::client::{JobRef, ServerOpts};
 use crate::control::{print_json, with_client};
 use crate::progress::{self, state_name};
@@ -35,6 +37,23 @@ pub struct CloneArgs {
     #[command(flatten)]
     pub settings: JobArgs,
     /// Print the new job's status as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Render some frames of a finished job again from scratch, in the same job (after the
+/// workers were fixed, or a frame file was lost): their old files go, their tasks run
+/// again with the job's settings.
+#[derive(Args, Debug)]
+pub struct RerenderArgs {
+    /// The job, by id or name.
+    pub job: JobRef,
+    /// The frames: single frames and ranges, e.g. 12,40-42.
+    #[arg(long, value_parser = parse_frame_list, allow_hyphen_values = true)]
+    pub frames: FrameList,
+    #[command(flatten)]
+    pub server: ServerOpts,
+    /// Print the job's new status as JSON.
     #[arg(long)]
     pub json: bool,
 }
@@ -111,6 +130,27 @@ pub fn clone(args: CloneArgs) -> anyhow::Result<()> {
         println!(
             "job {} submitted: a clone of job {id}; follow it with `tessera status {}{follow}`",
             job.id, job.id
+        );
+        Ok(())
+    })
+}
+
+pub fn rerender(args: RerenderArgs) -> anyhow::Result<()> {
+    let follow = server_flag(&args.server);
+    with_client(&args.server, |client| async move {
+        let id = client.resolve(&args.job).await?;
+        let list: Vec<String> = args.frames.0.iter().map(i32::to_string).collect();
+        let job = client
+            .rerender(id, args.frames.0)
+            .await
+            .with_context(|| format!("rendering frames {} of job {id} again", list.join(",")))?;
+        if args.json {
+            return print_json(&job);
+        }
+        println!(
+            "job {id}: {} frame(s) queued to render again; follow it with `tessera status \
+             {id}{follow}`",
+            list.len()
         );
         Ok(())
     })

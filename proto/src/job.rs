@@ -429,6 +429,15 @@ pub struct PriorityChange {
     pub priority: i32,
 }
 
+/// `POST /jobs/{id}/rerender`: the frames to render again from scratch.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct Rerender {
+    /// Frame numbers of the job (at least one; each once).
+    pub frames: Vec<i32>,
+}
+
 /// `GET /jobs`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]

@@ -27,7 +27,7 @@ pub use error::ErrorBody;
 pub use event::Event;
 pub use job::{
     BudgetPlan, CameraSpec, FrameList, FrameRange, FrameState, FrameStatus, JobList, JobSpec,
-    JobState, JobStatus, OutputLayer, PriorityChange, TaskCounts,
+    JobState, JobStatus, OutputLayer, PriorityChange, Rerender, TaskCounts,
 };
 pub use log::{AttemptLog, JobEvent, JobEventList, LogLevel, LogLine, TaskLog};
 pub use scene::{AnimationInfo, CameraInfo, SceneInfo};

@@ -10,6 +10,7 @@ use crate::db::events::log;
 use crate::db::tasks::{self, NewTask};
 use crate::db::{failures, frames, jobs};
 use crate::error::{Error, Result};
+use crate::limits::MAX_FRAMES;
 use crate::spec::{self, Plan};
 use crate::state::{control_transition, ControlChange, JobCommand, TaskEvent, TaskState};
 
@@ -145,6 +146,78 @@ pub fn retry(conn: &mut Connection, job: u64, now: i64) -> Result<usize> {
     jobs::update_finished(&tx, job, now)?;
     tx.commit()?;
     Ok(failed.len() + frames + blocks)
+}
+
+/// Renders `frames` of `job` again from scratch, as a worker would have the first time:
+/// their check tasks go, their render tasks are queued again (same tiles, same samples,
+/// so an unchanged tracer gives the same bits), and the frames count as not rendered. A
+/// frame still rendering is refused, as is a time-budget job (its passes follow its
+/// budget: clone it instead). Returns the tasks whose tiles and frame files the caller
+/// removes after this commits.
+pub fn rerender(conn: &mut Connection, job: u64, frames: &[i32], now: i64) -> Result<Vec<u64>> {
+    let mut unique = frames.to_vec();
+    unique.sort_unstable();
+    unique.dedup();
+    if frames.is_empty() || unique.len() != frames.len() || frames.len() as u64 > MAX_FRAMES {
+        return Err(Error::Invalid {
+            field: "frames".into(),
+            message: format!(
+                "must list 1 to {MAX_FRAMES} frames, each once; got {} ({} distinct)",
+                frames.len(),
+                unique.len()
+            ),
+        });
+    }
+    let tx = conn.transaction()?;
+    command(&tx, job, JobCommand::Rerender)?;
+    if jobs::load(&tx, job)?.budget.is_some() {
+        return Err(Error::Conflict(format!(
+            "job {job} has a time budget, which plans its frames' passes: clone it to render \
+             frames again"
+        )));
+    }
+    let mut rerendered = Vec::new();
+    for &frame in frames {
+        if !frames::exists(&tx, job, frame)? {
+            return Err(Error::Invalid {
+                field: "frames".into(),
+                message: format!("job {job} has no frame {frame}"),
+            });
+        }
+        let tasks = tasks::of_frame(&tx, job, frame)?;
+        if tasks
+            .iter()
+            .any(|t| matches!(t.state, TaskState::Queued | TaskState::Leased))
+            || frames::needs_assembly(&tx, job, frame)?
+        {
+            return Err(Error::Conflict(format!(
+                "frame {frame} of job {job} is still rendering: rerender it once it is done"
+            )));
+        }
+        let mut renders = 0;
+        for task in &tasks {
+            rerendered.push(task.id);
+            if task.check_of.is_some() {
+                tasks::delete(&tx, task.id)?;
+                continue;
+            }
+            tasks::advance(&tx, task, TaskEvent::Rerender)?;
+            tasks::clear_for_rerender(&tx, task.id)?;
+            renders += 1;
+        }
+        frames::reset(&tx, job, frame, renders)?;
+    }
+    let list: Vec<String> = frames.iter().map(i32::to_string).collect();
+    log(
+        &tx,
+        now,
+        Some(job),
+        "frames_rerender",
+        &format!("frames {}", list.join(", ")),
+    )?;
+    jobs::update_finished(&tx, job, now)?;
+    tx.commit()?;
+    Ok(rerendered)
 }
 
 /// Changes a job's priority (higher runs first); its next leases follow it.

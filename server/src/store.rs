@@ -117,6 +117,17 @@ impl Store {
         Ok(renamed)
     }
 
+    /// Removes a frame's files (EXR and PNG) from a job's output folder.
+    pub fn remove_frame(&self, job: u64, frame: i32, last: i32) -> io::Result<()> {
+        for extension in ["exr", "png"] {
+            match fs::remove_file(self.frame(job, frame, last, extension)) {
+                Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
     /// Removes the tile files of `tasks` in a job's tile folder, of every attempt.
     pub fn remove_tiles(&self, job: u64, tasks: &HashSet<u64>) {
         let Ok(entries) = fs::read_dir(self.tile_dir(job)) else {

@@ -1,7 +1,7 @@
 //! A job's life after submission, as its user drives it from the command line, naming the
 //! job by its name: download its frames (again, fetching only what is missing), clone it
 //! with one setting changed (the clone's frames equal a direct render at that setting,
-//! bit for bit), change its priority, delete it.
+//! bit for bit), render a frame again (the same bits), change its priority, delete it.
 
 use std::time::Duration;
 
@@ -73,6 +73,48 @@ fn download_clone_priority_and_delete_by_name() {
             "the clone's frame {frame} differs from tessera render at 4 spp"
         );
     }
+
+    // Frame 2 of the clone rendered again, in the same job: the same bits, its old files
+    // replaced, the job's log says so.
+    let before = std::fs::metadata(farm.data_dir().join(format!("jobs/{clone}/frame_0002.exr")))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let out = farm.client(&["rerender", "walk-4spp", "--frames", "2"]);
+    assert!(
+        out.starts_with(&format!("job {clone}: 1 frame(s) queued to render again")),
+        "{out}"
+    );
+    let st = farm.wait_for_job(clone, Duration::from_secs(120));
+    assert_eq!((st.state, st.frames_done), (JobState::Done, 2), "{st:?}");
+    let after = std::fs::metadata(farm.data_dir().join(format!("jobs/{clone}/frame_0002.exr")))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert!(after > before, "frame 2 was not written again");
+    assert!(
+        farm.server_frame(clone, 2) == render_directly(&scene, 2, "4", farm.path()),
+        "the rerendered frame 2 differs from tessera render at 4 spp"
+    );
+    let log = farm.client(&["logs", "walk-4spp"]);
+    assert!(log.contains("frames_rerender  frames 2"), "{log}");
+    // A frame the job does not have is refused with the reason.
+    let o = tests::tessera(
+        &[
+            "rerender",
+            "walk-4spp",
+            "--frames",
+            "7",
+            "--server",
+            &farm.url(),
+        ],
+        farm.path(),
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains(&format!("job {clone} has no frame 7")),
+        "{err}"
+    );
 
     // Priority and delete, by name.
     let out = farm.client(&["priority", "walk-4spp", "-7"]);

@@ -3,7 +3,7 @@
 use axum::extract::State;
 use axum::http::StatusCode;
 use axum::Json;
-use proto::{JobList, JobSpec, JobStatus, PriorityChange};
+use proto::{JobList, JobSpec, JobStatus, PriorityChange, Rerender};
 
 use super::error::{Id, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
@@ -181,6 +181,44 @@ pub async fn retry(
 ) -> Result<Json<JobStatus>> {
     control(app, id, |c, id, now| {
         controls::retry(c, id, now).map(|_| ())
+    })
+    .await
+}
+
+/// Renders some of a job's frames again from scratch (after a fix to the workers, or a
+/// frame file lost): their tasks are queued again and their files removed; an unchanged
+/// tracer gives the same bits. Frames still rendering, and time-budget jobs, are refused.
+#[utoipa::path(
+    post,
+    path = "/jobs/{id}/rerender",
+    tag = "jobs",
+    params(("id" = u64, Path, description = "job id")),
+    request_body = Rerender,
+    responses(
+        (status = 200, body = JobStatus),
+        (status = 404, body = proto::ErrorBody),
+        (status = 409, description = "a frame is still rendering, the job is cancelled, or it has a time budget", body = proto::ErrorBody),
+        (status = 422, description = "no frames, a frame twice, or a frame the job does not have", body = proto::ErrorBody),
+    ),
+    security(("client_token" = []))
+)]
+pub async fn rerender(
+    State(app): State<AppState>,
+    PathParams(Id(id)): PathParams<Id>,
+    JsonBody(request): JsonBody<Rerender>,
+) -> Result<Json<JobStatus>> {
+    let frames = request.frames;
+    let store = app.store.clone();
+    control(app, id, move |c, id, now| {
+        let tasks = controls::rerender(c, id, &frames, now)?;
+        // The rows say the frames are not rendered; their old files go while this holds
+        // the database, so no worker can have finished them again yet.
+        let last = db::jobs::load(c, id)?.spec.frames.map_or(0, |f| f.last());
+        for &frame in &frames {
+            store.remove_frame(id, frame, last)?;
+        }
+        store.remove_tiles(id, &tasks.into_iter().collect());
+        Ok(())
     })
     .await
 }

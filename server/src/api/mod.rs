@@ -75,6 +75,7 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .routes(routes!(jobs::resume))
         .routes(routes!(jobs::retry))
         .routes(routes!(jobs::priority))
+        .routes(routes!(jobs::rerender))
         .routes(routes!(tasks::list))
         .routes(routes!(tasks::failures))
         .routes(routes!(tasks::log))

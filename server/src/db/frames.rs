@@ -76,6 +76,35 @@ pub fn set_failure(tx: &Transaction, job: u64, frame: i32, reason: &str) -> Resu
     Ok(())
 }
 
+/// Whether `job` has frame `frame`.
+pub fn exists(conn: &Connection, job: u64, frame: i32) -> Result<bool> {
+    Ok(conn.row(
+        "SELECT EXISTS (SELECT 1 FROM frames WHERE job_id = ?1 AND frame = ?2)",
+        params![job, frame],
+        |r| r.get(0),
+    )?)
+}
+
+/// Whether every task of a frame is done but the frame is not assembled from them yet.
+pub fn needs_assembly(conn: &Connection, job: u64, frame: i32) -> Result<bool> {
+    Ok(conn.row(
+        &format!("SELECT {NEEDS_ASSEMBLY} FROM frames WHERE job_id = ?1 AND frame = ?2"),
+        params![job, frame],
+        |r| r.get(0),
+    )?)
+}
+
+/// A frame starts again with `tasks` tasks, none done, not assembled, not failed.
+pub fn reset(tx: &Transaction, job: u64, frame: i32, tasks: u64) -> Result<()> {
+    tx.exec(
+        "UPDATE frames SET tasks_total = ?3, tasks_done = 0, assembled_ms = NULL,
+                           assembled_tasks = NULL, spp_mean = NULL, noise = NULL, failure = NULL
+         WHERE job_id = ?1 AND frame = ?2",
+        params![job, frame, tasks],
+    )?;
+    Ok(())
+}
+
 /// Forgets the failed assemblies of `job`; returns how many frames had one.
 pub fn clear_failures(tx: &Transaction, job: u64) -> Result<usize> {
     Ok(tx.exec(

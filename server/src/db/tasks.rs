@@ -367,6 +367,27 @@ pub fn of_job(conn: &Connection, job: u64, states: &[TaskState]) -> Result<Vec<T
     )
 }
 
+/// Every task of one frame, render and check tasks alike.
+pub fn of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<TaskRow>> {
+    select(conn, "t.job_id = ?1 AND t.frame = ?2", params![job, frame])
+}
+
+/// Deletes a task (its failures and log lines go with it).
+pub fn delete(tx: &Transaction, task: u64) -> Result<()> {
+    tx.exec("DELETE FROM tasks WHERE id = ?1", [task])?;
+    Ok(())
+}
+
+/// A task queued again from scratch: no lease, no failures (its attempts count on).
+pub fn clear_for_rerender(tx: &Transaction, task: u64) -> Result<()> {
+    tx.exec(
+        "UPDATE tasks SET worker_id = NULL, leased_ms = NULL, deadline_ms = NULL, failures = 0
+         WHERE id = ?1",
+        [task],
+    )?;
+    Ok(())
+}
+
 /// The done render tasks of one frame (for assembly), by tile then pass.
 pub fn done_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<TaskRow>> {
     select(

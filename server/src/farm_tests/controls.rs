@@ -97,3 +97,78 @@ fn a_new_priority_decides_the_next_lease_and_is_checked() {
         Err(Error::NotFound(_))
     ));
 }
+
+/// Leases and accepts every queued task of `w`, assembling each frame it completes.
+fn render_all(c: &mut Connection, w: u64, t: i64) -> Vec<Lease> {
+    let mut done = Vec::new();
+    while let Some(l) = lease(c, w, t, TIMING).unwrap() {
+        if let Accepted::New {
+            job,
+            frame,
+            frame_complete: true,
+            ..
+        } = accept(c, w, l.token, 1, 1, None, t, TIMING).unwrap()
+        {
+            let summary = SamplingSummary {
+                mean_samples: 4.0,
+                min_samples: 4,
+                max_samples: 4,
+                mean_noise: None,
+            };
+            mark_assembled(c, job, frame, t, &summary, TIMING).unwrap();
+        }
+        done.push(l);
+    }
+    done
+}
+
+#[test]
+fn rerender_queues_a_finished_frames_tasks_again_and_refuses_what_it_cannot() {
+    let mut c = db();
+    let j = job(&mut c, 2, 0, 3, 0);
+    let w = worker(&mut c, "w", 0);
+    let first = render_all(&mut c, w, 1);
+    assert_eq!(first.len(), 8);
+    let st = job_status(&c, j, 2, TIMING.live_since(2)).unwrap();
+    assert_eq!((st.state, st.frames_done), (JobState::Done, 2));
+
+    let tasks = crate::controls::rerender(&mut c, j, &[2], 3).unwrap();
+    let frame2: Vec<u64> = first
+        .iter()
+        .filter(|l| l.frame == 2)
+        .map(|l| l.token.task_id)
+        .collect();
+    assert_eq!(tasks, frame2);
+    let st = job_status(&c, j, 3, TIMING.live_since(3)).unwrap();
+    assert_eq!(
+        (st.state, st.frames_done, st.tasks.queued),
+        (JobState::Running, 1, 4)
+    );
+    assert!(!is_assembled(&c, j, 2).unwrap());
+    // Queued again: not yet. A frame the job lacks, none, or one twice: refused.
+    for (frames, word) in [
+        (&[2][..], "still rendering"),
+        (&[9][..], "has no frame 9"),
+        (&[][..], "must list 1 to"),
+        (&[1, 1][..], "each once"),
+    ] {
+        let e = crate::controls::rerender(&mut c, j, frames, 4).unwrap_err();
+        assert!(e.to_string().contains(word), "{frames:?}: {e}");
+    }
+    // The same tiles and samples again, with fresh attempts.
+    let again = render_all(&mut c, w, 5);
+    let pairs = |ls: &[Lease]| -> Vec<_> {
+        ls.iter()
+            .map(|l| (l.token.task_id, l.tile, l.samples))
+            .collect()
+    };
+    assert_eq!(pairs(&again), pairs(&first[4..]));
+    assert!(again.iter().all(|l| l.token.attempt == 2));
+    let st = job_status(&c, j, 6, TIMING.live_since(6)).unwrap();
+    assert_eq!((st.state, st.frames_done), (JobState::Done, 2));
+
+    let k = job(&mut c, 1, 0, 3, 8);
+    cancel(&mut c, k, 9).unwrap();
+    let e = crate::controls::rerender(&mut c, k, &[1], 10).unwrap_err();
+    assert!(e.to_string().contains("is cancelled"), "{e}");
+}

@@ -35,6 +35,8 @@ pub enum JobCommand {
     Cancel,
     /// Queue the failed tasks and frames again.
     Retry,
+    /// Render some frames again from scratch.
+    Rerender,
 }
 
 /// What a command does to a job's control.
@@ -88,11 +90,11 @@ pub fn control_transition(
         (S::Active, C::Resume, _) => Stays,
         (S::Active | S::Paused, C::Cancel, false) => To(S::Cancelled),
         (S::Cancelled, C::Cancel, _) => Stays,
-        (S::Active | S::Paused, C::Retry, _) => Stays,
+        (S::Active | S::Paused, C::Retry | C::Rerender, _) => Stays,
 
         (S::Active, C::Pause, true)
         | (S::Active | S::Paused, C::Cancel, true)
-        | (S::Cancelled, C::Pause | C::Resume | C::Retry, _) => {
+        | (S::Cancelled, C::Pause | C::Resume | C::Retry | C::Rerender, _) => {
             return Err(ControlRefused {
                 from,
                 command,
@@ -192,7 +194,7 @@ mod tests {
     use JobCommand as C;
     use JobControl as S;
 
-    const COMMANDS: [JobCommand; 4] = [C::Pause, C::Resume, C::Cancel, C::Retry];
+    const COMMANDS: [JobCommand; 5] = [C::Pause, C::Resume, C::Cancel, C::Retry, C::Rerender];
 
     #[test]
     fn pause_resume_cancel_move_a_job_with_work_left() {
@@ -244,10 +246,10 @@ mod tests {
                 }
             }
         }
-        // Cancelled: pause, resume, retry, each finished or not (6); active and finished:
-        // pause; active or paused and finished: cancel (2).
-        assert_eq!(refused.len(), 9);
-        assert_eq!(refused.iter().filter(|r| *r == "is cancelled").count(), 6);
+        // Cancelled: pause, resume, retry, rerender, each finished or not (8); active and
+        // finished: pause; active or paused and finished: cancel (2).
+        assert_eq!(refused.len(), 11);
+        assert_eq!(refused.iter().filter(|r| *r == "is cancelled").count(), 8);
         assert!(refused.contains(&"has nothing left to run".to_string()));
         assert_eq!(
             refused

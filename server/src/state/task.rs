@@ -8,6 +8,7 @@
 //! leased --revoke--> queued                    (job paused, server restarted)
 //! queued | leased --cancel--> cancelled
 //! failed --retry--> queued
+//! done | failed --rerender--> queued          (its frame is rendered again)
 //! ```
 
 use std::fmt;
@@ -39,6 +40,8 @@ pub enum TaskEvent {
     Cancel,
     /// A client asked to retry failed tasks.
     Retry,
+    /// A client asked to render the task's frame again.
+    Rerender,
 }
 
 /// A transition the table does not allow.
@@ -75,9 +78,13 @@ pub fn transition(from: TaskState, event: TaskEvent) -> Result<TaskState, Invali
         (S::Leased, E::Revoke) => S::Queued,
         (S::Queued | S::Leased, E::Cancel) => S::Cancelled,
         (S::Failed, E::Retry) => S::Queued,
+        (S::Done | S::Failed, E::Rerender) => S::Queued,
 
-        (S::Queued, E::Complete | E::Fail { .. } | E::Expire { .. } | E::Revoke | E::Retry)
-        | (S::Leased, E::Lease | E::Retry)
+        (
+            S::Queued,
+            E::Complete | E::Fail { .. } | E::Expire { .. } | E::Revoke | E::Retry | E::Rerender,
+        )
+        | (S::Leased, E::Lease | E::Retry | E::Rerender)
         | (S::Done, _)
         | (S::Failed, E::Lease | E::Complete | E::Fail { .. } | E::Expire { .. } | E::Revoke)
         | (S::Failed, E::Cancel)
@@ -92,7 +99,7 @@ mod tests {
     use TaskEvent as E;
     use TaskState as S;
 
-    const EVENTS: [TaskEvent; 9] = [
+    const EVENTS: [TaskEvent; 10] = [
         E::Lease,
         E::Complete,
         E::Fail { exhausted: false },
@@ -102,6 +109,7 @@ mod tests {
         E::Revoke,
         E::Cancel,
         E::Retry,
+        E::Rerender,
     ];
 
     #[test]
@@ -162,6 +170,13 @@ mod tests {
         assert_eq!(transition(S::Failed, E::Retry), Ok(S::Queued));
     }
 
+    #[test]
+    fn done_and_failed_to_queued_when_their_frame_is_rendered_again() {
+        assert_eq!(transition(S::Done, E::Rerender), Ok(S::Queued));
+        assert_eq!(transition(S::Failed, E::Rerender), Ok(S::Queued));
+        assert!(transition(S::Leased, E::Rerender).is_err());
+    }
+
     /// Every pair not listed above is refused, naming the state and event.
     #[test]
     fn every_other_transition_is_illegal() {
@@ -176,6 +191,8 @@ mod tests {
             (S::Queued, E::Cancel),
             (S::Leased, E::Cancel),
             (S::Failed, E::Retry),
+            (S::Done, E::Rerender),
+            (S::Failed, E::Rerender),
         ];
         let mut refused = 0;
         for from in S::ALL {
@@ -189,7 +206,7 @@ mod tests {
                 }
             }
         }
-        assert_eq!(refused, 5 * 9 - legal.len());
+        assert_eq!(refused, 5 * EVENTS.len() - legal.len());
     }
 
     #[test]

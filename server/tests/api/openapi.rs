@@ -43,6 +43,7 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         ("POST", "/api/v1/jobs/{id}/resume"),
         ("POST", "/api/v1/jobs/{id}/retry"),
         ("POST", "/api/v1/jobs/{id}/priority"),
+        ("POST", "/api/v1/jobs/{id}/rerender"),
         ("GET", "/api/v1/jobs/{id}/tasks"),
         ("GET", "/api/v1/jobs/{id}/failures"),
         ("GET", "/api/v1/jobs/{id}/tasks/{task}/log"),
