@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use proto::{
-    ErrorBody, FailureList, FrameList, JobEvent, JobEventList, JobList, JobSpec, JobStatus,
-    PriorityChange, Rerender, SceneInfo, TaskLog, WorkerInfo, WorkerList,
+    ErrorBody, FailureList, FrameList, GcReport, GcRequest, JobEvent, JobEventList, JobList,
+    JobSpec, JobStatus, PriorityChange, Rerender, SceneInfo, TaskLog, WorkerInfo, WorkerList,
 };
 use reqwest::{Method, RequestBuilder, StatusCode};
 use serde::de::DeserializeOwned;
@@ -472,6 +472,17 @@ impl Client {
     /// `GET /workers`.
     pub async fn workers(&self) -> Result<WorkerList, ClientError> {
         self.get("/workers").await
+    }
+
+    /// `GET /workers?all=true`: also those gone for more than a day.
+    pub async fn all_workers(&self) -> Result<WorkerList, ClientError> {
+        self.get("/workers?all=true").await
+    }
+
+    /// `POST /gc`: retention now, or with `dry_run` what it would remove.
+    pub async fn gc(&self, request: &GcRequest) -> Result<GcReport, ClientError> {
+        let (req, what) = self.request(Method::POST, "/gc");
+        self.json(req.json(request), &what).await
     }
 
     /// `POST /workers/{id}/clear`: lifts a worker's quarantine.

@@ -48,6 +48,9 @@ pub struct WorkersArgs {
     /// wrong and its machine was repaired): it gets work again.
     #[arg(long, value_name = "ID")]
     pub clear: Option<u64>,
+    /// Also list the workers gone for more than a day.
+    #[arg(long)]
+    pub all: bool,
 }
 
 /// Runs `f` with a client on a small single-threaded runtime.
@@ -442,7 +445,11 @@ pub fn workers(args: WorkersArgs) -> anyhow::Result<()> {
                 Ok(())
             };
         }
-        let workers = client.workers().await?;
+        let workers = if args.all {
+            client.all_workers().await?
+        } else {
+            client.workers().await?
+        };
         if args.json {
             print_json(&workers)
         } else if workers.workers.is_empty() {

@@ -65,6 +65,9 @@ enum Command {
     Clone(manage::CloneArgs),
     /// Delete a job with every file it made.
     Delete(manage::DeleteArgs),
+    /// Remove finished jobs past the server's retention, unused scenes and old events
+    /// (`--dry-run`: say what would go).
+    Gc(manage::GcArgs),
     /// List the farm's workers.
     Workers(control::WorkersArgs),
     /// A job's event log, or what the workers logged for one of its tasks (`--task N`).
@@ -111,6 +114,7 @@ fn run() -> anyhow::Result<()> {
         Command::Delete(args) => manage::delete(args),
         Command::Workers(args) => control::workers(args),
         Command::Logs(args) => history::run(args),
+        Command::Gc(args) => manage::gc(args),
         Command::Demo(args) => demo::run(args),
     }
 }

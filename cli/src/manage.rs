@@ -1,11 +1,12 @@
 //! A job's life after submission: `tessera download`, `clone`, `rerender`, `priority`
-//! and `delete`.
+//! and `delete`; and `tessera gc`, which removes what the farm keeps no longer.
 //! Each takes the job by id or by name.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use proto::{GcReport, GcRequest};
 
 use crate::args::{parse_frame_list, FrameList};
 use crate::client::{JobRef, ServerOpts};
@@ -81,6 +82,64 @@ pub struct DeleteArgs {
     pub job: JobRef,
     #[command(flatten)]
     pub server: ServerOpts,
+}
+
+/// Remove finished jobs past the server's `--keep-jobs` (or the rule given) with their
+/// frames, scenes no job uses a day after their last upload, and old events; with
+/// `--dry-run`, only say what would go.
+#[derive(Args, Debug)]
+pub struct GcArgs {
+    #[command(flatten)]
+    pub server: ServerOpts,
+    /// Say what would go; remove nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Keep finished jobs by this rule instead of the server's: the newest N (`50`) or
+    /// those finished within an age (`30d`, `12h`).
+    #[arg(long, value_name = "RULE")]
+    pub keep_jobs: Option<String>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn gc(args: GcArgs) -> anyhow::Result<()> {
+    with_client(&args.server, |client| async move {
+        let request = GcRequest {
+            dry_run: args.dry_run,
+            keep_jobs: args.keep_jobs,
+        };
+        let report = client.gc(&request).await.context("collecting")?;
+        if args.json {
+            return print_json(&report);
+        }
+        print!("{}", gc_text(&report));
+        Ok(())
+    })
+}
+
+fn gc_text(r: &GcReport) -> String {
+    let verb = if r.dry_run { "would remove" } else { "removed" };
+    let mut out = format!(
+        "{verb} {} finished job(s) (kept: {}), {} unused scene(s) and {} event(s): {} freed\n",
+        r.jobs.len(),
+        r.keep_jobs,
+        r.scenes.len(),
+        r.events,
+        mib(r.bytes)
+    );
+    for j in &r.jobs {
+        out.push_str(&format!("  job {} `{}`\n", j.id, j.name));
+    }
+    for s in &r.scenes {
+        out.push_str(&format!("  scene {}\n", &s[..12.min(s.len())]));
+    }
+    out
+}
+
+/// Bytes as MiB with one decimal.
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1 << 20) as f64)
 }
 
 pub fn download(args: DownloadArgs) -> anyhow::Result<()> {
@@ -181,4 +240,30 @@ pub fn delete(args: DeleteArgs) -> anyhow::Result<()> {
         println!("job {id} deleted with its files");
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_gc_report_says_what_went() {
+        let report = GcReport {
+            dry_run: true,
+            keep_jobs: "30d".into(),
+            jobs: vec![proto::GcJob {
+                id: 4,
+                name: "walk".into(),
+                finished_ms: 0,
+            }],
+            scenes: vec!["ab".repeat(32)],
+            events: 12,
+            bytes: 3 << 20,
+        };
+        assert_eq!(
+            gc_text(&report),
+            "would remove 1 finished job(s) (kept: 30d), 1 unused scene(s) and 12 event(s): \
+             3.0 MiB freed\n  job 4 `walk`\n  scene abababababab\n"
+        );
+    }
 }

@@ -65,9 +65,22 @@ pub struct ServerArgs {
           default_value_t = server::limits::DEFAULT_ASSEMBLY_MEMORY >> 20,
           value_parser = clap::value_parser!(u64).range(1..=(1 << 40)))]
     pub assembly_memory: u64,
+    /// Which finished jobs (done, failed, cancelled) to keep: `all`, the newest N (`50`),
+    /// or those finished within an age (`30d`, `12h`); the others are removed with their
+    /// frames every 10 minutes, as `tessera gc` does. Jobs with work left are never
+    /// removed.
+    #[arg(long, env = "TESSERA_KEEP_JOBS", default_value = "all", value_name = "RULE",
+          value_parser = parse_keep_jobs)]
+    pub keep_jobs: String,
     #[command(flatten)]
     #[serde(flatten)]
     pub common: Common,
+}
+
+/// A rule for `--keep-jobs`, checked (kept as written, for --print-config).
+fn parse_keep_jobs(s: &str) -> Result<String, String> {
+    s.parse::<server::retention::KeepJobs>()?;
+    Ok(s.to_string())
 }
 
 /// A fraction from 0 to 1.
@@ -102,6 +115,7 @@ pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
     config.verify_fraction = args.verify_fraction;
     config.max_tile_bytes = args.max_tile_bytes as usize;
     config.assembly_memory = args.assembly_memory << 20;
+    config.keep_jobs = args.keep_jobs.parse().map_err(anyhow::Error::msg)?;
     // Refused before binding, so the message comes first; `serve` checks again.
     config
         .check_exposure(config.listen)

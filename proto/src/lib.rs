@@ -10,6 +10,7 @@
 //! | [`worker`] | registration, lease, heartbeat, result upload headers, failure reports |
 //! | [`log`] | the lines a worker logged per task, a job's event log |
 //! | [`event`] | server-sent events for jobs, frames and workers |
+//! | [`gc`] | retention: what `POST /gc` removed or would remove |
 //! | [`error`] | the JSON error body every failed request answers with |
 //!
 //! Times on the wire are Unix milliseconds (`*_ms`); durations are seconds (`*_seconds`).
@@ -17,6 +18,7 @@
 
 pub mod error;
 pub mod event;
+pub mod gc;
 pub mod job;
 pub mod log;
 pub mod scene;
@@ -25,6 +27,7 @@ pub mod worker;
 
 pub use error::ErrorBody;
 pub use event::Event;
+pub use gc::{GcJob, GcReport, GcRequest};
 pub use job::{
     BudgetPlan, CameraSpec, FrameList, FrameRange, FrameState, FrameStatus, JobList, JobSpec,
     JobState, JobStatus, OutputLayer, PriorityChange, Rerender, TaskCounts,

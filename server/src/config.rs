@@ -42,6 +42,9 @@ pub struct Config {
     /// Memory one frame's assembly may take, bytes: a job whose frames need more is
     /// refused when it is submitted (see [`crate::assembly::assembly_bytes`]).
     pub assembly_memory: u64,
+    /// Which finished jobs are kept; the others are removed with their files
+    /// ([`crate::retention`]).
+    pub keep_jobs: crate::retention::KeepJobs,
 }
 
 impl Config {
@@ -73,6 +76,7 @@ impl Config {
             max_scene_bytes: limits::DEFAULT_MAX_SCENE_BYTES,
             max_tile_bytes: limits::MAX_TILE_BYTES,
             assembly_memory: limits::DEFAULT_ASSEMBLY_MEMORY,
+            keep_jobs: crate::retention::KeepJobs::All,
         }
     }
 

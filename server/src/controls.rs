@@ -231,12 +231,13 @@ pub fn set_priority(conn: &mut Connection, job: u64, priority: i32, now: i64) ->
     Ok(())
 }
 
-/// Deletes a job's rows (its files are removed by the caller after this commits).
-pub fn delete(conn: &mut Connection, job: u64, now: i64) -> Result<()> {
+/// Deletes a job's rows (its files are removed by the caller after this commits); `why`
+/// goes to the event log.
+pub fn delete(conn: &mut Connection, job: u64, now: i64, why: &str) -> Result<()> {
     let tx = conn.transaction()?;
     jobs::control(&tx, job)?;
     jobs::delete(&tx, job)?;
-    log(&tx, now, Some(job), "job_deleted", "")?;
+    log(&tx, now, Some(job), "job_deleted", why)?;
     tx.commit()?;
     Ok(())
 }

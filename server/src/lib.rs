@@ -9,7 +9,8 @@
 //! | [`store`] | files beside the database: scenes by SHA-256, tiles, job outputs |
 //! | [`state`] | the task and job state machines: one transition table each |
 //! | [`scheduler`] | leases, heartbeats, uploads accepted, failures, expiry: one transaction each |
-//! | [`controls`] | job controls: submit, pause, resume, cancel, retry, delete |
+//! | [`controls`] | job controls: submit, pause, resume, cancel, retry, rerender, priority, delete |
+//! | [`retention`] | finished jobs past `--keep-jobs`, unused scenes, old events: removed |
 //! | [`spec`] | job-spec checks (each error names its field) and the split into tasks |
 //! | [`budget`] | time-budget jobs: the farm's measured speed decides which passes fit |
 //! | [`scene`] | scene uploads checked with the tracer's loader and summarised |
@@ -42,6 +43,7 @@ pub mod identity;
 pub mod intake;
 pub mod limits;
 pub mod metrics;
+pub mod retention;
 pub mod scene;
 pub mod scheduler;
 pub mod spec;
@@ -205,8 +207,13 @@ pub fn openapi() -> utoipa::openapi::OpenApi {
 async fn sweep(app: AppState) {
     let mut tick = tokio::time::interval(app.config.sweep_interval);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut last_gc: Option<std::time::Instant> = None;
     loop {
         tick.tick().await;
+        if last_gc.is_none_or(|t| t.elapsed() >= retention::GC_INTERVAL) {
+            last_gc = Some(std::time::Instant::now());
+            housekeeping(&app).await;
+        }
         let (now, timing) = (now_ms(), app.timing());
         match app.db.run(move |c| scheduler::expire(c, now, timing)).await {
             Ok(jobs) if !jobs.is_empty() => {
@@ -258,6 +265,24 @@ async fn sweep(app: AppState) {
             Ok(Err(e)) => tracing::error!("assembling frames: {e}"),
             Err(e) => tracing::error!("assembling frames: {e}"),
         }
+    }
+}
+
+/// Every [`retention::GC_INTERVAL`]: retention by the server's `--keep-jobs`, and the
+/// data folder's disk use for the metric.
+async fn housekeeping(app: &AppState) {
+    let a = app.clone();
+    let done = tokio::task::spawn_blocking(move || {
+        let collected = retention::collect(&a, a.config.keep_jobs, false, now_ms());
+        a.metrics
+            .set_data_bytes(store::disk_use(&a.config.data_dir));
+        collected
+    })
+    .await;
+    match done {
+        Ok(Ok(_)) => {}
+        Ok(Err(e)) => tracing::error!("retention: {e}"),
+        Err(e) => tracing::error!("retention: {e}"),
     }
 }
 

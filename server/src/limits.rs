@@ -54,3 +54,11 @@ pub const MAX_TAG_BYTES: usize = 64;
 pub const MAX_TASKS_PER_PAGE: u32 = 1_000;
 /// Reasons `GET /jobs/{id}/failures` lists at most: the most frequent.
 pub const MAX_FAILURE_GROUPS: usize = 100;
+/// Entries the event log keeps; the oldest go past this ([`crate::retention`]).
+pub const MAX_EVENTS: u64 = 100_000;
+/// A scene no job uses is kept this long after its last upload, so that a client can
+/// upload it and then submit the job: one day, in ms.
+pub const UNUSED_SCENE_GRACE_MS: i64 = 24 * 3600 * 1000;
+/// A worker gone (left, or not seen) this long leaves the worker list; its rows stay for
+/// the records of the jobs it worked on: one day, in ms.
+pub const GONE_WORKER_LISTED_MS: i64 = 24 * 3600 * 1000;

@@ -88,6 +88,12 @@ fn describe() {
         "Leases that ran out without a heartbeat; their tasks were queued again."
     );
     describe_gauge!("tessera_jobs", Unit::Count, "Jobs by state.");
+    describe_gauge!(
+        "tessera_data_folder_bytes",
+        Unit::Bytes,
+        "Bytes of the files in the data folder (database, scenes, tiles, frames), measured \
+         every 10 minutes."
+    );
     describe_gauge!("tessera_tasks", Unit::Count, "Tasks by state.");
     describe_gauge!(
         "tessera_workers",
@@ -166,6 +172,11 @@ impl Metrics {
             metrics::counter!("tessera_frame_assembly_tile_bytes_total").increment(tile_bytes);
             metrics::histogram!("tessera_frame_assembly_seconds").record(seconds);
         });
+    }
+
+    /// The data folder holds `bytes`.
+    pub fn set_data_bytes(&self, bytes: u64) {
+        self.record(|| metrics::gauge!("tessera_data_folder_bytes").set(bytes as f64));
     }
 
     /// Leases that expired.

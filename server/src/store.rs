@@ -117,6 +117,17 @@ impl Store {
         Ok(renamed)
     }
 
+    /// Removes a job's output and tile folders.
+    pub fn remove_job(&self, job: u64) -> io::Result<()> {
+        for dir in [self.job_dir(job), self.tile_dir(job)] {
+            match fs::remove_dir_all(&dir) {
+                Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
     /// Removes a frame's files (EXR and PNG) from a job's output folder.
     pub fn remove_frame(&self, job: u64, frame: i32, last: i32) -> io::Result<()> {
         for extension in ["exr", "png"] {
@@ -195,6 +206,19 @@ pub fn is_digest(s: &str) -> bool {
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> crate::error::Result<()> {
     fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
     Ok(tracer::output::write_atomic(path, bytes)?)
+}
+
+/// Bytes of the files under `path` (0 when it is missing); what cannot be read counts 0.
+pub fn disk_use(path: &Path) -> u64 {
+    let Ok(meta) = fs::symlink_metadata(path) else {
+        return 0;
+    };
+    if !meta.is_dir() {
+        return meta.len();
+    }
+    fs::read_dir(path)
+        .map(|entries| entries.flatten().map(|e| disk_use(&e.path())).sum())
+        .unwrap_or(0)
 }
 
 #[cfg(test)]

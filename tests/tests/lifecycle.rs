@@ -147,3 +147,78 @@ fn download_clone_priority_and_delete_by_name() {
         "{err}"
     );
 }
+
+#[test]
+fn retention_removes_old_finished_jobs_with_their_files_and_spares_jobs_with_work_left() {
+    let mut farm = Farm::new();
+    farm.start_server_with(60, &["--keep-jobs", "1"]);
+    // The data folder's size is measured as the server starts.
+    let measured = || {
+        http::get(farm.port, "/metrics")
+            .text()
+            .lines()
+            .find_map(|l| l.strip_prefix("tessera_data_folder_bytes "))
+            .and_then(|v| v.parse::<f64>().ok())
+    };
+    tests::wait_until(
+        "the data folder metric",
+        Duration::from_secs(30),
+        || measured().is_some_and(|bytes| bytes > 0.0),
+        || farm.logs(),
+    );
+
+    farm.start_worker("w", 2);
+    let scene = farm.demo_scene();
+    let mut args = vec![scene.to_str().unwrap(), "--frames", "1"];
+    args.extend(settings("1"));
+    let old = farm.submit(&args);
+    farm.wait_for_job(old, Duration::from_secs(120));
+    let newer = farm.submit(&args);
+    farm.wait_for_job(newer, Duration::from_secs(120));
+    // A job with work left: paused before it can finish (30 frames).
+    let mut long = vec![scene.to_str().unwrap(), "--frames", "1-30"];
+    long.extend(settings("1"));
+    let open = farm.submit(&long);
+    farm.client(&["pause", &open.to_string()]);
+    let jobs_dir = farm.data_dir().join("jobs");
+
+    let out = farm.client(&["gc", "--dry-run"]);
+    assert!(
+        out.starts_with("would remove 1 finished job(s) (kept: 1), 0 unused scene(s)")
+            && out.contains(&format!("  job {old} `job {old}`")),
+        "{out}"
+    );
+    assert!(jobs_dir.join(old.to_string()).is_dir());
+
+    let out = farm.client(&["gc"]);
+    assert!(
+        out.starts_with("removed 1 finished job(s) (kept: 1)"),
+        "{out}"
+    );
+    assert_eq!(
+        http::get(farm.port, &format!("/api/v1/jobs/{old}")).status,
+        404
+    );
+    assert!(!jobs_dir.join(old.to_string()).exists());
+    assert!(jobs_dir.join(newer.to_string()).is_dir());
+
+    // Keeping none: the finished one goes, the paused one with work left stays.
+    let out = farm.client(&["gc", "--keep-jobs", "0"]);
+    assert!(
+        out.contains(&format!("  job {newer} `job {newer}`")),
+        "{out}"
+    );
+    let st = farm.job(open);
+    assert_eq!(st.state, JobState::Paused, "{st:?}");
+    let log = farm.client(&["logs", &open.to_string()]);
+    assert!(log.contains("job_created"), "{log}");
+    let bad = tests::tessera(
+        &["gc", "--keep-jobs", "soon", "--server", &farm.url()],
+        farm.path(),
+    );
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && err.contains("`soon`: expected"),
+        "{err}"
+    );
+}

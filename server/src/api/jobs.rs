@@ -258,15 +258,13 @@ pub async fn delete(
     PathParams(Id(id)): PathParams<Id>,
 ) -> Result<StatusCode> {
     let now = now_ms();
-    app.db.run(move |c| controls::delete(c, id, now)).await?;
-    let (jobs_dir, tiles_dir) = (app.store.job_dir(id), app.store.tile_dir(id));
-    for dir in [jobs_dir, tiles_dir] {
-        match tokio::fs::remove_dir_all(&dir).await {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(e.into()),
-        }
-    }
+    app.db
+        .run(move |c| controls::delete(c, id, now, "by a client"))
+        .await?;
+    let store = app.store.clone();
+    tokio::task::spawn_blocking(move || store.remove_job(id))
+        .await
+        .map_err(|e| Error::Internal(format!("removing the files of job {id}: {e}")))??;
     app.events.send(proto::Event::JobDeleted { job_id: id });
     Ok(StatusCode::NO_CONTENT)
 }

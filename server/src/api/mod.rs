@@ -5,17 +5,19 @@
 //! | file | routes |
 //! |---|---|
 //! | `scenes.rs` | `POST /scenes`, `GET /scenes/{digest}`, `GET /scenes/{digest}/info` |
-//! | `jobs.rs` | `POST/GET /jobs`, `GET/DELETE /jobs/{id}`, `POST /jobs/{id}/{cancel,pause,resume,retry,priority}` |
-//! | `tasks.rs` | `GET /jobs/{id}/tasks`, `GET /jobs/{id}/failures` |
+//! | `jobs.rs` | `POST/GET /jobs`, `GET/DELETE /jobs/{id}`, `POST /jobs/{id}/{cancel,pause,resume,retry,rerender,priority}` |
+//! | `tasks.rs` | `GET /jobs/{id}/tasks`, `GET /jobs/{id}/failures`, `GET /jobs/{id}/tasks/{task}/log`, `GET /jobs/{id}/log` |
 //! | `frames.rs` | `GET /jobs/{id}/frames`, `GET /jobs/{id}/frames/{frame}/{exr,png}` |
 //! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat,leave,clear}`, `POST /workers/{id}/tasks/{task}/{result,failure}` |
 //! | `events.rs` | `GET /events` (server-sent events) |
+//! | `gc.rs` | `POST /gc` (retention) |
 //! | `system.rs` | `/healthz`, `/metrics`, `/api/v1/openapi.json` |
 //! | `error.rs` | errors as JSON; extractors that reject with them |
 
 pub mod error;
 pub mod events;
 pub mod frames;
+pub mod gc;
 pub mod jobs;
 pub mod scenes;
 pub mod system;
@@ -44,6 +46,7 @@ use crate::limits::MAX_JSON_BYTES;
         (name = "frames", description = "assembled frames"),
         (name = "workers", description = "the worker protocol"),
         (name = "events", description = "server-sent events"),
+        (name = "system", description = "retention"),
     )
 )]
 struct ApiDoc;
@@ -86,6 +89,7 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .routes(routes!(workers::list))
         .routes(routes!(workers::clear))
         .routes(routes!(events::events))
+        .routes(routes!(gc::collect))
         .layer(json_limit)
         .route_layer(guard(Role::Client));
     // Raw bodies: the handlers read them with their own limits (scene, tile).

@@ -12,10 +12,10 @@ use proto::{
     ResultMetadata, TaskToken, WorkerLeft, WorkerList, WorkerRegistered, WorkerRegistration,
 };
 
-use super::error::{read_body, Id, JsonBody, PathParams};
+use super::error::{read_body, Id, JsonBody, PathParams, QueryParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
-use crate::limits::{MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
+use crate::limits::{GONE_WORKER_LISTED_MS, MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
 use crate::{db, identity, intake, scheduler, verify};
 
 /// Registers a worker with the join token (the server's worker token); the answer carries
@@ -106,13 +106,39 @@ pub async fn register(
     ))
 }
 
-/// Every worker: name, threads, version, current task, last seen.
-#[utoipa::path(get, path = "/workers", tag = "workers", responses((status = 200, body = WorkerList)), security(("client_token" = [])))]
-pub async fn list(State(app): State<AppState>) -> Result<Json<WorkerList>> {
-    let live_since = app.timing().live_since(now_ms());
+/// The query of `GET /workers`.
+#[derive(Clone, Copy, Debug, Default, serde::Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct WorkerQuery {
+    /// Also the workers gone for more than a day (their rows stay for the jobs' records).
+    #[serde(default)]
+    all: bool,
+}
+
+/// The workers seen within a day (every one with `?all=true`): name, threads, version,
+/// current task, last seen.
+#[utoipa::path(
+    get,
+    path = "/workers",
+    tag = "workers",
+    params(WorkerQuery),
+    responses((status = 200, body = WorkerList)),
+    security(("client_token" = []))
+)]
+pub async fn list(
+    State(app): State<AppState>,
+    QueryParams(q): QueryParams<WorkerQuery>,
+) -> Result<Json<WorkerList>> {
+    let now = now_ms();
+    let live_since = app.timing().live_since(now);
+    let listed_since = if q.all {
+        0
+    } else {
+        now - GONE_WORKER_LISTED_MS
+    };
     Ok(Json(
         app.db
-            .run(move |c| db::workers::list(c, live_since))
+            .run(move |c| db::workers::list(c, live_since, listed_since))
             .await?,
     ))
 }

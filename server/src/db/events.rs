@@ -34,3 +34,38 @@ pub fn of_job(conn: &Connection, job: u64, after: u64, limit: u32) -> Result<Job
     let next_after = (events.len() == limit as usize).then(|| events[events.len() - 1].id);
     Ok(JobEventList { events, next_after })
 }
+
+/// Events of jobs that are gone (but for the record of their deletion).
+const OF_GONE_JOBS: &str = "job_id IS NOT NULL AND kind != 'job_deleted'
+                            AND NOT EXISTS (SELECT 1 FROM jobs WHERE jobs.id = events.job_id)";
+
+/// How many events [`trim`] would remove after `going` jobs were deleted too.
+pub fn to_trim(conn: &Connection, going: &[u64], max: u64) -> Result<u64> {
+    let mut of_gone: u64 = conn.row(
+        &format!("SELECT count(*) FROM events WHERE {OF_GONE_JOBS}"),
+        [],
+        |r| r.get(0),
+    )?;
+    for &job in going {
+        of_gone += conn.row(
+            "SELECT count(*) FROM events WHERE job_id = ?1 AND kind != 'job_deleted'",
+            [job],
+            |r| r.get::<_, u64>(0),
+        )?;
+    }
+    let total: u64 = conn.row("SELECT count(*) FROM events", [], |r| r.get(0))?;
+    // Each deletion adds its own record.
+    let left = total + going.len() as u64 - of_gone;
+    Ok(of_gone + left.saturating_sub(max))
+}
+
+/// Removes the events of jobs that are gone, then the oldest past `max`; returns how many.
+pub fn trim(tx: &Transaction, max: u64) -> Result<u64> {
+    let gone = tx.exec(&format!("DELETE FROM events WHERE {OF_GONE_JOBS}"), [])?;
+    let oldest = tx.exec(
+        "DELETE FROM events WHERE id <= (SELECT id FROM events ORDER BY id DESC
+                                         LIMIT 1 OFFSET ?1)",
+        [max],
+    )?;
+    Ok((gone + oldest) as u64)
+}

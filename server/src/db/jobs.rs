@@ -144,6 +144,29 @@ pub fn delete(tx: &Transaction, job: u64) -> Result<()> {
     Ok(())
 }
 
+/// Finished jobs (nothing left to run, cancelled ones included), the last finished first.
+pub fn finished(conn: &Connection) -> Result<Vec<proto::GcJob>> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT id, name, finished_ms FROM jobs WHERE finished_ms IS NOT NULL
+         ORDER BY finished_ms DESC, id DESC",
+    )?;
+    let rows = stmt.query_map([], |r| {
+        Ok(proto::GcJob {
+            id: r.get(0)?,
+            name: r.get(1)?,
+            finished_ms: r.get(2)?,
+        })
+    })?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
+/// Every job with its scene's digest.
+pub fn scenes(conn: &Connection) -> Result<Vec<(u64, String)>> {
+    let mut stmt = conn.prepare_cached("SELECT id, scene FROM jobs")?;
+    let rows = stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
 /// What the scene of `job` needs from the tracer (its summary's `features`).
 pub fn scene_features(conn: &Connection, job: u64) -> Result<Vec<String>> {
     let json: String = conn.row(

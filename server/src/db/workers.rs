@@ -318,10 +318,13 @@ pub fn info(conn: &Connection, id: u64, live_since: i64) -> Result<WorkerInfo> {
     .ok_or_else(|| Error::NotFound(format!("worker {id} is not registered")))
 }
 
-/// Every worker, by id.
-pub fn list(conn: &Connection, live_since: i64) -> Result<WorkerList> {
-    let mut stmt = conn.prepare_cached(&format!("{INFO_QUERY} ORDER BY w.id"))?;
-    let rows = stmt.query_map([], |r| info_from_row(r, live_since))?;
+/// The workers seen since `listed_since` (0: every worker), by id; those seen since
+/// `live_since` are online.
+pub fn list(conn: &Connection, live_since: i64, listed_since: i64) -> Result<WorkerList> {
+    let mut stmt = conn.prepare_cached(&format!(
+        "{INFO_QUERY} WHERE w.last_seen_ms >= ?1 ORDER BY w.id"
+    ))?;
+    let rows = stmt.query_map([listed_since], |r| info_from_row(r, live_since))?;
     Ok(WorkerList {
         workers: rows.collect::<rusqlite::Result<_>>()?,
     })

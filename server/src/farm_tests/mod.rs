@@ -7,6 +7,7 @@ mod controls;
 mod failures;
 mod identity;
 mod leases;
+mod retention;
 mod tags;
 
 use proto::{
