@@ -72,6 +72,20 @@ pub struct ServerArgs {
     #[arg(long, env = "TESSERA_KEEP_JOBS", default_value = "all", value_name = "RULE",
           value_parser = parse_keep_jobs)]
     pub keep_jobs: String,
+    /// A URL told (POST, JSON, signed) when any job ends (done, failed, its time budget
+    /// reached) or a worker is quarantined; repeat it, or separate URLs with commas.
+    #[arg(
+        long,
+        env = "TESSERA_WEBHOOK",
+        value_delimiter = ',',
+        value_name = "URL"
+    )]
+    pub webhook: Vec<String>,
+    /// The key every webhook delivery is signed with: the `x-tessera-signature` header is
+    /// `sha256=` and the hex HMAC-SHA256 of the body. Needed for --webhook and for jobs'
+    /// own webhooks.
+    #[arg(long, env = "TESSERA_WEBHOOK_SECRET", hide_env_values = true)]
+    pub webhook_secret: Option<String>,
     #[command(flatten)]
     #[serde(flatten)]
     pub common: Common,
@@ -93,7 +107,11 @@ fn parse_fraction(s: &str) -> Result<f64, String> {
 
 pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
     // An empty token is no token (an empty bearer token could never be presented).
-    for token in [&mut args.worker_token, &mut args.client_token] {
+    for token in [
+        &mut args.worker_token,
+        &mut args.client_token,
+        &mut args.webhook_secret,
+    ] {
         token.take_if(|t| t.is_empty());
     }
     if args.common.print_config {
@@ -116,6 +134,17 @@ pub fn run(mut args: ServerArgs, layers: Layers) -> anyhow::Result<()> {
     config.max_tile_bytes = args.max_tile_bytes as usize;
     config.assembly_memory = args.assembly_memory << 20;
     config.keep_jobs = args.keep_jobs.parse().map_err(anyhow::Error::msg)?;
+    for url in &args.webhook {
+        server::webhooks::check_url("--webhook", url)?;
+    }
+    if !args.webhook.is_empty() && args.webhook_secret.is_none() {
+        anyhow::bail!(
+            "--webhook needs --webhook-secret (TESSERA_WEBHOOK_SECRET): deliveries are signed \
+             with it so that receivers can tell them from forgeries"
+        );
+    }
+    config.webhooks = args.webhook;
+    config.webhook_secret = args.webhook_secret;
     // Refused before binding, so the message comes first; `serve` checks again.
     config
         .check_exposure(config.listen)

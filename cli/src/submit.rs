@@ -66,6 +66,9 @@ pub struct JobArgs {
     /// the whole shot can be seen early [default: frame order].
     #[arg(long, value_name = "N")]
     pub preview_every: Option<u32>,
+    /// Also tell this URL when the job ends (the server signs it with its webhook secret).
+    #[arg(long, value_name = "URL")]
+    pub webhook: Option<String>,
     /// Higher runs first [default: 0].
     #[arg(long, allow_hyphen_values = true)]
     pub priority: Option<i32>,
@@ -162,6 +165,9 @@ impl JobArgs {
         }
         if self.preview_every.is_some() {
             spec.preview_every = self.preview_every;
+        }
+        if self.webhook.is_some() {
+            spec.webhook = self.webhook.clone();
         }
         if let Some(priority) = self.priority {
             spec.priority = priority;
@@ -486,6 +492,8 @@ mod tests {
             "4",
             "--preview-every",
             "8",
+            "--webhook",
+            "https://hooks.example.com/t",
             "--priority",
             "-3",
             "--max-attempts",
@@ -518,6 +526,7 @@ mod tests {
         want.shutter = [-0.25, 0.25];
         want.sample_passes = 4;
         want.preview_every = Some(8);
+        want.webhook = Some("https://hooks.example.com/t".into());
         want.priority = -3;
         want.max_attempts = 7;
         want.camera = CameraSpec::Name("Main".into());

@@ -240,6 +240,10 @@ pub struct JobSpec {
     /// frame order). A time budget already renders every frame first.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preview_every: Option<u32>,
+    /// Also tell this URL when the job ends (as the server's `--webhook`s are told; the
+    /// server must have a webhook secret to sign with).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub webhook: Option<String>,
     /// Higher runs first (default 0).
     #[serde(default)]
     pub priority: i32,
@@ -275,6 +279,7 @@ impl JobSpec {
             tile_size: None,
             sample_passes: 1,
             preview_every: None,
+            webhook: None,
             priority: 0,
             max_attempts: default_max_attempts(),
             layers: default_layers(),

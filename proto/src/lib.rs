@@ -26,7 +26,7 @@ pub mod task;
 pub mod worker;
 
 pub use error::ErrorBody;
-pub use event::Event;
+pub use event::{Event, Notification, NotificationKind};
 pub use gc::{GcJob, GcReport, GcRequest};
 pub use job::{
     BudgetPlan, CameraSpec, FrameList, FrameRange, FrameState, FrameStatus, JobList, JobSpec,

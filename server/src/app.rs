@@ -29,6 +29,8 @@ pub struct App {
     /// Held while a frame or a preview is written, so that a late progressive preview
     /// never replaces a finished frame's PNG.
     pub assembly: std::sync::Mutex<()>,
+    /// Webhook deliveries under way.
+    pub webhooks: crate::webhooks::Webhooks,
 }
 
 /// What handlers get.

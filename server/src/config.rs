@@ -45,6 +45,10 @@ pub struct Config {
     /// Which finished jobs are kept; the others are removed with their files
     /// ([`crate::retention`]).
     pub keep_jobs: crate::retention::KeepJobs,
+    /// URLs told when any job ends or a worker is quarantined ([`crate::webhooks`]).
+    pub webhooks: Vec<String>,
+    /// The key webhook deliveries are signed with; webhooks need one.
+    pub webhook_secret: Option<String>,
 }
 
 impl Config {
@@ -77,6 +81,8 @@ impl Config {
             max_tile_bytes: limits::MAX_TILE_BYTES,
             assembly_memory: limits::DEFAULT_ASSEMBLY_MEMORY,
             keep_jobs: crate::retention::KeepJobs::All,
+            webhooks: Vec::new(),
+            webhook_secret: None,
         }
     }
 

@@ -22,6 +22,7 @@
 //! | [`identity`] | workers joining: new, or an earlier one back by credential or name |
 //! | [`tls`] | HTTPS from a certificate and key, handshakes off the accept loop |
 //! | [`api`] | the HTTP routes, one file per resource, and the OpenAPI document |
+//! | [`webhooks`] | signed notifications of jobs ending and workers quarantined |
 //! | [`dashboard`] | the web page at `/` |
 //!
 //! A binary (or a test) calls [`serve`] with a bound listener and a shutdown future.
@@ -54,6 +55,7 @@ pub mod store;
 pub mod testing;
 pub mod tls;
 pub mod verify;
+pub mod webhooks;
 
 use std::future::Future;
 use std::sync::Arc;
@@ -135,6 +137,7 @@ pub fn open(config: Config) -> Result<AppState, StartError> {
         metrics: metrics::Metrics::default(),
         work: tokio::sync::Notify::new(),
         assembly: std::sync::Mutex::new(()),
+        webhooks: webhooks::Webhooks::default(),
     });
     let now = now_ms();
     let revoked = app.db.with(|c| scheduler::revoke_all_leases(c, now))?;
@@ -196,6 +199,7 @@ pub fn openapi() -> utoipa::openapi::OpenApi {
         metrics: metrics::Metrics::default(),
         work: tokio::sync::Notify::new(),
         assembly: std::sync::Mutex::new(()),
+        webhooks: webhooks::Webhooks::default(),
     });
     api::api(app).1
 }
@@ -210,6 +214,7 @@ async fn sweep(app: AppState) {
     let mut last_gc: Option<std::time::Instant> = None;
     loop {
         tick.tick().await;
+        webhooks::deliver_pending(&app).await;
         if last_gc.is_none_or(|t| t.elapsed() >= retention::GC_INTERVAL) {
             last_gc = Some(std::time::Instant::now());
             housekeeping(&app).await;

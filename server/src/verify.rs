@@ -21,7 +21,7 @@ use tracer::film::Layers;
 use crate::db::events::log;
 pub use crate::db::tasks::Render;
 use crate::db::tasks::{self, NewTask, TaskRow};
-use crate::db::{frames, workers};
+use crate::db::{frames, outbox, workers};
 use crate::error::{Error, Result};
 
 /// The most check renders of one task: with the first render, four chances for two
@@ -260,6 +260,7 @@ fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<(
         add_check(tx, task, now, &format!("worker {worker} quarantined"))?;
     }
     let assembled = tasks::merged_count_of(tx, worker)?;
+    outbox::add(tx, outbox::Subject::WorkerQuarantined(worker), now)?;
     log(
         tx,
         now,

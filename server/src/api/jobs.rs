@@ -8,7 +8,7 @@ use proto::{JobList, JobSpec, JobStatus, PriorityChange, Rerender};
 use super::error::{Id, JsonBody, PathParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
-use crate::{assembly, controls, db, spec, status};
+use crate::{assembly, controls, db, spec, status, webhooks};
 
 /// Creates a job: the spec is checked field by field and split into tasks.
 #[utoipa::path(
@@ -27,6 +27,17 @@ pub async fn create(
     JsonBody(spec): JsonBody<JobSpec>,
 ) -> Result<(StatusCode, Json<JobStatus>)> {
     let (max_tasks, assembly_memory) = (app.config.max_tasks_per_job, app.config.assembly_memory);
+    if let Some(url) = &spec.webhook {
+        webhooks::check_url("webhook", url)?;
+        if app.config.webhook_secret.is_none() {
+            return Err(Error::Invalid {
+                field: "webhook".into(),
+                message: "this server has no webhook secret to sign deliveries with; start it \
+                          with --webhook-secret"
+                    .into(),
+            });
+        }
+    }
     let now = now_ms();
     let live_since = app.timing().live_since(now);
     let id = app

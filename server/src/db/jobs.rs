@@ -95,6 +95,7 @@ pub fn note_first_lease(tx: &Transaction, job: u64, now: i64) -> Result<()> {
 
 /// Sets or clears `jobs.finished_ms`: set when nothing is left to run (every task done,
 /// failed or cancelled and every complete frame assembled), cleared when work reappears.
+/// Each time it is newly set, webhooks are to be told ([`super::outbox`]).
 pub fn update_finished(tx: &Transaction, job: u64, now: i64) -> Result<()> {
     // EXISTS, not count(*): this runs on every accepted tile, and a count of a big job's
     // queue grows with the job (measured with `tessera bench farm`).
@@ -108,10 +109,13 @@ pub fn update_finished(tx: &Transaction, job: u64, now: i64) -> Result<()> {
         |r| r.get(0),
     )?;
     if !open {
-        tx.exec(
-            "UPDATE jobs SET finished_ms = coalesce(finished_ms, ?2) WHERE id = ?1",
+        let newly = tx.exec(
+            "UPDATE jobs SET finished_ms = ?2 WHERE id = ?1 AND finished_ms IS NULL",
             params![job, now],
         )?;
+        if newly == 1 {
+            super::outbox::add(tx, super::outbox::Subject::JobFinished(job), now)?;
+        }
     } else {
         tx.exec("UPDATE jobs SET finished_ms = NULL WHERE id = ?1", [job])?;
     }

@@ -147,6 +147,17 @@ const MIGRATIONS: &[&str] = &[
     "#,
     // 11: preview-first order: tasks of round 0 are leased before those of round 1.
     "ALTER TABLE tasks ADD COLUMN round INTEGER NOT NULL DEFAULT 0;",
+    // 12: notifications to deliver to webhooks, written in the transaction that made them
+    // happen and removed once delivered (or given up on).
+    r#"
+    CREATE TABLE outbox (
+        id         INTEGER PRIMARY KEY AUTOINCREMENT,
+        kind       TEXT NOT NULL,     -- job_finished | worker_quarantined
+        job_id     INTEGER,
+        worker_id  INTEGER,
+        at_ms      INTEGER NOT NULL
+    );
+    "#,
 ];
 
 /// The schema version this build writes.

@@ -15,6 +15,7 @@
 //! | [`scenes`] | uploaded scenes' summaries |
 //! | [`plans`] | what the time-budget planner measures and the passes it adds |
 //! | [`events`] | the event log, and a job's part of it |
+//! | [`outbox`] | notifications for webhooks, until delivered |
 //!
 //! Functions take a `&Connection` to read and a `&Transaction` to write: a change is
 //! made inside the transaction of the operation that needs it, never on its own.
@@ -25,6 +26,7 @@ pub mod frames;
 pub mod jobs;
 pub mod logs;
 pub mod migrations;
+pub mod outbox;
 pub mod plans;
 pub mod scenes;
 pub mod tasks;

@@ -81,6 +81,16 @@ fn checks_go_to_other_workers_and_the_verdict_quarantines_the_wrong_one() {
     .unwrap();
     assert!(workers::is_quarantined(&c, a).unwrap());
     assert!(!workers::is_quarantined(&c, b).unwrap());
+    // Webhooks are to be told, once.
+    let told: Vec<_> = crate::db::outbox::pending(&c, 100)
+        .unwrap()
+        .into_iter()
+        .filter_map(|p| match p.subject {
+            crate::db::outbox::Subject::WorkerQuarantined(w) => Some(w),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(told, [a]);
     // a's lease on its second task went back to the queue, and a gets no more work.
     assert_eq!(state_of(&c, second.token.task_id), TaskState::Queued);
     assert_eq!(lease(&mut c, a, 7, timing).unwrap(), None);

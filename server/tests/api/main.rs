@@ -9,3 +9,4 @@ mod dashboard;
 mod farm;
 mod faults;
 mod openapi;
+mod webhooks;
