@@ -338,6 +338,12 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
                 },
                 current,
                 w.tasks_done.to_string(),
+                w.samples_per_second
+                    .map_or("-".into(), crate::progress::rate),
+                match (&w.last_failure, w.recent_failures) {
+                    (Some(why), n) if n > 0 => format!("{n}: {why}"),
+                    _ => "-".into(),
+                },
                 ago(w.last_seen_ms, now_ms),
                 if w.tags.is_empty() {
                     "-".into()
@@ -356,6 +362,8 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
             "CHECKS",
             "CURRENT",
             "TASKS DONE",
+            "SPEED",
+            "FAILED (1H)",
             "LAST SEEN",
             "TAGS",
         ],
@@ -676,8 +684,13 @@ mod tests {
             quarantined: None,
             platform: None,
             tags: vec![],
+            samples_per_second: None,
+            recent_failures: 0,
+            last_failure: None,
         };
         let mut bad = worker(3, "c", true, None, None);
+        bad.samples_per_second = Some(2.5e6);
+        (bad.recent_failures, bad.last_failure) = (2, Some("out of memory".into()));
         bad.tags = vec!["gpu".into(), "studio-a".into()];
         bad.quarantined = Some("its tile of task 9 differs".into());
         let list = WorkerList {
@@ -689,10 +702,10 @@ mod tests {
         };
         assert_eq!(
             workers_table(&list, 60_000),
-            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  LAST SEEN  TAGS\n\
-             1   render-01  8        yes     ok           job 3 frame 12  17          2s ago     -\n\
-             2   b          8        no      ok           -               17          2s ago     -\n\
-             3   c          8        yes     quarantined  -               17          2s ago     gpu,studio-a"
+            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  SPEED             FAILED (1H)       LAST SEEN  TAGS\n\
+             1   render-01  8        yes     ok           job 3 frame 12  17          -                 -                 2s ago     -\n\
+             2   b          8        no      ok           -               17          -                 -                 2s ago     -\n\
+             3   c          8        yes     quarantined  -               17          2.50 M samples/s  2: out of memory  2s ago     gpu,studio-a"
         );
     }
 }

@@ -59,7 +59,7 @@ pub struct WorkerRegistered {
 }
 
 /// A worker as `GET /workers` lists it.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct WorkerInfo {
     /// Its id.
@@ -95,10 +95,19 @@ pub struct WorkerInfo {
     /// Its tags ([`WorkerRegistration::tags`]).
     #[serde(default)]
     pub tags: Vec<String>,
+    /// Camera samples per second over its last tasks (none done yet: absent).
+    #[serde(default)]
+    pub samples_per_second: Option<f64>,
+    /// Attempts it failed in the last hour.
+    #[serde(default)]
+    pub recent_failures: u64,
+    /// Why its last failed attempt failed, word for word.
+    #[serde(default)]
+    pub last_failure: Option<String>,
 }
 
 /// `GET /workers`.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct WorkerList {
     /// Workers by id.

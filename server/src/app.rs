@@ -92,10 +92,11 @@ impl App {
         if !self.events.has_listeners() {
             return;
         }
-        let live_since = self.timing().live_since(now_ms());
+        let now = now_ms();
+        let live_since = self.timing().live_since(now);
         if let Ok(w) = self
             .db
-            .run(move |c| db::workers::info(c, worker, live_since))
+            .run(move |c| db::workers::info(c, worker, now, live_since))
             .await
         {
             self.events.send(proto::Event::Worker { worker: w });

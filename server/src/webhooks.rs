@@ -187,7 +187,7 @@ fn notification(
             (event, Some(Box::new(job)), None)
         }
         Subject::WorkerQuarantined(id) => {
-            let worker = db::workers::info(c, id, live_since)?;
+            let worker = db::workers::info(c, id, now, live_since)?;
             (NotificationKind::WorkerQuarantined, None, Some(worker))
         }
     };

@@ -138,7 +138,7 @@ pub async fn list(
     };
     Ok(Json(
         app.db
-            .run(move |c| db::workers::list(c, live_since, listed_since))
+            .run(move |c| db::workers::list(c, now, live_since, listed_since))
             .await?,
     ))
 }
@@ -380,7 +380,7 @@ pub async fn clear(
         .db
         .run(move |c| {
             verify::clear(c, worker, now)?;
-            db::workers::info(c, worker, live_since)
+            db::workers::info(c, worker, now, live_since)
         })
         .await?;
     app.work.notify_waiters();

@@ -158,6 +158,8 @@ const MIGRATIONS: &[&str] = &[
         at_ms      INTEGER NOT NULL
     );
     "#,
+    // 13: a worker's recent failures, for the worker list.
+    "CREATE INDEX task_failures_by_worker_time ON task_failures (worker_id, at_ms);",
 ];
 
 /// The schema version this build writes.

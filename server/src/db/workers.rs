@@ -306,26 +306,62 @@ fn info_from_row(r: &rusqlite::Row, live_since: i64) -> rusqlite::Result<WorkerI
         tags: serde_json::from_str(&r.get::<_, String>(14)?).map_err(|e| {
             rusqlite::Error::FromSqlConversionFailure(14, rusqlite::types::Type::Text, e.into())
         })?,
+        samples_per_second: None,
+        recent_failures: 0,
+        last_failure: None,
     })
 }
 
-/// One worker as clients see it; online when seen since `live_since`.
-pub fn info(conn: &Connection, id: u64, live_since: i64) -> Result<WorkerInfo> {
-    conn.row(&format!("{INFO_QUERY} WHERE w.id = ?1"), [id], |r| {
-        info_from_row(r, live_since)
-    })
-    .optional()?
-    .ok_or_else(|| Error::NotFound(format!("worker {id} is not registered")))
+/// Tasks a worker's speed is measured over: its last done ones.
+const SPEED_TASKS: u32 = 20;
+/// Failures within this much of the last seen time are recent: an hour, in ms.
+const RECENT_FAILURES_MS: i64 = 3_600_000;
+
+/// Fills in what a worker did lately: its speed over its last [`SPEED_TASKS`] tasks, and
+/// its failed attempts within [`RECENT_FAILURES_MS`] of `now`.
+fn with_recent(conn: &Connection, mut w: WorkerInfo, now: i64) -> rusqlite::Result<WorkerInfo> {
+    let (samples, ms): (Option<f64>, Option<f64>) = conn.row(
+        "SELECT sum(w * h * (sample_end - sample_start) * 1.0), sum(render_ms * 1.0) FROM (
+             SELECT w, h, sample_start, sample_end, render_ms FROM tasks
+             WHERE worker_id = ?1 AND state = 'done' AND render_ms > 0
+             ORDER BY id DESC LIMIT ?2)",
+        params![w.id, SPEED_TASKS],
+        |r| Ok((r.get(0)?, r.get(1)?)),
+    )?;
+    w.samples_per_second = match (samples, ms) {
+        (Some(s), Some(ms)) if ms > 0.0 => Some(s / ms * 1000.0),
+        _ => None,
+    };
+    (w.recent_failures, w.last_failure) = conn.row(
+        "SELECT count(*), (SELECT message FROM task_failures WHERE worker_id = ?1
+                           ORDER BY at_ms DESC LIMIT 1)
+         FROM task_failures WHERE worker_id = ?1 AND at_ms >= ?2",
+        params![w.id, now - RECENT_FAILURES_MS],
+        |r| Ok((r.get(0)?, r.get(1)?)),
+    )?;
+    Ok(w)
+}
+
+/// One worker as clients see it at `now`; online when seen since `live_since`.
+pub fn info(conn: &Connection, id: u64, now: i64, live_since: i64) -> Result<WorkerInfo> {
+    let info = conn
+        .row(&format!("{INFO_QUERY} WHERE w.id = ?1"), [id], |r| {
+            info_from_row(r, live_since)
+        })
+        .optional()?
+        .ok_or_else(|| Error::NotFound(format!("worker {id} is not registered")))?;
+    Ok(with_recent(conn, info, now)?)
 }
 
 /// The workers seen since `listed_since` (0: every worker), by id; those seen since
 /// `live_since` are online.
-pub fn list(conn: &Connection, live_since: i64, listed_since: i64) -> Result<WorkerList> {
+pub fn list(conn: &Connection, now: i64, live_since: i64, listed_since: i64) -> Result<WorkerList> {
     let mut stmt = conn.prepare_cached(&format!(
         "{INFO_QUERY} WHERE w.last_seen_ms >= ?1 ORDER BY w.id"
     ))?;
     let rows = stmt.query_map([listed_since], |r| info_from_row(r, live_since))?;
-    Ok(WorkerList {
-        workers: rows.collect::<rusqlite::Result<_>>()?,
-    })
+    let workers = rows
+        .map(|w| with_recent(conn, w?, now))
+        .collect::<rusqlite::Result<_>>()?;
+    Ok(WorkerList { workers })
 }

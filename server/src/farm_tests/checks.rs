@@ -94,7 +94,9 @@ fn checks_go_to_other_workers_and_the_verdict_quarantines_the_wrong_one() {
     // a's lease on its second task went back to the queue, and a gets no more work.
     assert_eq!(state_of(&c, second.token.task_id), TaskState::Queued);
     assert_eq!(lease(&mut c, a, 7, timing).unwrap(), None);
-    let workers = workers::list(&c, TIMING.live_since(7), 0).unwrap().workers;
+    let workers = workers::list(&c, 7, TIMING.live_since(7), 0)
+        .unwrap()
+        .workers;
     assert!(workers[0]
         .quarantined
         .as_deref()

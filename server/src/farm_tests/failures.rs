@@ -114,3 +114,28 @@ fn task_pages_follow_ids_and_end() {
         Err(Error::NotFound(_))
     ));
 }
+
+#[test]
+fn a_worker_shows_its_speed_and_its_failures_of_the_last_hour() {
+    let mut c = db();
+    job(&mut c, 1, 0, 5, 0);
+    let w = worker(&mut c, "w", 0);
+    let info = |c: &Connection, now| workers::info(c, w, now, TIMING.live_since(now)).unwrap();
+    assert_eq!(info(&c, 0).samples_per_second, None);
+    // Two 8×8 tiles of 4 samples in 2 ms each: 256 samples per 2 ms.
+    for now in [1, 2] {
+        let l = lease(&mut c, w, now, TIMING).unwrap().unwrap();
+        accept(&mut c, w, l.token, 1, 2, None, now, TIMING).unwrap();
+    }
+    let l = lease(&mut c, w, 3, TIMING).unwrap().unwrap();
+    fail(&mut c, w, l.token, REASON, &[], 3, TIMING).unwrap();
+    let now_ = info(&c, 4);
+    assert_eq!(now_.samples_per_second, Some(128_000.0));
+    assert_eq!(
+        (now_.recent_failures, now_.last_failure.as_deref()),
+        (1, Some(REASON))
+    );
+    // An hour later the failure is no longer recent; what it was stays.
+    let later = info(&c, 3 + 3_600_001);
+    assert_eq!(later.recent_failures, 0);
+}

@@ -36,7 +36,9 @@ fn a_job_that_requires_tags_goes_only_to_workers_that_have_them_all() {
         None
     );
     assert_eq!(lease(&mut c, full, 3, TIMING).unwrap().unwrap().job_id, j);
-    let listed = workers::list(&c, TIMING.live_since(3), 0).unwrap().workers;
+    let listed = workers::list(&c, 3, TIMING.live_since(3), 0)
+        .unwrap()
+        .workers;
     assert_eq!(listed.iter().find(|w| w.id == full).unwrap().tags, tags);
     // A job that requires nothing goes to any worker.
     let any = job(&mut c, 1, 0, 3, 4);
