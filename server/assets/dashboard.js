@@ -1,21 +1,46 @@
-// Tessera dashboard: jobs with progress bars, frame thumbnails as they finish, workers and
-// their current task; kept live by server-sent events. No framework, no CDN.
+// Tessera dashboard: jobs with progress, their frames coloured by state with thumbnails,
+// controls (pause, resume, cancel, retry, priority, clone, delete), workers with what each
+// is doing, its speed and its recent failures; kept live by server-sent events. No
+// framework, no CDN. Built for 1,000 frames a job and 100 workers: every element is found
+// through a map, frame grids are filled only when opened, thumbnails load lazily.
 "use strict";
 
 const API = "/api/v1";
-// A client token, when the server needs one: open the page as /#token=SECRET once.
-const token = (() => {
+const TOKEN_KEY = "tessera-token";
+
+// The client token, when the server needs one: asked for on the first 401 and kept for
+// this browser session; `/#token=SECRET` still works once (and leaves the address bar).
+let token = (() => {
   const m = location.hash.match(/token=([^&]+)/);
-  if (m) localStorage.setItem("tessera-token", decodeURIComponent(m[1]));
-  return localStorage.getItem("tessera-token") || "";
+  if (m) {
+    sessionStorage.setItem(TOKEN_KEY, decodeURIComponent(m[1]));
+    history.replaceState(null, "", location.pathname + location.search);
+  }
+  return sessionStorage.getItem(TOKEN_KEY) || "";
 })();
 const withToken = (url) => token ? url + (url.includes("?") ? "&" : "?") + "access_token=" + encodeURIComponent(token) : url;
 
-async function get(path) {
-  const res = await fetch(API + path, { headers: token ? { Authorization: "Bearer " + token } : {} });
-  if (!res.ok) throw new Error(path + ": " + res.status + " " + (await res.text()));
-  return res.json();
+class Unauthorized extends Error {}
+
+async function call(method, path, body) {
+  const headers = token ? { Authorization: "Bearer " + token } : {};
+  if (body !== undefined) headers["Content-Type"] = "application/json";
+  const res = await fetch(API + path, {
+    method, headers, body: body === undefined ? undefined : JSON.stringify(body),
+  });
+  if (res.status === 401) {
+    askForToken();
+    throw new Unauthorized("the server wants the client token");
+  }
+  if (!res.ok) {
+    const text = await res.text();
+    let message = text;
+    try { message = JSON.parse(text).message || text; } catch (_) { /* not JSON */ }
+    throw new Error(`${method} ${path}: ${message}`);
+  }
+  return res.status === 204 ? null : res.json();
 }
+const get = (path) => call("GET", path);
 
 function el(tag, cls, text) {
   const e = document.createElement(tag);
@@ -41,8 +66,45 @@ function rate(x) {
 
 function pad4(n) { return String(n).padStart(4, "0"); }
 
+// ---- token ----
+
+function askForToken() {
+  const form = document.getElementById("login");
+  if (!form.hidden) return;
+  form.hidden = false;
+  document.getElementById("live").textContent = "signed out";
+  document.getElementById("token-input").focus();
+}
+
+document.getElementById("login").addEventListener("submit", (e) => {
+  e.preventDefault();
+  token = document.getElementById("token-input").value.trim();
+  sessionStorage.setItem(TOKEN_KEY, token);
+  e.target.hidden = true;
+  start();
+});
+
+// ---- jobs ----
+
+const cards = new Map();   // job id -> card element
+const jobs = new Map();    // job id -> the latest JobStatus
+
+const OPEN = ["queued", "running", "paused"];
+// Which controls a job in each state offers (retry also while stuck).
+const CONTROLS = [
+  ["pause", "Pause", (j) => j.state === "queued" || j.state === "running"],
+  ["resume", "Resume", (j) => j.state === "paused"],
+  ["retry", "Retry failed", (j) => j.state === "failed" || !!j.stuck],
+  ["cancel", "Cancel", (j) => OPEN.includes(j.state)],
+  ["clone", "Clone", () => true],
+  ["delete", "Delete", () => true],
+  ["watch", "Notify me", (j) => OPEN.includes(j.state)],
+];
+
 function jobCard(job) {
-  let card = document.querySelector(`.job[data-job-id="${job.id}"]`);
+  const previous = jobs.get(job.id);
+  jobs.set(job.id, job);
+  let card = cards.get(job.id);
   if (!card) {
     card = el("article", "job");
     card.dataset.jobId = job.id;
@@ -50,13 +112,42 @@ function jobCard(job) {
     title.append(el("span", "name"), el("span", "state"), el("span", "stats"));
     const bar = el("div", "bar");
     bar.append(el("div"));
+    const actions = el("div", "actions");
+    for (const [action, label] of CONTROLS) {
+      const b = el("button", null, label);
+      b.dataset.action = action;
+      actions.append(b);
+    }
+    const priority = el("label", "priority", "Priority ");
+    const input = el("input");
+    input.type = "number";
+    input.min = -1000;
+    input.max = 1000;
+    // A value being typed is not overwritten by the job's updates until it is set.
+    input.addEventListener("input", () => { input.dataset.edited = "true"; });
+    const set = el("button", null, "Set");
+    set.dataset.action = "priority";
+    priority.append(input, set);
+    actions.append(priority);
     const stuck = el("p", "stuck");
     stuck.hidden = true;
     const failures = el("ul", "failures");
     failures.hidden = true;
-    card.append(title, bar, stuck, failures, el("div", "frames"));
-    const jobs = document.getElementById("jobs");
-    jobs.prepend(card);
+    const panel = el("details", "frames-panel");
+    panel.append(el("summary", null, "Frames"), el("div", "frames"));
+    // Small jobs show their frames at once; a big one's grid is made when opened.
+    panel.open = job.frames_total <= 100;
+    panel.addEventListener("toggle", () => {
+      if (panel.open) loadFrames(job.id).catch(showError);
+    });
+    card.append(title, bar, actions, stuck, failures, panel);
+    actions.addEventListener("click", (e) => {
+      const action = e.target.dataset && e.target.dataset.action;
+      if (action) act(job.id, action, card).catch(showError);
+    });
+    cards.set(job.id, card);
+    document.getElementById("jobs").prepend(card);
+    if (panel.open) loadFrames(job.id).catch(showError);
   }
   card.querySelector(".name").textContent = "#" + job.id + " " + job.name;
   const state = card.querySelector(".state");
@@ -70,12 +161,74 @@ function jobCard(job) {
     `${pct}% · frames ${job.frames_done}/${job.frames_total} · tasks ${job.tasks.done}/` +
     `${job.tasks.queued + job.tasks.leased + job.tasks.done + job.tasks.failed + job.tasks.cancelled}` +
     ` · ${rate(job.samples_per_second)} samples/s · ETA ${duration(job.eta_seconds)}`;
+  for (const [action, , shown] of CONTROLS) {
+    card.querySelector(`button[data-action="${action}"]`).hidden = !shown(job);
+  }
+  const priority = card.querySelector(".priority input");
+  if (priority.dataset.edited !== "true") priority.value = job.spec.priority;
   const stuck = card.querySelector(".stuck");
   stuck.hidden = !job.stuck;
   stuck.textContent = job.stuck ? "Stuck: " + job.stuck : "";
   showFailures(card, job);
+  notifyIfEnded(card, previous, job);
   document.getElementById("no-jobs").hidden = true;
   return card;
+}
+
+async function act(id, action, card) {
+  const job = jobs.get(id);
+  let answer;
+  switch (action) {
+    case "pause": case "resume": case "cancel": case "retry":
+      answer = await call("POST", `/jobs/${id}/${action}`);
+      break;
+    case "priority": {
+      const input = card.querySelector(".priority input");
+      answer = await call("POST", `/jobs/${id}/priority`, { priority: Number(input.value) });
+      delete input.dataset.edited;
+      break;
+    }
+    case "clone": {
+      // The same scene and settings under a name of its own.
+      const spec = { ...job.spec };
+      delete spec.name;
+      answer = await call("POST", "/jobs", spec);
+      break;
+    }
+    case "delete":
+      if (!confirm(`Delete job #${id} ${job.name} with every frame it made?`)) return;
+      await call("DELETE", `/jobs/${id}`);
+      removeJob(id);
+      return;
+    case "watch":
+      card.dataset.watched = "true";
+      card.querySelector('button[data-action="watch"]').textContent = "Watching";
+      if ("Notification" in window && Notification.permission === "default") {
+        await Notification.requestPermission();
+      }
+      return;
+  }
+  if (answer) jobCard(answer);
+}
+
+// A browser notification when a watched job ends.
+function notifyIfEnded(card, previous, job) {
+  if (card.dataset.watched !== "true" || !previous || OPEN.includes(job.state)) return;
+  if (!OPEN.includes(previous.state)) return;
+  card.dataset.watched = "false";
+  card.dataset.notified = job.state;
+  if ("Notification" in window && Notification.permission === "granted") {
+    new Notification(`Tessera: job #${job.id} ${job.name} is ${job.state}`, {
+      body: `frames ${job.frames_done}/${job.frames_total}` + (job.stuck ? " · " + job.stuck : ""),
+    });
+  }
+}
+
+function removeJob(id) {
+  cards.get(id)?.remove();
+  cards.delete(id);
+  jobs.delete(id);
+  frameCells.delete(id);
 }
 
 // Why a job's attempts failed, grouped by reason; read again only when the count changes.
@@ -96,34 +249,72 @@ function showFailures(card, job) {
   }).catch(showError);
 }
 
-function frameThumb(jobId, frame) {
-  const card = document.querySelector(`.job[data-job-id="${jobId}"]`);
-  if (!card) return;
-  const strip = card.querySelector(".frames");
-  let fig = strip.querySelector(`figure[data-frame="${frame.frame}"]`);
-  if (frame.state !== "done" && !fig) return;
-  if (!fig) {
-    fig = el("figure");
-    fig.dataset.frame = frame.frame;
-    const img = el("img");
-    img.alt = "frame " + frame.frame;
-    fig.append(img, el("figcaption", null, pad4(frame.frame)));
-    // Keep thumbnails in frame order.
-    const after = [...strip.children].find((f) => Number(f.dataset.frame) > frame.frame);
-    strip.insertBefore(fig, after || null);
+// ---- frames ----
+
+const frameCells = new Map();  // job id -> Map(frame number -> figure)
+
+async function loadFrames(id) {
+  if (frameCells.has(id)) return;
+  frameCells.set(id, new Map());
+  const { frames } = await get(`/jobs/${id}/frames`).catch((e) => {
+    frameCells.delete(id);
+    throw e;
+  });
+  const strip = cards.get(id)?.querySelector(".frames");
+  if (!strip) return;
+  const cells = frameCells.get(id);
+  const fragment = document.createDocumentFragment();
+  for (const f of frames) {
+    const fig = el("figure");
+    fig.dataset.frame = f.frame;
+    fig.append(el("figcaption", null, pad4(f.frame)));
+    cells.set(f.frame, fig);
+    fragment.append(fig);
+    frameCell(id, f);
   }
-  fig.dataset.state = frame.state;
-  fig.querySelector("img").src = withToken(`${API}/jobs/${jobId}/frames/${frame.frame}/png?v=${frame.tasks_done}`);
+  strip.replaceChildren(fragment);
 }
 
+function frameCell(jobId, frame) {
+  const fig = frameCells.get(jobId)?.get(frame.frame);
+  if (!fig) return;
+  fig.dataset.state = frame.state;
+  fig.title = `frame ${frame.frame}: ${frame.state}` + (frame.failure ? ` (${frame.failure})` : "");
+  // A thumbnail once a pass or the frame is in; it changes as passes land.
+  if (frame.state === "done" || (frame.state === "rendering" && frame.tasks_done > 0)) {
+    let img = fig.querySelector("img");
+    if (!img) {
+      img = el("img");
+      img.alt = "frame " + frame.frame;
+      img.loading = "lazy";
+      fig.prepend(img);
+    }
+    const src = withToken(`${API}/jobs/${jobId}/frames/${frame.frame}/png?v=${frame.tasks_done}`);
+    if (img.getAttribute("src") !== src) img.src = src;
+  }
+}
+
+// ---- workers ----
+
+const rows = new Map();  // worker id -> row
+const WORKER_COLUMNS = 9;
+
 function workerRow(w) {
-  const body = document.querySelector("#workers tbody");
-  let row = body.querySelector(`tr[data-worker-id="${w.id}"]`);
+  let row = rows.get(w.id);
   if (!row) {
     row = el("tr");
     row.dataset.workerId = w.id;
-    for (let i = 0; i < 6; i++) row.append(el("td"));
-    body.append(row);
+    for (let i = 0; i < WORKER_COLUMNS; i++) row.append(el("td"));
+    const clear = el("button", null, "Clear");
+    clear.dataset.action = "clear";
+    clear.title = "its machine is repaired: give it work again";
+    clear.addEventListener("click", () => {
+      call("POST", `/workers/${w.id}/clear`).then(workerRow, showError);
+    });
+    row.dataset.clear = "";
+    row.lastChild.append(el("span"), clear);
+    rows.set(w.id, row);
+    document.querySelector("#workers tbody").append(row);
   }
   const cells = row.children;
   cells[0].textContent = w.name;
@@ -133,45 +324,65 @@ function workerRow(w) {
     ? `job ${w.current_job} · frame ${w.current_frame} · task ${w.current_task.task_id}`
     : "idle";
   cells[4].textContent = w.tasks_done;
-  cells[5].textContent = new Date(w.last_seen_ms).toLocaleTimeString();
-  row.className = w.online ? "online" : "offline";
+  cells[5].textContent = w.samples_per_second ? rate(w.samples_per_second) + " samples/s" : "–";
+  cells[6].textContent = w.recent_failures ? `${w.recent_failures}: ${w.last_failure}` : "–";
+  cells[7].textContent = new Date(w.last_seen_ms).toLocaleTimeString();
+  const status = w.quarantined ? "quarantined: " + w.quarantined : w.suspect ? "suspect" : "ok";
+  cells[8].firstChild.textContent = status;
+  cells[8].querySelector("button").hidden = !w.quarantined;
+  row.className = (w.online ? "online" : "offline") + (w.quarantined ? " quarantined" : "");
   document.getElementById("no-workers").hidden = true;
 }
 
+// ---- loading and the live stream ----
+
 async function loadAll() {
-  const [{ jobs }, { workers }] = await Promise.all([get("/jobs"), get("/workers")]);
-  for (const job of jobs.slice().reverse()) jobCard(job);
+  const [{ jobs: list }, { workers }] = await Promise.all([get("/jobs"), get("/workers")]);
+  for (const job of list.slice().reverse()) jobCard(job);
   for (const w of workers) workerRow(w);
-  await Promise.all(jobs.map(async (job) => {
-    const { frames } = await get(`/jobs/${job.id}/frames`);
-    for (const f of frames) frameThumb(job.id, f);
-  }));
+  for (const id of [...cards.keys()]) {
+    if (!list.some((j) => j.id === id)) removeJob(id);
+  }
 }
 
+let source = null;
+
 function listen() {
+  source?.close();
   const live = document.getElementById("live");
-  const source = new EventSource(withToken(API + "/events"));
+  source = new EventSource(withToken(API + "/events"));
   source.onopen = () => { live.textContent = "live"; live.className = "on"; };
   source.onerror = () => { live.textContent = "reconnecting"; live.className = "off"; };
   source.addEventListener("job", (e) => jobCard(JSON.parse(e.data).job));
   source.addEventListener("frame", (e) => {
     const d = JSON.parse(e.data);
-    frameThumb(d.job_id, d.frame);
+    frameCell(d.job_id, d.frame);
   });
   source.addEventListener("worker", (e) => workerRow(JSON.parse(e.data).worker));
-  source.addEventListener("job_deleted", (e) => {
-    const id = JSON.parse(e.data).job_id;
-    document.querySelector(`.job[data-job-id="${id}"]`)?.remove();
+  source.addEventListener("job_deleted", (e) => removeJob(JSON.parse(e.data).job_id));
+  // Missed events: read everything again, the open frame grids too.
+  source.addEventListener("lagged", () => {
+    loadAll().catch(showError);
+    for (const [id, card] of cards) {
+      if (card.querySelector(".frames-panel").open) {
+        frameCells.delete(id);
+        loadFrames(id).catch(showError);
+      }
+    }
   });
-  // Missed events: read everything again.
-  source.addEventListener("lagged", () => loadAll().catch(showError));
 }
 
 function showError(err) {
+  if (err instanceof Unauthorized) return;
   const p = document.getElementById("error");
-  p.textContent = String(err);
+  p.textContent = String(err.message || err);
   p.hidden = false;
+  setTimeout(() => { p.hidden = true; }, 10000);
 }
 
-listen();
-loadAll().then(() => { document.body.dataset.loaded = "true"; }, showError);
+function start() {
+  listen();
+  loadAll().then(() => { document.body.dataset.loaded = "true"; }, showError);
+}
+
+start();

@@ -1,7 +1,9 @@
 //! The web dashboard, served from the binary: one page, a script and a style sheet under
 //! `server/assets/`, compiled in with `include_str!` (no CDN, no build step). The page
-//! reads the JSON API and follows `/api/v1/events`; it needs no token to load, and asks
-//! for the client token (`/#token=...`) when the API does.
+//! reads the JSON API and follows `/api/v1/events`, and acts through the API (pause,
+//! resume, cancel, retry, priority, clone, delete, clear a quarantined worker); it needs no
+//! token to load, and asks for the client token when the API answers 401, keeping it for
+//! the browser session (`/#token=...` also works once).
 
 use axum::http::header;
 use axum::response::IntoResponse;

@@ -182,7 +182,7 @@ const SUMMARY: &str = r#"JSON.stringify((() => {
     name: card && card.querySelector('.name').textContent,
     bar: card && card.querySelector('.bar > div').style.width,
     stats: card && card.querySelector('.stats').textContent,
-    frames: card ? [...card.querySelectorAll('.frames figure')].map(f => Number(f.dataset.frame)) : [],
+    frames: card ? [...card.querySelectorAll('.frames figure')].map(f => [Number(f.dataset.frame), f.dataset.state]) : [],
     thumbs: card ? [...card.querySelectorAll('.frames img')].map(i => i.complete ? i.naturalWidth : 0) : [],
     worker: row ? [...row.children].map(td => td.textContent) : [],
     failures: card ? [...card.querySelectorAll('.failures li')].map(li => li.textContent) : [],
@@ -244,7 +244,11 @@ async fn dashboard_shows_jobs_frames_failures_and_workers_live_in_chromium() {
     assert_eq!(before["state"], json!("running"), "{before}");
     assert_eq!(before["name"], json!(format!("#{} hallway", job.id)));
     assert_eq!(before["bar"], json!("50%"), "{before}");
-    assert_eq!(before["frames"], json!([1]), "{before}");
+    assert_eq!(
+        before["frames"],
+        json!([[1, "done"], [2, "rendering"]]),
+        "{before}"
+    );
     assert_eq!(
         before["failures"],
         json!([format!(
@@ -282,7 +286,11 @@ async fn dashboard_shows_jobs_frames_failures_and_workers_live_in_chromium() {
     .await
     .unwrap();
     assert_eq!(after["bar"], json!("100%"), "{after}");
-    assert_eq!(after["frames"], json!([1, 2]), "{after}");
+    assert_eq!(
+        after["frames"],
+        json!([[1, "done"], [2, "done"]]),
+        "{after}"
+    );
     assert_eq!(after["thumbs"], json!([64, 64]), "{after}");
     assert!(
         after["stats"].as_str().unwrap().contains("frames 2/2"),
@@ -295,4 +303,313 @@ async fn dashboard_shows_jobs_frames_failures_and_workers_live_in_chromium() {
     std::fs::write(&shot, &png).unwrap();
     assert!(png.starts_with(b"\x89PNG"));
     eprintln!("dashboard screenshot: {}", shot.display());
+}
+
+const TOKEN: &str = "dashboard-client-token";
+
+/// A client that sends the client token.
+fn authed() -> reqwest::Client {
+    let mut headers = reqwest::header::HeaderMap::new();
+    headers.insert(
+        reqwest::header::AUTHORIZATION,
+        format!("Bearer {TOKEN}").parse().unwrap(),
+    );
+    reqwest::Client::builder()
+        .default_headers(headers)
+        .timeout(Duration::from_secs(60))
+        .build()
+        .unwrap()
+}
+
+/// Runs `script` in the page (a blocking DevTools call, off the async runtime).
+async fn run(browser: Browser, script: &str) -> Browser {
+    let script = script.to_string();
+    tokio::task::spawn_blocking(move || {
+        let mut b = browser;
+        b.eval(&script);
+        b
+    })
+    .await
+    .unwrap()
+}
+
+/// Waits, off the async runtime, until `expr` is true in the page.
+async fn page_shows(browser: Browser, expr: &str, what: &str) -> Browser {
+    let (expr, what) = (expr.to_string(), what.to_string());
+    tokio::task::spawn_blocking(move || {
+        let mut b = browser;
+        b.wait_for(&expr, &what);
+        b
+    })
+    .await
+    .unwrap()
+}
+
+/// Clicks a job card's control.
+async fn click(browser: Browser, job: u64, action: &str) -> Browser {
+    run(
+        browser,
+        &format!(
+            "document.querySelector('.job[data-job-id=\"{job}\"] button[data-action=\"{action}\"]').click()"
+        ),
+    )
+    .await
+}
+
+/// Polls the API until `check` holds for the job (or it is gone: `None`).
+async fn api_shows(
+    c: &reqwest::Client,
+    s: &TestServer,
+    job: u64,
+    what: &str,
+    check: impl Fn(Option<&proto::JobStatus>) -> bool,
+) {
+    let mut last = None;
+    for _ in 0..300 {
+        let res = c.get(s.url(&format!("/jobs/{job}"))).send().await.unwrap();
+        let status = match res.status() {
+            StatusCode::NOT_FOUND => None,
+            _ => Some(res.json::<proto::JobStatus>().await.unwrap()),
+        };
+        if check(status.as_ref()) {
+            return;
+        }
+        last = status;
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("the API never showed {what} for job {job}: {last:?}");
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn dashboard_controls_change_what_the_api_reports_in_chromium() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(dir.path());
+    cfg.client_token = Some(TOKEN.into());
+    let s = TestServer::start(cfg);
+    let c = authed();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let spec = |name: &str, frames: i32| {
+        let mut spec = JobSpec::new(scene.digest.clone());
+        spec.name = Some(name.into());
+        spec.frames = Some(FrameRange {
+            start: 1,
+            end: frames,
+            step: 1,
+        });
+        (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 16, Some(16), 1);
+        spec
+    };
+    // A job nobody renders (no worker asks), one whose task failed for good, and one of a
+    // thousand frames; a hundred workers, one of them quarantined.
+    let mut broken = spec("broken", 1);
+    broken.max_attempts = 1;
+    let broken = create_job(&s, &c, &broken).await.id;
+    let open = create_job(&s, &c, &spec("open", 3)).await.id;
+    let mut workers = Vec::new();
+    for i in 0..100 {
+        workers.push(SimWorker::register(&s, &format!("node-{i:03}")).await);
+    }
+    let lease = workers[0].lease(&s).await.unwrap();
+    assert_eq!(lease.job_id, broken, "the older job goes first");
+    workers[0].fail(&s, &lease, "out of memory").await;
+    let long = create_job(&s, &c, &spec("long", 1000)).await.id;
+    let quarantined = workers[1].id;
+    rusqlite::Connection::open(dir.path().join("data/tessera.db"))
+        .unwrap()
+        .execute(
+            "UPDATE workers SET quarantined_ms = 1, quarantine_reason = 'its tile of task 3 \
+             differs' WHERE id = ?1",
+            [quarantined],
+        )
+        .unwrap();
+
+    // The page asks for the token, keeps it for the session only, and then shows the farm.
+    let url = format!("{}/", s.base);
+    let b = tokio::task::spawn_blocking(move || Browser::open(&url))
+        .await
+        .unwrap();
+    let b = page_shows(
+        b,
+        "!document.getElementById('login').hidden",
+        "the token prompt",
+    )
+    .await;
+    let b = run(
+        b,
+        &format!(
+            "document.getElementById('token-input').value = '{TOKEN}'; \
+             document.getElementById('login').requestSubmit()"
+        ),
+    )
+    .await;
+    let b = page_shows(
+        b,
+        "document.body.dataset.loaded === 'true' && document.getElementById('live').className === 'on' \
+         && document.querySelectorAll('#workers tbody tr').length === 100 \
+         && sessionStorage.getItem('tessera-token') !== null && localStorage.length === 0",
+        "the farm after signing in",
+    )
+    .await;
+    // A thousand frames: the grid is made when opened, every frame in it.
+    let b = run(
+        b,
+        &format!("document.querySelector('.job[data-job-id=\"{long}\"] details').open = true"),
+    )
+    .await;
+    let mut b = page_shows(
+        b,
+        &format!(
+            "document.querySelectorAll('.job[data-job-id=\"{long}\"] .frames figure[data-state=\"queued\"]').length === 1000"
+        ),
+        "the thousand frames",
+    )
+    .await;
+
+    // Pause, resume, priority.
+    b = click(b, open, "pause").await;
+    api_shows(&c, &s, open, "paused", |j| {
+        j.is_some_and(|j| j.state == proto::JobState::Paused)
+    })
+    .await;
+    b = page_shows(
+        b,
+        &format!(
+            "document.querySelector('.job[data-job-id=\"{open}\"]').dataset.state === 'paused'"
+        ),
+        "the paused job",
+    )
+    .await;
+    b = click(b, open, "resume").await;
+    api_shows(&c, &s, open, "resumed", |j| {
+        j.is_some_and(|j| j.state == proto::JobState::Queued)
+    })
+    .await;
+    b = run(
+        b,
+        &format!(
+            "const input = document.querySelector('.job[data-job-id=\"{open}\"] .priority input'); \
+             input.value = 7; input.dispatchEvent(new Event('input'))"
+        ),
+    )
+    .await;
+    b = click(b, open, "priority").await;
+    api_shows(&c, &s, open, "priority 7", |j| {
+        j.is_some_and(|j| j.spec.priority == 7)
+    })
+    .await;
+
+    // Clone: a new job with the same settings (once the page knows the new priority).
+    b = page_shows(
+        b,
+        &format!("document.querySelector('.job[data-job-id=\"{open}\"] .priority input').value === '7' && !document.querySelector('.job[data-job-id=\"{open}\"] .priority input').dataset.edited"),
+        "the new priority",
+    )
+    .await;
+    b = click(b, open, "clone").await;
+    let clone = loop {
+        let list: proto::JobList = c
+            .get(s.url("/jobs"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        if let Some(j) = list.jobs.iter().find(|j| j.id > long) {
+            break j.clone();
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    assert_eq!(
+        (clone.spec.frames, clone.spec.priority),
+        (
+            Some(FrameRange {
+                start: 1,
+                end: 3,
+                step: 1
+            }),
+            7
+        )
+    );
+    assert_eq!(clone.name, format!("job {}", clone.id));
+
+    // Watch, then cancel: the browser says the watched job ended.
+    b = run(
+        b,
+        "window.told = []; window.Notification = class { constructor(t) { told.push(t); } \
+         static requestPermission() { return Promise.resolve('granted'); } }; \
+         Notification.permission = 'granted'; window.confirm = () => true;",
+    )
+    .await;
+    b = click(b, open, "watch").await;
+    b = click(b, open, "cancel").await;
+    api_shows(&c, &s, open, "cancelled", |j| {
+        j.is_some_and(|j| j.state == proto::JobState::Cancelled)
+    })
+    .await;
+    b = page_shows(
+        b,
+        &format!("window.told.length === 1 && window.told[0] === 'Tessera: job #{open} open is cancelled'"),
+        "the notification",
+    )
+    .await;
+
+    // Retry the failed job; delete the clone.
+    b = click(b, broken, "retry").await;
+    api_shows(&c, &s, broken, "retried", |j| {
+        j.is_some_and(|j| j.tasks.failed == 0 && j.state == proto::JobState::Queued)
+    })
+    .await;
+    b = click(b, clone.id, "delete").await;
+    api_shows(&c, &s, clone.id, "deleted", |j| j.is_none()).await;
+    b = page_shows(
+        b,
+        &format!(
+            "!document.querySelector('.job[data-job-id=\"{}\"]')",
+            clone.id
+        ),
+        "the deleted job gone",
+    )
+    .await;
+
+    // Clear the quarantined worker.
+    b = page_shows(
+        b,
+        &format!("document.querySelector('tr[data-worker-id=\"{quarantined}\"]').children[8].textContent.startsWith('quarantined: its tile of task 3 differs')"),
+        "the quarantined worker",
+    )
+    .await;
+    b = run(
+        b,
+        &format!("document.querySelector('tr[data-worker-id=\"{quarantined}\"] button[data-action=\"clear\"]').click()"),
+    )
+    .await;
+    for _ in 0..300 {
+        let list: proto::WorkerList = c
+            .get(s.url("/workers"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        if list
+            .workers
+            .iter()
+            .any(|w| w.id == quarantined && w.quarantined.is_none())
+        {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let b = page_shows(
+        b,
+        &format!("document.querySelector('tr[data-worker-id=\"{quarantined}\"]').children[8].textContent.startsWith('ok')"),
+        "the cleared worker",
+    )
+    .await;
+    let error = run(b, "")
+        .await
+        .eval("document.getElementById('error').hidden");
+    assert_eq!(error, json!(true), "the page showed an error");
 }
