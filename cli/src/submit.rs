@@ -280,6 +280,19 @@ pub fn pack_scene(path: &Path) -> anyhow::Result<Vec<u8>> {
     tracer::loader::pack_glb(path).map_err(|e| anyhow::anyhow!("packing {}: {e}", path.display()))
 }
 
+/// Checks the job against the scene here, with the server's own rules, before a large
+/// upload: a bad setting (spp, fps, size, tile, frames, camera, animation) is reported at
+/// once. The one bound that depends on the server's settings, tasks per job, is left to
+/// it.
+pub fn check_locally(glb: &[u8], job: &JobArgs, what: &str) -> anyhow::Result<()> {
+    let (scene, _) =
+        server::scene::inspect(glb).map_err(|e| anyhow::anyhow!("loading {what}: {e}"))?;
+    let spec = job.to_spec(&scene)?;
+    server::spec::plan(spec, &scene, u64::MAX)
+        .map_err(|e| anyhow::anyhow!("the job's `{}`: {}", e.field, e.message))?;
+    Ok(())
+}
+
 /// Uploads `glb` and creates the job `job` describes; prints what was found and the job id.
 pub async fn upload_and_create(
     client: &Client,
@@ -288,6 +301,7 @@ pub async fn upload_and_create(
     what: &str,
 ) -> anyhow::Result<proto::JobStatus> {
     let size = glb.len();
+    check_locally(&glb, job, what)?;
     let scene = client
         .upload_scene(glb)
         .await

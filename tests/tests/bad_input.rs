@@ -792,3 +792,29 @@ fn broken_scenes_are_refused_by_name_and_nothing_is_stored() {
     want.sort();
     assert_eq!(stored_scenes(&farm), want);
 }
+
+/// What can be checked without the server is checked before the upload: with no server
+/// listening, a bad setting is still reported by name (not as an unreachable server).
+#[test]
+fn bad_settings_are_refused_before_the_scene_is_uploaded() {
+    let farm = Farm::new();
+    let scene = farm.demo_scene();
+    let nowhere = format!("http://127.0.0.1:{}", tests::free_port());
+    for (flag, value, words) in [
+        ("--fps", "-5", "the job's `fps`: must be above 0"),
+        ("--spp", "0", "the job's `spp`: must be 1 to"),
+        ("--tile", "3", "the job's `tile_size`: must be 8 to"),
+        ("--camera", "7", "the job's `camera`: camera 7 does not exist"),
+        ("--frames", "1-200000", "at most 100000"),
+    ] {
+        let out = tessera(
+            &["submit", scene.to_str().unwrap(), "--server", &nowhere, flag, value],
+            farm.path(),
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(words) && !err.contains("cannot reach"),
+            "{flag} {value}: {err}"
+        );
+    }
+}
