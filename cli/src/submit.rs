@@ -234,7 +234,9 @@ fn animation_name(given: &str, scene: &SceneInfo) -> anyhow::Result<String> {
 /// Pack a scene, upload it to the farm and create a render job.
 #[derive(Args, Debug)]
 pub struct SubmitArgs {
-    /// The scene: a .gltf (its .bin and images are packed in) or a .glb.
+    /// The scene: a .gltf (its .bin and images are packed in) or a .glb; or the digest of
+    /// a scene already on the farm (its first 8 or more hex digits, as submit prints them),
+    /// which is not uploaded again.
     pub scene: PathBuf,
     #[command(flatten)]
     pub server: ServerOpts,
@@ -309,7 +311,31 @@ pub async fn upload_and_create(
     for warning in &scene.warnings {
         eprintln!("warning: {what}: {warning}");
     }
-    let spec = job.to_spec(&scene)?;
+    create(client, &scene, size, job).await
+}
+
+/// Creates the job `job` describes for a scene already on the farm (by its digest or the
+/// digest's start).
+pub async fn create_for_stored(
+    client: &Client,
+    digest: &str,
+    job: &JobArgs,
+) -> anyhow::Result<proto::JobStatus> {
+    let scene = client
+        .scene_info(digest)
+        .await
+        .with_context(|| format!("finding scene {digest} on the farm"))?;
+    create(client, &scene, scene.size as usize, job).await
+}
+
+/// Creates the job for `scene`; prints what was found and the job id.
+async fn create(
+    client: &Client,
+    scene: &proto::SceneInfo,
+    size: usize,
+    job: &JobArgs,
+) -> anyhow::Result<proto::JobStatus> {
+    let spec = job.to_spec(scene)?;
     let status = client.create_job(&spec).await.context("creating the job")?;
     let frames = status.spec.frames.map_or(String::new(), |f| {
         if f.step == 1 {
@@ -343,8 +369,14 @@ pub async fn upload_and_create(
 }
 
 pub fn run(args: SubmitArgs) -> anyhow::Result<()> {
-    // The scene is checked before the server is asked anything.
-    let glb = pack_scene(&args.scene)?;
+    // The scene is checked before the server is asked anything; a digest names one it has.
+    let arg = args.scene.to_string_lossy().to_string();
+    let stored = !args.scene.exists() && server::store::is_digest_prefix(&arg);
+    let glb = if stored {
+        None
+    } else {
+        Some(pack_scene(&args.scene)?)
+    };
     let client = args.server.client()?;
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -352,7 +384,10 @@ pub fn run(args: SubmitArgs) -> anyhow::Result<()> {
         .context("starting the async runtime")?;
     runtime.block_on(async {
         let what = args.scene.display().to_string();
-        let job = upload_and_create(&client, glb, &args.job, &what).await?;
+        let job = match glb {
+            Some(glb) => upload_and_create(&client, glb, &args.job, &what).await?,
+            None => create_for_stored(&client, &arg, &args.job).await?,
+        };
         let id = job.id;
         println!("job {id} submitted; dashboard: {}", client.dashboard_url());
         if !args.wait {

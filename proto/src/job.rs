@@ -170,7 +170,8 @@ impl OutputLayer {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct JobSpec {
-    /// SHA-256 digest of an uploaded scene.
+    /// SHA-256 digest of an uploaded scene (or its first 8 or more hex digits; the job
+    /// keeps the whole digest).
     pub scene: String,
     /// A name for people; defaults to `job <id>`.
     #[serde(default)]

@@ -191,6 +191,16 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     s
 }
 
+/// The shortest start of a digest that names a scene: what the CLI prints is 12.
+pub const MIN_DIGEST_PREFIX: usize = 8;
+
+/// Whether `s` is the start of a digest, [`MIN_DIGEST_PREFIX`] to 64 lower-case hex digits.
+pub fn is_digest_prefix(s: &str) -> bool {
+    (MIN_DIGEST_PREFIX..=64).contains(&s.len())
+        && s.bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+}
+
 /// Whether `s` looks like a digest this server wrote (64 lower-case hex digits), so it
 /// can be used as a file name safely.
 pub fn is_digest(s: &str) -> bool {

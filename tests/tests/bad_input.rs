@@ -804,11 +804,22 @@ fn bad_settings_are_refused_before_the_scene_is_uploaded() {
         ("--fps", "-5", "the job's `fps`: must be above 0"),
         ("--spp", "0", "the job's `spp`: must be 1 to"),
         ("--tile", "3", "the job's `tile_size`: must be 8 to"),
-        ("--camera", "7", "the job's `camera`: camera 7 does not exist"),
+        (
+            "--camera",
+            "7",
+            "the job's `camera`: camera 7 does not exist",
+        ),
         ("--frames", "1-200000", "at most 100000"),
     ] {
         let out = tessera(
-            &["submit", scene.to_str().unwrap(), "--server", &nowhere, flag, value],
+            &[
+                "submit",
+                scene.to_str().unwrap(),
+                "--server",
+                &nowhere,
+                flag,
+                value,
+            ],
             farm.path(),
         );
         let err = String::from_utf8_lossy(&out.stderr);

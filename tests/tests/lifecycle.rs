@@ -116,6 +116,22 @@ fn download_clone_priority_and_delete_by_name() {
         "{err}"
     );
 
+    // The scene again by the short digest submit printed: not uploaded again.
+    let digest = farm.job(first).spec.scene;
+    let mut again = vec!["submit", &digest[..12], "--server"];
+    let url = farm.url();
+    again.extend([url.as_str(), "--frames", "1", "--name", "by-digest"]);
+    again.extend(settings("2"));
+    let out = tests::tessera_ok(&again, farm.path());
+    let by_digest = tests::job_id_in(&out).unwrap_or_else(|| panic!("{out}"));
+    assert_eq!(farm.job(by_digest).spec.scene, digest, "{out}");
+    let o = tests::tessera(&["submit", "00000000", "--server", &url], farm.path());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("no scene with digest `00000000`"),
+        "{err}"
+    );
+
     // Priority and delete, by name.
     let out = farm.client(&["priority", "walk-4spp", "-7"]);
     assert_eq!(out.trim(), format!("job {clone} now has priority -7"));

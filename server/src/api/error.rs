@@ -85,7 +85,7 @@ impl IntoResponse for Error {
 
 /// Adds to every operation of the OpenAPI document the error answers the server gives it
 /// beyond those its handler lists, each with the [`ErrorBody`] schema: 400 and 404 for an
-/// operation with path parameters, 400, 413 and 422 for one with a request body, 401 for
+/// operation with path parameters, 400 for one with query parameters, 400, 413 and 422 for one with a request body, 401 for
 /// one behind a token, 403 for a worker's own routes, 503 and 507 for one that writes.
 /// A handler's own description of a status is kept.
 pub struct ErrorAnswers;
@@ -110,6 +110,11 @@ impl utoipa::Modify for ErrorAnswers {
                     .iter()
                     .flatten()
                     .any(|p| matches!(p.parameter_in, ParameterIn::Path));
+                let in_query = op
+                    .parameters
+                    .iter()
+                    .flatten()
+                    .any(|p| matches!(p.parameter_in, ParameterIn::Query));
                 let body = op.request_body.is_some();
                 let schemes: Vec<String> = op
                     .security
@@ -136,9 +141,10 @@ impl utoipa::Modify for ErrorAnswers {
                 };
                 add(
                     "400",
-                    "the request is malformed: a path parameter that is not one (an id past \
-                     the largest), a body that is not JSON or not sent as application/json",
-                    in_path || body,
+                    "the request is malformed: a path or query parameter that is not one (an \
+                     id past the largest, an unknown state), a body that is not JSON or not \
+                     sent as application/json",
+                    in_path || in_query || body,
                 );
                 add(
                     "401",

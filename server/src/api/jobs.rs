@@ -24,7 +24,7 @@ use crate::{assembly, controls, db, spec, status, webhooks};
 )]
 pub async fn create(
     State(app): State<AppState>,
-    JsonBody(spec): JsonBody<JobSpec>,
+    JsonBody(mut spec): JsonBody<JobSpec>,
 ) -> Result<(StatusCode, Json<JobStatus>)> {
     let (max_tasks, assembly_memory) = (app.config.max_tasks_per_job, app.config.assembly_memory);
     if let Some(url) = &spec.webhook {
@@ -43,18 +43,18 @@ pub async fn create(
     let id = app
         .db
         .run(move |c| -> Result<u64> {
-            let scene = match db::scenes::info(c, &spec.scene)? {
-                Some(scene) => scene,
-                None => {
+            // The digest may be shortened, as the CLI prints it.
+            spec.scene = match super::scenes::resolve(c, "scene", &spec.scene) {
+                Err(Error::NotFound(message)) => {
                     return Err(Error::Invalid {
                         field: "scene".into(),
-                        message: format!(
-                            "no scene with digest `{}`; upload it first (POST /api/v1/scenes)",
-                            spec.scene
-                        ),
+                        message,
                     })
                 }
+                other => other?,
             };
+            let scene = db::scenes::info(c, &spec.scene)?
+                .ok_or_else(|| Error::Internal(format!("scene {} vanished", spec.scene)))?;
             let plan = spec::plan(spec, &scene, max_tasks)?;
             assembly::check_assembly_memory(&plan.spec, assembly_memory)?;
             controls::submit(c, &plan, now)

@@ -42,6 +42,9 @@ pub async fn upload(State(app): State<AppState>, body: Body) -> Result<Response>
         // A scene already stored was checked when it first came: answer from the database.
         let digest = store::sha256_hex(&bytes);
         if let Some(info) = a.db.with(|c| db::scenes::info(c, &digest))? {
+            // Uploaded again: retention counts its grace from now.
+            let now = now_ms();
+            a.db.with(|c| db::scenes::insert(c, &digest, bytes.len() as u64, &info, now))?;
             return Ok((info, false));
         }
         let (info, _scene) = crate::scene::inspect(&bytes)
@@ -73,25 +76,60 @@ fn check_digest(digest: &str) -> Result<()> {
     }
 }
 
-/// What an uploaded scene holds.
+/// The full digest of the scene whose digest starts with `prefix` (the whole digest, or
+/// its first 8 or more hex digits, as the CLI prints them).
+pub fn resolve(c: &rusqlite::Connection, field: &str, prefix: &str) -> Result<String> {
+    if !store::is_digest_prefix(prefix) {
+        return Err(Error::Invalid {
+            field: field.into(),
+            message: format!(
+                "`{prefix}` is not a SHA-256 digest or its start ({} to 64 lower-case hex \
+                 digits)",
+                store::MIN_DIGEST_PREFIX
+            ),
+        });
+    }
+    match db::scenes::resolve(c, prefix)? {
+        Ok(Some(digest)) => Ok(digest),
+        Ok(None) => Err(Error::NotFound(format!(
+            "no scene with digest `{prefix}`; upload it first (POST /api/v1/scenes)"
+        ))),
+        Err(many) => Err(Error::Invalid {
+            field: field.into(),
+            message: format!(
+                "`{prefix}` starts the digests of several scenes ({}); give more of it",
+                many.join(", ")
+            ),
+        }),
+    }
+}
+
+/// What an uploaded scene holds; the digest may be shortened to its first 8 or more hex
+/// digits.
 #[utoipa::path(
     get,
     path = "/scenes/{digest}/info",
     tag = "scenes",
-    params(("digest" = String, Path, description = "SHA-256 of the GLB")),
-    responses((status = 200, body = SceneInfo), (status = 404, body = proto::ErrorBody)),
+    params(("digest" = String, Path, description = "SHA-256 of the GLB, or its first 8 or more hex digits")),
+    responses(
+        (status = 200, body = SceneInfo),
+        (status = 404, body = proto::ErrorBody),
+        (status = 422, description = "not a digest, or the start of several", body = proto::ErrorBody),
+    ),
     security(("client_token" = []), ("worker_token" = []), ("worker_credential" = []))
 )]
 pub async fn info(
     State(app): State<AppState>,
     PathParams(digest): PathParams<String>,
 ) -> Result<Json<SceneInfo>> {
-    check_digest(&digest)?;
-    let d = digest.clone();
-    let info = app.db.run(move |c| db::scenes::info(c, &d)).await?;
-    let info = info.ok_or_else(|| {
-        Error::NotFound(format!("no scene with digest {digest}; upload it first"))
-    })?;
+    let info = app
+        .db
+        .run(move |c| {
+            let digest = resolve(c, "digest", &digest)?;
+            db::scenes::info(c, &digest)?
+                .ok_or_else(|| Error::NotFound(format!("no scene with digest {digest}")))
+        })
+        .await?;
     Ok(Json(info))
 }
 

@@ -34,6 +34,24 @@ pub fn insert(
     Ok(())
 }
 
+/// What a digest or a digest's start names: `Ok(None)` when no scene, `Err` with the
+/// matches when more than one.
+pub fn resolve(conn: &Connection, prefix: &str) -> Result<Result<Option<String>, Vec<String>>> {
+    // Hex digits sort before 'g': the range is the prefix's, and uses the primary key.
+    let mut stmt = conn.prepare_cached(
+        "SELECT digest FROM scenes WHERE digest >= ?1 AND digest < ?1 || 'g'
+         ORDER BY digest LIMIT 3",
+    )?;
+    let found: Vec<String> = stmt
+        .query_map([prefix], |r| r.get(0))?
+        .collect::<rusqlite::Result<_>>()?;
+    Ok(match found.len() {
+        0 => Ok(None),
+        1 => Ok(found.into_iter().next()),
+        _ => Err(found),
+    })
+}
+
 /// Scenes last uploaded before `before`, with their sizes.
 pub fn uploaded_before(conn: &Connection, before: i64) -> Result<Vec<(String, u64)>> {
     let mut stmt =
