@@ -18,7 +18,7 @@ use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 
 use crate::args::{parse_frames, parse_shutter, parse_size, FrameRange};
-use crate::client::{Client, Control};
+use crate::client::Client;
 use crate::progress::{self, has_ended, Followed};
 use crate::submit::{upload_and_create, JobArgs};
 
@@ -446,7 +446,7 @@ async fn session(
     server: &LocalServer,
 ) -> anyhow::Result<Outcome> {
     let setup = async {
-        cancel_leftover_jobs(client).await?;
+        clear_earlier_jobs(client).await?;
         upload_and_create(client, glb, &demo_job(args), "the demo scene").await
     };
     let job = tokio::select! {
@@ -510,16 +510,14 @@ async fn session(
     }
 }
 
-/// Cancels jobs a previous, interrupted demo left unfinished in the same data folder, so
-/// that the workers render this run's job.
-async fn cancel_leftover_jobs(client: &Client) -> anyhow::Result<()> {
+/// Deletes the jobs earlier demos left in the same data folder (an interrupted one's
+/// unfinished job too), so that the workers render this run's job and the folder does not
+/// fill up run after run. Their frames were downloaded to frames/, which this run replaces.
+async fn clear_earlier_jobs(client: &Client) -> anyhow::Result<()> {
     for job in client.jobs().await?.jobs {
-        if !has_ended(&job) && job.state != proto::JobState::Cancelled {
-            client.control(job.id, Control::Cancel).await?;
-            eprintln!(
-                "cancelled job {} left unfinished by an earlier demo",
-                job.id
-            );
+        client.delete_job(job.id).await?;
+        if !has_ended(&job) {
+            eprintln!("deleted job {} left unfinished by an earlier demo", job.id);
         }
     }
     Ok(())

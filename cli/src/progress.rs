@@ -2,8 +2,9 @@
 //! `GET /jobs/{id}`, then every finished frame downloaded as `frame_0001.exr` and
 //! `frame_0001.png`. `tessera submit --wait` and `tessera demo` both use [`follow`].
 
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -125,6 +126,20 @@ pub fn progress_message(s: &JobStatus) -> String {
     parts.join(" · ")
 }
 
+/// How often a progress line is printed when there is no terminal for the bar.
+const PROGRESS_LINE_EVERY: Duration = Duration::from_secs(10);
+
+/// One line of progress for a log: `job 3: 6/12 tasks · frames 1/4 · ETA 1m 05s · ...`.
+fn progress_line(s: &JobStatus) -> String {
+    format!(
+        "job {}: {}/{} tasks · {}",
+        s.id,
+        s.tasks.done,
+        s.tasks.total(),
+        progress_message(s)
+    )
+}
+
 fn bar(total: u64) -> ProgressBar {
     let bar = ProgressBar::new(total);
     let style = ProgressStyle::with_template(
@@ -157,11 +172,19 @@ pub async fn watch(
     tokio::pin!(interrupted);
     let (id, mut status) = (job.id, job);
     let bar = bar(status.tasks.total());
+    // Without a terminal the bar is hidden: a line now and then tells a log how it goes.
+    let mut lines = (!std::io::stderr().is_terminal()).then_some(None::<Instant>);
     let mut failed_polls = 0;
     loop {
         bar.set_length(status.tasks.total());
         bar.set_position(status.tasks.done);
         bar.set_message(progress_message(&status));
+        if let Some(last) = &mut lines {
+            if last.is_none_or(|t| t.elapsed() >= PROGRESS_LINE_EVERY) || has_ended(&status) {
+                *last = Some(Instant::now());
+                eprintln!("{}", progress_line(&status));
+            }
+        }
         if let Some(line) = check(&status).inspect_err(|_| bar.abandon())? {
             note(&bar, &line);
         }
@@ -364,6 +387,14 @@ mod tests {
         assert_eq!(rate(950.0), "950 samples/s");
         assert_eq!(rate(12_345.0), "12.3 k samples/s");
         assert_eq!(rate(1_234_567.0), "1.23 M samples/s");
+    }
+
+    #[test]
+    fn a_progress_line_names_the_job_and_its_tasks() {
+        assert_eq!(
+            progress_line(&status(JobState::Running)),
+            "job 3: 6/12 tasks · frames 1/4 · ETA 1m 05s · 1.23 M samples/s"
+        );
     }
 
     #[test]

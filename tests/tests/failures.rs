@@ -51,6 +51,8 @@ fn a_job_no_worker_can_render_says_why_everywhere_and_wait_stops() {
         )),
         "{stderr}"
     );
+    // Without a terminal, progress comes as lines.
+    assert!(stderr.contains("job 1: 0/"), "{stderr}");
     // One line, no backtrace, even with RUST_BACKTRACE set.
     let last = stderr.trim_end().lines().last().unwrap_or_default();
     assert!(last.starts_with("error: job 1 cannot go on"), "{stderr}");

@@ -191,22 +191,29 @@ fn kill_9_of_the_server_mid_job_keeps_accepted_tiles_and_finishes() {
 #[test]
 fn tessera_demo_runs_a_farm_and_leaves_frames_and_nothing_running() {
     let dir = tempfile::tempdir().unwrap();
-    let out = tessera_ok(
-        &[
-            "demo",
-            "--workers",
-            "2",
-            "--frames",
-            "1-2",
-            "--size",
-            "32x24",
-            "--spp",
-            "2",
-            "--dir",
-            "demo",
-        ],
-        dir.path(),
-    );
+    let demo = [
+        "demo",
+        "--workers",
+        "2",
+        "--frames",
+        "1-2",
+        "--size",
+        "32x24",
+        "--spp",
+        "2",
+        "--dir",
+        "demo",
+    ];
+    // Run twice in the same folder: the second run reuses it without piling up jobs or
+    // workers.
+    tessera_ok(&demo, dir.path());
+    let out = tessera_ok(&demo, dir.path());
+    let db = rusqlite::Connection::open(dir.path().join("demo/data/tessera.db")).unwrap();
+    let count = |table: &str| -> i64 {
+        db.query_row(&format!("SELECT count(*) FROM {table}"), [], |r| r.get(0))
+            .unwrap()
+    };
+    assert_eq!((count("jobs"), count("workers")), (1, 2));
     assert!(
         out.contains("http://127.0.0.1:"),
         "the dashboard URL: {out}"
