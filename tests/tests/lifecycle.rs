@@ -1,5 +1,6 @@
 //! A job's life after submission, as its user drives it from the command line, naming the
-//! job by its name: download its frames (again, fetching only what is missing), clone it
+//! job by its name: download its frames (again after a server restart, fetching only what
+//! is missing), clone it
 //! with one setting changed (the clone's frames equal a direct render at that setting,
 //! bit for bit), render a frame again (the same bits), change its priority, delete it.
 
@@ -39,6 +40,9 @@ fn download_clone_priority_and_delete_by_name() {
     );
     assert!(dir.join("frame_0002.png").is_file());
     std::fs::remove_file(&frame1).unwrap();
+    // The server restarts in between: the finished job's frames are still there.
+    farm.server.as_mut().unwrap().kill9();
+    farm.start_server(60);
     let out = farm.client(&["download", "walk", "--out", "walk-frames"]);
     assert!(out.contains("(3 file(s) already there"), "{out}");
     assert_eq!(
