@@ -129,7 +129,7 @@ async fn deliver(app: &AppState, entry: Pending) -> Result<()> {
                 send(&app.webhooks.client, &url, notification.id, body, &sign).await
             }
         });
-        for (url, delivered) in futures_join(tries).await {
+        for (url, delivered) in join_all(tries).await {
             if !delivered {
                 tracing::warn!(
                     "webhook {url}: notification {} not taken after {ATTEMPTS} tries; dropped",
@@ -142,7 +142,7 @@ async fn deliver(app: &AppState, entry: Pending) -> Result<()> {
 }
 
 /// Runs the deliveries together; each says its URL and whether it was taken.
-async fn futures_join<F>(tries: impl Iterator<Item = F>) -> Vec<(String, bool)>
+async fn join_all<F>(tries: impl Iterator<Item = F>) -> Vec<(String, bool)>
 where
     F: std::future::Future<Output = (String, bool)> + Send + 'static,
 {
