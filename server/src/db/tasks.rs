@@ -184,6 +184,11 @@ const NOT_IN_CHECK_GROUP: &str = "(t.check_of IS NULL OR NOT EXISTS (
         SELECT 1 FROM tasks g WHERE (g.id = t.check_of OR g.check_of = t.check_of)
           AND g.state = 'done' AND g.worker_id = ?2))";
 
+/// The lease order of a job's tasks: preview round, frame, pass, tile.
+const FRAME_ORDER: &str = "t.round, t.frame, t.pass, t.tile";
+/// A time-budget job's: as its plan issued them.
+const BUDGET_ORDER: &str = "t.id";
+
 /// The next queued task for `worker` in job `job`: tasks it has not failed first; a task
 /// it failed only when no other live worker (seen since `live_since`) could take it.
 /// Round by round (preview-first frames, then the rest), frame by frame, pass by pass; a
@@ -196,24 +201,10 @@ pub fn next_for(
     worker: u64,
     live_since: i64,
 ) -> Result<Option<u64>> {
-    let order = if budget {
-        "t.id"
-    } else {
-        "t.round, t.frame, t.pass, t.tile"
-    };
+    let order = if budget { BUDGET_ORDER } else { FRAME_ORDER };
     let tagged = has_required_tags("(SELECT spec FROM jobs WHERE id = t.job_id)", "w.tags");
     let fresh: Option<u64> = tx
-        .row(
-            &format!(
-                "SELECT t.id FROM tasks t
-             WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
-               AND NOT EXISTS (SELECT 1 FROM task_failures f
-                               WHERE f.task_id = t.id AND f.worker_id = ?2)
-             ORDER BY {order} LIMIT 1"
-            ),
-            params![job, worker],
-            |r| r.get(0),
-        )
+        .row(&next_fresh_sql(order), params![job, worker], |r| r.get(0))
         .optional()?;
     if fresh.is_some() {
         return Ok(fresh);
@@ -238,6 +229,17 @@ pub fn next_for(
             |r| r.get(0),
         )
         .optional()?)
+}
+
+/// The next queued task of job `?1` that worker `?2` has not failed, in `order`.
+fn next_fresh_sql(order: &str) -> String {
+    format!(
+        "SELECT t.id FROM tasks t
+         WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
+           AND NOT EXISTS (SELECT 1 FROM task_failures f
+                           WHERE f.task_id = t.id AND f.worker_id = ?2)
+         ORDER BY {order} LIMIT 1"
+    )
 }
 
 /// Records the lease of a task the caller moved to leased.
@@ -567,4 +569,32 @@ pub fn progress(conn: &Connection, job: u64) -> Result<Progress> {
         *slot = n;
     }
     Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lease walks the queue's index in lease order: a sort would read the job's whole
+    /// queue on every lease (a million tasks for the largest job). A time-budget job's
+    /// queue holds only the passes its plan issued, and is sorted.
+    #[test]
+    fn the_next_task_is_read_off_the_queue_index_without_a_sort() {
+        let mut conn = Connection::open_in_memory().unwrap();
+        super::super::migrations::migrate(&mut conn).unwrap();
+        let plan: Vec<String> = conn
+            .prepare(&format!(
+                "EXPLAIN QUERY PLAN {}",
+                next_fresh_sql(FRAME_ORDER)
+            ))
+            .unwrap()
+            .query_map(params![1, 2], |r| r.get::<_, String>(3))
+            .unwrap()
+            .collect::<rusqlite::Result<_>>()
+            .unwrap();
+        assert!(
+            plan.iter().all(|step| !step.contains("TEMP B-TREE")),
+            "{plan:?}"
+        );
+    }
 }
