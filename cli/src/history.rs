@@ -88,8 +88,8 @@ fn task_text(id: u64, log: &TaskLog) -> String {
     );
     if log.attempts.is_empty() {
         out.push_str(
-            "workers send a task's lines with its heartbeats and its failure report; a task \
-             that went well before its first heartbeat sends only its warnings\n",
+            "workers send a task's lines with its heartbeats, its failure report and their \
+             next lease request; a worker that stopped right after the task sent none\n",
         );
     }
     for a in &log.attempts {

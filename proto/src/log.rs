@@ -1,6 +1,7 @@
 //! What happened to a job, for people reading it afterwards: the lines a worker logged
-//! while it held a task (sent with its heartbeats and its failure report), and the job's
-//! event log (created, paused, a task failed, a frame assembled, ...).
+//! while it held a task (sent with its heartbeats, its failure report or its next lease
+//! request), and the job's event log (created, paused, a task failed, a frame assembled,
+//! ...).
 
 use serde::{Deserialize, Serialize};
 

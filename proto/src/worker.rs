@@ -123,6 +123,21 @@ pub struct LeaseRequest {
     /// default 0: answer at once).
     #[serde(default)]
     pub wait_seconds: u64,
+    /// The lines the worker logged for its previous lease after that lease's last
+    /// heartbeat: a task that ends before its first heartbeat sends them all here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_task_log: Option<TaskLogLines>,
+}
+
+/// Log lines of one lease.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct TaskLogLines {
+    /// The lease they were logged for.
+    pub token: TaskToken,
+    /// The lines, oldest first.
+    pub lines: Vec<LogLine>,
 }
 
 /// A fencing token: the task and which attempt at it this lease is. A heartbeat, result or

@@ -141,6 +141,24 @@ pub fn heartbeat(
     result.map(Some)
 }
 
+/// Keeps the lines `worker` logged for `token` after its last heartbeat (sent with its
+/// next lease request): only for an attempt that worker held; others are dropped.
+pub fn keep_late_log(
+    conn: &mut Connection,
+    worker: u64,
+    token: TaskToken,
+    lines: &[LogLine],
+) -> Result<()> {
+    let tx = conn.transaction()?;
+    let held = tasks::load(&tx, token.task_id)?
+        .is_some_and(|t| t.worker_id == Some(worker) && t.attempt == token.attempt);
+    if held {
+        logs::append(&tx, token.task_id, token.attempt, worker, lines)?;
+    }
+    tx.commit()?;
+    Ok(())
+}
+
 /// What [`accept`] did.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Accepted {

@@ -206,7 +206,13 @@ impl Rogue {
 
     fn lease(&self) -> Lease {
         let path = format!("/api/v1/workers/{}/lease", self.id);
-        let answer = self.post_json(&path, &LeaseRequest { wait_seconds: 10 });
+        let answer = self.post_json(
+            &path,
+            &LeaseRequest {
+                wait_seconds: 10,
+                ..LeaseRequest::default()
+            },
+        );
         assert_eq!(answer.status, 200, "{}", answer.text());
         answer.json()
     }

@@ -131,6 +131,14 @@ fn a_job_no_worker_can_render_says_why_everywhere_and_wait_stops() {
     let done = farm.wait_for_job(1, Duration::from_secs(120));
     assert_eq!(done.state, proto::JobState::Done, "{done:?}");
     assert_eq!(done.stuck, None);
+    // A task that went well has its worker's lines too (sent with the next lease request).
+    let tasks: TaskList = http::get(farm.port, "/api/v1/jobs/1/tasks?state=done").json();
+    let last = tasks.tasks.iter().max_by_key(|t| t.id).unwrap();
+    let text = farm.client(&["logs", "1", "--task", &last.id.to_string()]);
+    assert!(
+        text.contains("on worker healthy:") && text.contains("INFO  lease taken: job 1"),
+        "{text}"
+    );
 }
 
 #[test]

@@ -16,7 +16,8 @@ use std::time::Duration;
 use anyhow::Context;
 use proto::{
     ErrorBody, FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, LogLine,
-    ResultAck, ResultMetadata, TaskToken, WorkerLeft, WorkerRegistered, WorkerRegistration,
+    ResultAck, ResultMetadata, TaskLogLines, TaskToken, WorkerLeft, WorkerRegistered,
+    WorkerRegistration,
 };
 use reqwest::{RequestBuilder, Response, StatusCode};
 
@@ -300,12 +301,19 @@ impl Api {
         }
     }
 
-    /// `POST /workers/{id}/lease`, waiting up to `wait` for work.
-    pub async fn lease(&self, worker: u64, wait: Duration) -> Result<LeaseAnswer, ApiError> {
+    /// `POST /workers/{id}/lease`, waiting up to `wait` for work, with the previous lease's
+    /// last log lines.
+    pub async fn lease(
+        &self,
+        worker: u64,
+        wait: Duration,
+        last_task_log: Option<TaskLogLines>,
+    ) -> Result<LeaseAnswer, ApiError> {
         let req = self
             .post(&format!("/workers/{worker}/lease"), wait + LEASE_SLACK)
             .json(&LeaseRequest {
                 wait_seconds: wait.as_secs(),
+                last_task_log,
             });
         let res = self.send(req).await?;
         match res.status() {

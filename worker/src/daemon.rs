@@ -34,7 +34,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use proto::{Lease, LogLevel, TaskToken, WorkerRegistered, WorkerRegistration};
+use proto::{Lease, TaskLogLines, TaskToken, WorkerRegistered, WorkerRegistration};
 use tokio::task::JoinHandle;
 use tracer::film::TileBuffer;
 use tracer::output::ExrCompression;
@@ -136,6 +136,7 @@ pub async fn run(
         warned: Vec::new(),
         compression,
         delivery: None,
+        late_log: None,
         summary: RunSummary::default(),
     };
     let result = daemon.main_loop().await;
@@ -163,6 +164,9 @@ struct Daemon {
     compression: ExrCompression,
     /// The last tile's upload, running while the next tile renders.
     delivery: Option<JoinHandle<Delivered>>,
+    /// The lines logged for the last lease after its last heartbeat: sent with the next
+    /// lease request.
+    late_log: Option<TaskLogLines>,
     summary: RunSummary,
 }
 
@@ -266,10 +270,11 @@ impl Daemon {
     async fn lease_and_work(&mut self, reg: &WorkerRegistered) -> Option<Result<(), ApiError>> {
         let wait = Duration::from_secs(reg.max_wait_seconds);
         let asked = Instant::now();
+        let late_log = self.late_log.take();
         let answer = self
             .api
             .retry("lease", &self.stop, InFlight::Drop, || {
-                self.api.lease(reg.worker_id, wait)
+                self.api.lease(reg.worker_id, wait, late_log.clone())
             })
             .await;
         Some(match answer {
@@ -429,7 +434,8 @@ impl Daemon {
     async fn work(&mut self, reg: &WorkerRegistered, lease: Lease) -> Result<(), ApiError> {
         let task = lease.token.task_id;
         // What is logged about the lease from here on goes to the server with its
-        // heartbeats or failure report (the upload's own lines stay in this log only).
+        // heartbeats, its failure report or the next lease request (the upload's own lines
+        // stay in this log only).
         let _log = TaskLog::open(task);
         tracing::info!(
             "lease taken: job {} frame {} tile {}x{} at ({}, {}) samples {}..{} (task {}, \
@@ -494,10 +500,7 @@ impl Daemon {
                 );
                 return Ok(());
             }
-            Some(Ok(r)) => {
-                self.send_warnings(reg.worker_id, lease.token).await;
-                r
-            }
+            Some(Ok(r)) => r,
             Some(Err(TaskError::Api(e))) => {
                 self.count(Fate::Abandoned);
                 return Err(e);
@@ -512,22 +515,14 @@ impl Daemon {
             self.count(Fate::Abandoned);
             return Err(e);
         }
+        // What was logged since the last heartbeat goes with the next lease request.
+        self.late_log = Some(TaskLogLines {
+            token: lease.token,
+            lines: task_log::take(task),
+        });
         let delivery = courier.deliver(lease, tile, render_ms, self.compression);
         self.delivery = Some(tokio::spawn(delivery.in_current_span()));
         Ok(())
-    }
-
-    /// Sends the lines logged for a rendered lease when one is a warning or an error: a
-    /// task that ends before its next heartbeat would otherwise keep them from the server.
-    /// Lines of a task that went well stay here (one more call per tile is not worth them).
-    async fn send_warnings(&self, worker: u64, token: TaskToken) {
-        let log = task_log::take(token.task_id);
-        if log.iter().all(|l| l.level > LogLevel::Warn) {
-            return;
-        }
-        if let Err(e) = self.api.heartbeat(worker, token, log).await {
-            tracing::debug!("sending the log of task {}: {e}", token.task_id);
-        }
     }
 
     /// Scene, frame, render: `Ok` with the tile and its render time in milliseconds.

@@ -11,7 +11,7 @@
 //! | [`cache`] | scenes on disk as `<digest>.glb`: verified on read, written atomically |
 //! | [`identity`] | the credential a registration answered, kept for the next start |
 //! | [`render`] | a [`proto::Lease`] into tracer frame options, a tile render, its EXR bytes |
-//! | [`task_log`] | the lines logged per task, sent with its heartbeats and failure report |
+//! | [`task_log`] | the lines logged per task, sent with its heartbeats, failure report or the next lease request |
 //! | `stop` | the shutdown signal every wait listens to |
 //! | `daemon` | [`run`]: the register / lease / render / upload loop |
 //!

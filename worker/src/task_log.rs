@@ -1,5 +1,5 @@
 //! The lines this worker logs while it holds a task, kept until they are sent with the
-//! task's next heartbeat or its failure report, so that `tessera logs JOB --task N` shows
+//! task's next heartbeat, its failure report or (once rendered) the next lease request, so that `tessera logs JOB --task N` shows
 //! what the worker saw. A [`TaskLogLayer`] in the process's subscriber copies every event
 //! logged inside a `task{id}` span into the buffer of an open [`TaskLog`] with that id.
 //! Events of tasks with no open log (the server's own `task` spans) are not kept.

@@ -337,7 +337,7 @@ async fn simulated_worker(
         }
         let asked = Instant::now();
         let answer = tokio::select! {
-            a = api.lease(id, LEASE_WAIT) => a,
+            a = api.lease(id, LEASE_WAIT, None) => a,
             _ = stop.wait_for(|s| *s) => break,
         };
         let lease = match answer {

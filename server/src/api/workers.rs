@@ -160,6 +160,11 @@ pub async fn lease(
     JsonBody(req): JsonBody<LeaseRequest>,
 ) -> Result<Response> {
     let started = Instant::now();
+    if let Some(late) = req.last_task_log {
+        app.db
+            .run(move |c| scheduler::keep_late_log(c, worker, late.token, &late.lines))
+            .await?;
+    }
     let wait = Duration::from_secs(req.wait_seconds).min(app.config.max_lease_wait);
     let deadline = tokio::time::Instant::now() + wait;
     loop {

@@ -140,12 +140,24 @@ impl SimWorker {
     }
 
     pub async fn lease_wait(&self, s: &TestServer, wait_seconds: u64) -> Option<Lease> {
+        self.lease_with(
+            s,
+            LeaseRequest {
+                wait_seconds,
+                ..LeaseRequest::default()
+            },
+        )
+        .await
+    }
+
+    /// A lease request as given (with the previous lease's last log lines, say).
+    pub async fn lease_with(&self, s: &TestServer, request: LeaseRequest) -> Option<Lease> {
         let res = self
             .auth(
                 self.client
                     .post(s.url(&format!("/workers/{}/lease", self.id))),
             )
-            .json(&LeaseRequest { wait_seconds })
+            .json(&request)
             .send()
             .await
             .unwrap();

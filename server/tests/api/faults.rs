@@ -463,6 +463,48 @@ async fn a_task_log_keeps_the_lines_of_each_attempt_bounded_and_the_job_log_list
 }
 
 #[tokio::test(flavor = "multi_thread")]
+async fn lines_logged_after_the_last_heartbeat_come_with_the_next_lease_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(config(dir.path()));
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let job = create_job(&s, &c, &small(&scene.digest, 1)).await;
+    let mut w = SimWorker::register(&s, "sim").await;
+    let other = SimWorker::register(&s, "other").await;
+    let done = w.lease(&s).await.unwrap();
+    let (exr, _) = w.render(&s, &done).await;
+    assert_eq!(w.upload(&s, &done, exr).await.status(), StatusCode::OK);
+    let late = |text: &str| proto::LeaseRequest {
+        wait_seconds: 0,
+        last_task_log: Some(proto::TaskLogLines {
+            token: done.token,
+            lines: vec![line(5, LogLevel::Info, text)],
+        }),
+    };
+    // The worker that rendered it: kept. Another worker claiming it: dropped.
+    assert!(w.lease_with(&s, late("tile uploaded")).await.is_some());
+    assert!(other.lease_with(&s, late("not mine")).await.is_some());
+    let log: TaskLog = c
+        .get(s.url(&format!(
+            "/jobs/{}/tasks/{}/log",
+            job.id, done.token.task_id
+        )))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let texts: Vec<&str> = log
+        .attempts
+        .iter()
+        .flat_map(|a| &a.lines)
+        .map(|l| &l.text[..])
+        .collect();
+    assert_eq!(texts, ["tile uploaded"]);
+}
+
+#[tokio::test(flavor = "multi_thread")]
 async fn an_expired_lease_is_requeued_and_its_worker_hears_409() {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = config(dir.path());
@@ -574,7 +616,10 @@ async fn a_waiting_lease_request_wakes_when_a_job_arrives() {
         client()
             .post(url)
             .bearer_auth(credential)
-            .json(&proto::LeaseRequest { wait_seconds: 30 })
+            .json(&proto::LeaseRequest {
+                wait_seconds: 30,
+                ..proto::LeaseRequest::default()
+            })
             .send()
             .await
             .unwrap()

@@ -78,7 +78,10 @@ impl Painter {
     /// The next task, if any is left.
     fn lease(&self) -> Option<Lease> {
         let path = format!("/api/v1/workers/{}/lease", self.id);
-        let wait = LeaseRequest { wait_seconds: 1 };
+        let wait = LeaseRequest {
+            wait_seconds: 1,
+            ..LeaseRequest::default()
+        };
         let answer = post_json(self.port, &path, &wait, Some(self.bearer()));
         match answer.status {
             200 => Some(answer.json()),
