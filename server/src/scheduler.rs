@@ -4,7 +4,7 @@
 //! [`tasks::advance`]); times are passed in (`now`, Unix ms) so tests need no clock. The
 //! job controls are in [`crate::controls`].
 
-use proto::{FailureAck, FailureKind, Lease, LogLine, Rect, SampleSpan, TaskToken};
+use proto::{FailureAck, FailureKind, Lease, LogLine, Rect, SampleSpan, TaskLogLines, TaskToken};
 use rusqlite::{Connection, Transaction};
 
 use crate::config::Timing;
@@ -16,15 +16,42 @@ use crate::state::{JobControl, TaskEvent, TaskState};
 use crate::verify::{self, Verdict};
 
 /// Leases the next task to `worker`: active jobs by priority (highest first), then age;
-/// within a job, frame by frame and pass by pass so that previews fill in evenly.
+/// within a job, round by round (preview-first), frame by frame and pass by pass so that
+/// previews fill in evenly.
 pub fn lease(
     conn: &mut Connection,
     worker: u64,
     now: i64,
     timing: Timing,
 ) -> Result<Option<Lease>> {
+    lease_keeping(conn, worker, None, now, timing)
+}
+
+/// [`lease`], keeping first, in the same transaction, the lines the worker logged for its
+/// previous lease after that lease's last heartbeat: only for an attempt that worker
+/// held; others are dropped.
+pub fn lease_keeping(
+    conn: &mut Connection,
+    worker: u64,
+    late: Option<&TaskLogLines>,
+    now: i64,
+    timing: Timing,
+) -> Result<Option<Lease>> {
     let tx = conn.transaction()?;
     workers::touch(&tx, worker, now)?;
+    if let Some(late) = late {
+        let held = tasks::load(&tx, late.token.task_id)?
+            .is_some_and(|t| t.worker_id == Some(worker) && t.attempt == late.token.attempt);
+        if held {
+            logs::append(
+                &tx,
+                late.token.task_id,
+                late.token.attempt,
+                worker,
+                &late.lines,
+            )?;
+        }
+    }
     if workers::is_quarantined(&tx, worker)? {
         tx.commit()?;
         return Ok(None);
@@ -139,24 +166,6 @@ pub fn heartbeat(
     // The worker's last-seen time is kept even when the lease is gone.
     tx.commit()?;
     result.map(Some)
-}
-
-/// Keeps the lines `worker` logged for `token` after its last heartbeat (sent with its
-/// next lease request): only for an attempt that worker held; others are dropped.
-pub fn keep_late_log(
-    conn: &mut Connection,
-    worker: u64,
-    token: TaskToken,
-    lines: &[LogLine],
-) -> Result<()> {
-    let tx = conn.transaction()?;
-    let held = tasks::load(&tx, token.task_id)?
-        .is_some_and(|t| t.worker_id == Some(worker) && t.attempt == token.attempt);
-    if held {
-        logs::append(&tx, token.task_id, token.attempt, worker, lines)?;
-    }
-    tx.commit()?;
-    Ok(())
 }
 
 /// What [`accept`] did.

@@ -160,11 +160,8 @@ pub async fn lease(
     JsonBody(req): JsonBody<LeaseRequest>,
 ) -> Result<Response> {
     let started = Instant::now();
-    if let Some(late) = req.last_task_log {
-        app.db
-            .run(move |c| scheduler::keep_late_log(c, worker, late.token, &late.lines))
-            .await?;
-    }
+    // Kept with the first look for work, in its transaction.
+    let mut late = req.last_task_log;
     let wait = Duration::from_secs(req.wait_seconds).min(app.config.max_lease_wait);
     let deadline = tokio::time::Instant::now() + wait;
     loop {
@@ -175,9 +172,10 @@ pub async fn lease(
         let (now, timing) = (now_ms(), app.timing());
         // If the worker hangs up while this runs, the lease is granted but never seen; it
         // expires after one lease period and the task is leased again.
+        let late = late.take();
         let lease = app
             .db
-            .run(move |c| scheduler::lease(c, worker, now, timing))
+            .run(move |c| scheduler::lease_keeping(c, worker, late.as_ref(), now, timing))
             .await?;
         if let Some(lease) = lease {
             app.metrics.lease_granted(started.elapsed().as_secs_f64());
