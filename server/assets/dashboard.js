@@ -229,6 +229,7 @@ function removeJob(id) {
   cards.delete(id);
   jobs.delete(id);
   frameCells.delete(id);
+  frameLoads.delete(id);
 }
 
 // Why a job's attempts failed, grouped by reason; read again only when the count changes.
@@ -252,14 +253,22 @@ function showFailures(card, job) {
 // ---- frames ----
 
 const frameCells = new Map();  // job id -> Map(frame number -> figure)
+const frameLoads = new Map();  // job id -> the promise of its grid
 
-async function loadFrames(id) {
-  if (frameCells.has(id)) return;
-  frameCells.set(id, new Map());
-  const { frames } = await get(`/jobs/${id}/frames`).catch((e) => {
-    frameCells.delete(id);
-    throw e;
-  });
+// Fills a job's frame grid once; every caller gets the same promise.
+function loadFrames(id) {
+  if (!frameCells.has(id)) {
+    frameCells.set(id, new Map());
+    frameLoads.set(id, buildGrid(id).catch((e) => {
+      frameCells.delete(id);
+      frameLoads.delete(id);
+      throw e;
+    }));
+  }
+  return frameLoads.get(id);
+}
+async function buildGrid(id) {
+  const { frames } = await get(`/jobs/${id}/frames`);
   const strip = cards.get(id)?.querySelector(".frames");
   if (!strip) return;
   const cells = frameCells.get(id);
@@ -343,6 +352,9 @@ async function loadAll() {
   for (const id of [...cards.keys()]) {
     if (!list.some((j) => j.id === id)) removeJob(id);
   }
+  // Loaded means the open grids too.
+  await Promise.all([...cards].filter(([, card]) => card.querySelector(".frames-panel").open)
+    .map(([id]) => loadFrames(id)));
 }
 
 let source = null;
@@ -366,6 +378,7 @@ function listen() {
     for (const [id, card] of cards) {
       if (card.querySelector(".frames-panel").open) {
         frameCells.delete(id);
+        frameLoads.delete(id);
         loadFrames(id).catch(showError);
       }
     }

@@ -217,7 +217,8 @@ async fn sweep(app: AppState) {
         webhooks::deliver_pending(&app).await;
         if last_gc.is_none_or(|t| t.elapsed() >= retention::GC_INTERVAL) {
             last_gc = Some(std::time::Instant::now());
-            housekeeping(&app).await;
+            // Beside the sweep: walking a large data folder must not hold up expiry.
+            tokio::spawn(housekeeping(app.clone()));
         }
         let (now, timing) = (now_ms(), app.timing());
         match app.db.run(move |c| scheduler::expire(c, now, timing)).await {
@@ -275,12 +276,11 @@ async fn sweep(app: AppState) {
 
 /// Every [`retention::GC_INTERVAL`]: retention by the server's `--keep-jobs`, and the
 /// data folder's disk use for the metric.
-async fn housekeeping(app: &AppState) {
-    let a = app.clone();
+async fn housekeeping(app: AppState) {
     let done = tokio::task::spawn_blocking(move || {
-        let collected = retention::collect(&a, a.config.keep_jobs, false, now_ms());
-        a.metrics
-            .set_data_bytes(store::disk_use(&a.config.data_dir));
+        let collected = retention::collect(&app, app.config.keep_jobs, false, now_ms());
+        app.metrics
+            .set_data_bytes(store::disk_use(&app.config.data_dir));
         collected
     })
     .await;

@@ -234,7 +234,7 @@ async fn dashboard_shows_jobs_frames_failures_and_workers_live_in_chromium() {
     let (mut browser, before) = tokio::task::spawn_blocking(move || {
         let mut b = Browser::open(&url);
         b.wait_for("document.body.dataset.loaded === 'true' && document.getElementById('live').className === 'on'", "the loaded, live page");
-        b.wait_for("[...document.querySelectorAll('.frames img')].every(i => i.complete && i.naturalWidth > 0)", "the thumbnails");
+        b.wait_for("document.querySelectorAll('.frames img').length === 1 && [...document.querySelectorAll('.frames img')].every(i => i.complete && i.naturalWidth > 0)", "the thumbnail");
         b.wait_for("document.querySelectorAll('.failures li').length === 1", "the failure");
         let before = summary(&mut b);
         (b, before)
