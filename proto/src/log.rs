@@ -73,14 +73,19 @@ pub struct LogLine {
 impl LogLine {
     /// `text` cut to [`MAX_LOG_LINE_BYTES`] at a character boundary.
     pub fn bounded(at_ms: i64, level: LogLevel, mut text: String) -> LogLine {
-        if text.len() > MAX_LOG_LINE_BYTES {
-            let mut cut = MAX_LOG_LINE_BYTES;
-            while !text.is_char_boundary(cut) {
-                cut -= 1;
-            }
-            text.truncate(cut);
-        }
+        truncate_at_char(&mut text, MAX_LOG_LINE_BYTES);
         LogLine { at_ms, level, text }
+    }
+}
+
+/// Cuts `text` to at most `max` bytes, at a character boundary.
+pub fn truncate_at_char(text: &mut String, max: usize) {
+    if text.len() > max {
+        let mut cut = max;
+        while !text.is_char_boundary(cut) {
+            cut -= 1;
+        }
+        text.truncate(cut);
     }
 }
 

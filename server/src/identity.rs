@@ -104,7 +104,7 @@ fn new_credential() -> Result<String> {
     let mut bytes = [0u8; 32];
     getrandom::fill(&mut bytes)
         .map_err(|e| Error::Internal(format!("drawing a worker credential: {e}")))?;
-    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+    Ok(crate::store::hex(&bytes))
 }
 
 /// The worker `credential` belongs to, if any.

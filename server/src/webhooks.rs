@@ -19,6 +19,7 @@ use tokio::sync::Semaphore;
 use crate::app::{now_ms, AppState};
 use crate::db::outbox::{self, Pending, Subject};
 use crate::error::{Error, Result};
+use crate::store::hex;
 use crate::{db, status};
 
 /// Tries per URL and notification.
@@ -76,13 +77,7 @@ pub fn signature(secret: &str, body: &[u8]) -> String {
     let mut mac =
         Hmac::<Sha256>::new_from_slice(secret.as_bytes()).expect("HMAC takes keys of any size");
     mac.update(body);
-    let hex: String = mac
-        .finalize()
-        .into_bytes()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
-    format!("sha256={hex}")
+    format!("sha256={}", hex(&mac.finalize().into_bytes()))
 }
 
 /// Hands the outbox's entries to delivery tasks (those not already under way).

@@ -340,13 +340,7 @@ pub async fn failure(
 ) -> Result<Json<FailureAck>> {
     let (worker, task) = (worker.0, task.0);
     let mut message = report.message;
-    if message.len() > MAX_FAILURE_MESSAGE_BYTES {
-        let mut cut = MAX_FAILURE_MESSAGE_BYTES;
-        while !message.is_char_boundary(cut) {
-            cut -= 1;
-        }
-        message.truncate(cut);
-    }
+    proto::log::truncate_at_char(&mut message, MAX_FAILURE_MESSAGE_BYTES);
     tracing::warn!("worker {worker} failed task {task}: {message}");
     let token = TaskToken {
         task_id: task,
