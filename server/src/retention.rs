@@ -120,11 +120,10 @@ pub fn collect(app: &AppState, keep: KeepJobs, dry_run: bool, now: i64) -> Resul
             .filter(|(job, _)| !going.contains(job))
             .map(|(_, scene)| scene)
             .collect();
-        let scenes: Vec<(String, u64)> =
-            db::scenes::uploaded_before(c, now - UNUSED_SCENE_GRACE_MS)?
-                .into_iter()
-                .filter(|(digest, _)| !in_use.contains(digest))
-                .collect();
+        let scenes: Vec<String> = db::scenes::uploaded_before(c, now - UNUSED_SCENE_GRACE_MS)?
+            .into_iter()
+            .filter(|digest| !in_use.contains(digest))
+            .collect();
         let ids: Vec<u64> = going.into_iter().collect();
         let events = db::events::to_trim(c, &ids, MAX_EVENTS)?;
         Ok((jobs, scenes, events))
@@ -150,9 +149,8 @@ pub fn collect(app: &AppState, keep: KeepJobs, dry_run: bool, now: i64) -> Resul
         report.bytes += bytes;
         report.jobs.push(job);
     }
-    for (digest, _) in scenes {
-        let path = store.scene(&digest);
-        let bytes = disk_use(&path);
+    for digest in scenes {
+        let bytes = disk_use(&store.scene(&digest));
         if !dry_run {
             let gone = app.db.with(|c| -> Result<bool> {
                 let tx = c.transaction()?;
@@ -163,10 +161,7 @@ pub fn collect(app: &AppState, keep: KeepJobs, dry_run: bool, now: i64) -> Resul
             if !gone {
                 continue;
             }
-            std::fs::remove_file(&path).or_else(|e| match e.kind() {
-                std::io::ErrorKind::NotFound => Ok(()),
-                _ => Err(e),
-            })?;
+            store.remove_scene(&digest)?;
         }
         report.bytes += bytes;
         report.scenes.push(digest);

@@ -131,12 +131,14 @@ impl Store {
     /// Removes a frame's files (EXR and PNG) from a job's output folder.
     pub fn remove_frame(&self, job: u64, frame: i32, last: i32) -> io::Result<()> {
         for extension in ["exr", "png"] {
-            match fs::remove_file(self.frame(job, frame, last, extension)) {
-                Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
-                _ => {}
-            }
+            remove_if_there(&self.frame(job, frame, last, extension))?;
         }
         Ok(())
+    }
+
+    /// Removes a scene's file.
+    pub fn remove_scene(&self, digest: &str) -> io::Result<()> {
+        remove_if_there(&self.scene(digest))
     }
 
     /// Removes the tile files of `tasks` in a job's tile folder, of every attempt.
@@ -216,6 +218,14 @@ pub fn is_digest(s: &str) -> bool {
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> crate::error::Result<()> {
     fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
     Ok(tracer::output::write_atomic(path, bytes)?)
+}
+
+/// Removes the file at `path`; one that is not there is fine.
+fn remove_if_there(path: &Path) -> io::Result<()> {
+    match fs::remove_file(path) {
+        Err(e) if e.kind() != io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    }
 }
 
 /// Bytes of the files under `path` (0 when it is missing); what cannot be read counts 0.

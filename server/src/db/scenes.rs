@@ -52,11 +52,11 @@ pub fn resolve(conn: &Connection, prefix: &str) -> Result<Result<Option<String>,
     })
 }
 
-/// Scenes last uploaded before `before`, with their sizes.
-pub fn uploaded_before(conn: &Connection, before: i64) -> Result<Vec<(String, u64)>> {
+/// The digests of the scenes last uploaded before `before`.
+pub fn uploaded_before(conn: &Connection, before: i64) -> Result<Vec<String>> {
     let mut stmt =
-        conn.prepare_cached("SELECT digest, size FROM scenes WHERE created_ms < ?1 ORDER BY 1")?;
-    let rows = stmt.query_map([before], |r| Ok((r.get(0)?, r.get(1)?)))?;
+        conn.prepare_cached("SELECT digest FROM scenes WHERE created_ms < ?1 ORDER BY 1")?;
+    let rows = stmt.query_map([before], |r| r.get(0))?;
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 
