@@ -24,7 +24,7 @@
 //! `{"tessera": {"environment": [r, g, b]}}`, which the loader reads back (other glTF
 //! readers ignore it); an environment map is refused.
 
-use glam::{DQuat, DVec3, Vec3, Vec4};
+use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
 use gltf::json::Value;
 
 use crate::animation::{Animation, Interpolation, Target};
@@ -108,7 +108,7 @@ pub fn scene_to_glb(scene: &Scene) -> Result<Vec<u8>, ExportError> {
         .nodes
         .iter()
         .enumerate()
-        .map(|(i, n)| node(i, n, scene))
+        .map(|(i, n)| node(i, n, scene, &mut bin, &mut used))
         .collect::<Result<Vec<_>, _>>()?;
     let cameras = scene
         .cameras
@@ -264,6 +264,7 @@ fn finite(element: &str, name: &str, values: &[f32]) -> Result<(), ExportError> 
 /// The glTF extensions the document uses.
 #[derive(Default)]
 struct Extensions {
+    gpu_instancing: bool,
     lights: bool,
     emissive_strength: bool,
     ior: bool,
@@ -274,6 +275,7 @@ struct Extensions {
 impl Extensions {
     fn names(&self) -> Vec<&'static str> {
         [
+            (self.gpu_instancing, INSTANCING),
             (self.lights, "KHR_lights_punctual"),
             (self.emissive_strength, "KHR_materials_emissive_strength"),
             (self.ior, "KHR_materials_ior"),
@@ -711,7 +713,13 @@ fn light(i: usize, l: &PunctualLight) -> Result<Value, ExportError> {
 // ---------------------------------------------------------------------------------------
 // Nodes
 
-fn node(i: usize, n: &Node, scene: &Scene) -> Result<Value, ExportError> {
+fn node(
+    i: usize,
+    n: &Node,
+    scene: &Scene,
+    bin: &mut Bin,
+    used: &mut Extensions,
+) -> Result<Value, ExportError> {
     let el = label("node", i, n.name.as_deref());
     let in_range = |what: &str, index: Option<u32>, len: usize, all: &str| match index {
         Some(x) if x as usize >= len => Err(invalid(
@@ -773,16 +781,23 @@ fn node(i: usize, n: &Node, scene: &Scene) -> Result<Value, ExportError> {
     if let Some(c) = n.camera {
         out = out.with("camera", c);
     }
+    let mut extensions = Obj::default();
     if let Some(l) = n.light {
-        out = out.with(
-            "extensions",
-            Obj::default()
-                .with(
-                    "KHR_lights_punctual",
-                    Obj::default().with("light", l).build(),
-                )
-                .build(),
+        extensions = extensions.with(
+            "KHR_lights_punctual",
+            Obj::default().with("light", l).build(),
         );
+    }
+    if !n.gpu_instances.is_empty() {
+        if n.mesh.is_none() {
+            return Err(invalid(&el, "GPU instances without a mesh"));
+        }
+        used.gpu_instancing = true;
+        extensions = extensions.with(INSTANCING, gpu_instances(&el, &n.gpu_instances, bin)?);
+    }
+    let extensions = extensions.build();
+    if extensions.as_object().is_some_and(|e| !e.is_empty()) {
+        out = out.with("extensions", extensions);
     }
     if let Some(w) = &n.weights {
         let targets = n.mesh.map_or(0, |m| scene.meshes[m as usize].weights.len());
@@ -801,6 +816,33 @@ fn node(i: usize, n: &Node, scene: &Scene) -> Result<Value, ExportError> {
 
 // ---------------------------------------------------------------------------------------
 // Meshes
+
+const INSTANCING: &str = "EXT_mesh_gpu_instancing";
+
+/// EXT_mesh_gpu_instancing's TRANSLATION, ROTATION and SCALE accessors for `instances`,
+/// each decomposed as the loader composes it.
+fn gpu_instances(el: &str, instances: &[DMat4], bin: &mut Bin) -> Result<Value, ExportError> {
+    let (mut t, mut r, mut s) = (Vec::new(), Vec::new(), Vec::new());
+    for m in instances {
+        let (scale, rotation, translation) = m.to_scale_rotation_translation();
+        t.extend(translation.as_vec3().to_array());
+        r.extend(rotation.normalize().as_quat().to_array());
+        s.extend(scale.as_vec3().to_array());
+    }
+    finite(el, "GPU instance translations", &t)?;
+    finite(el, "GPU instance rotations", &r)?;
+    finite(el, "GPU instance scales", &s)?;
+    Ok(Obj::default()
+        .with(
+            "attributes",
+            Obj::default()
+                .with("TRANSLATION", bin.floats(&t, 3, false, None))
+                .with("ROTATION", bin.floats(&r, 4, false, None))
+                .with("SCALE", bin.floats(&s, 3, false, None))
+                .build(),
+        )
+        .build())
+}
 
 fn mesh(i: usize, m: &Mesh, materials: usize, bin: &mut Bin) -> Result<Value, ExportError> {
     let label = label("mesh", i, m.name.as_deref());

@@ -56,6 +56,7 @@ pub mod error;
 pub mod framing;
 mod gltf;
 mod images;
+mod instancing;
 mod materials;
 mod meshes;
 mod tangents;
@@ -70,6 +71,7 @@ use container::Resolver;
 /// The glTF extensions the loader implements. KHR_mesh_quantization needs nothing beyond
 /// the integer attribute types the accessor reader handles anyway.
 pub const SUPPORTED_EXTENSIONS: &[&str] = &[
+    "EXT_mesh_gpu_instancing",
     "KHR_lights_punctual",
     "KHR_materials_emissive_strength",
     "KHR_materials_ior",
@@ -78,6 +80,11 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_mesh_quantization",
     "KHR_texture_transform",
 ];
+
+/// Most mesh draws a scene may ask for: each is an instance of the frame's top-level BVH
+/// (about 200 bytes with its share of the tree), so this bounds that tree near 1 GB
+/// whatever a small file declares.
+pub const MAX_MESH_DRAWS: u64 = 5_000_000;
 
 /// Loads a .gltf (its buffers and images resolved relative to its folder) or a .glb file.
 pub fn load_path(path: &Path) -> Result<Scene, SceneError> {

@@ -26,11 +26,14 @@ use crate::motion::{auto_steps, place, step_positions, DeformedMesh, PixelFootpr
 use crate::scene::{Node, Scene};
 use crate::settings::{CameraChoice, FrameOptions, RenderError};
 
-/// The node graph at one time: every node instance with its world transform, and the
-/// first world transform of each node (the one joints of a skin use).
+/// The node graph at one time: every node instance and every mesh draw with its world
+/// transform, and the first world transform of each node (the one joints of a skin use).
 struct Posed {
     pose: Pose,
+    /// Node instances (cameras and lights hang from these).
     instances: Vec<(u32, DMat4)>,
+    /// Mesh draws: each node instance with a mesh, once per GPU instance.
+    draws: Vec<(u32, DMat4)>,
     world: Vec<Option<DMat4>>,
 }
 
@@ -42,10 +45,19 @@ impl Posed {
             |i| pose.local[i as usize],
             |i, m| instances.push((i, *m)),
         );
+        let draws = instances
+            .iter()
+            .filter(|(i, _)| scene.nodes[*i as usize].mesh.is_some())
+            .flat_map(|&(i, world)| {
+                let node = &scene.nodes[i as usize];
+                node.draw_transforms().iter().map(move |t| (i, world * *t))
+            })
+            .collect();
         let world = animation::world_transforms(scene, &pose);
         Self {
             pose,
             instances,
+            draws,
             world,
         }
     }
@@ -159,10 +171,8 @@ fn probe_points(
     camera_from_world: &DMat4,
 ) -> Vec<DVec3> {
     let mut points = Vec::new();
-    for (j, (node, world)) in posed.instances.iter().enumerate() {
-        let Some(mesh) = scene.nodes[*node as usize].mesh else {
-            continue;
-        };
+    for (j, (node, world)) in posed.draws.iter().enumerate() {
+        let mesh = scene.nodes[*node as usize].mesh.expect("draws have a mesh");
         if deforming[j] {
             for d in deform_instance(scene, posed, *node, world, relative) {
                 let stride = d.positions.len().div_ceil(PROBE_VERTICES).max(1);
@@ -275,7 +285,7 @@ pub fn prepare_frame(
         .iter()
         .any(|&a| !scene.animations[a].channels.is_empty());
     let mut deforming: Vec<bool> = center
-        .instances
+        .draws
         .iter()
         .map(|(n, _)| deforms(&scene, *n, &[&center]))
         .collect();
@@ -288,7 +298,7 @@ pub fn prepare_frame(
             .map(|i| posed_at(i as f64 / (PROBES - 1) as f64))
             .collect();
         let refs: Vec<&Posed> = probes.iter().collect();
-        for (j, (n, _)) in center.instances.iter().enumerate() {
+        for (j, (n, _)) in center.draws.iter().enumerate() {
             deforming[j] = deforms(&scene, *n, &refs);
         }
         let points: Vec<Vec<DVec3>> = probes
@@ -309,7 +319,7 @@ pub fn prepare_frame(
     };
     if steps > 1 {
         let refs: Vec<&Posed> = poses.iter().collect();
-        for (j, (n, _)) in poses[0].instances.iter().enumerate() {
+        for (j, (n, _)) in poses[0].draws.iter().enumerate() {
             deforming[j] = deforms(&scene, *n, &refs);
         }
     }
@@ -397,9 +407,9 @@ pub fn prepare_frame(
     })
 }
 
-/// The frame's instances: rigid ones with one transform per step (`relative` moves the
-/// world so the camera sits at the origin), deformed ones (`deforming[j]` for pose
-/// instance `j`) as per-frame meshes, which the second list holds.
+/// The frame's instances, one per mesh draw: rigid ones with one transform per step
+/// (`relative` moves the world so the camera sits at the origin), deformed ones
+/// (`deforming[j]` for draw `j`) as per-frame meshes, which the second list holds.
 fn place_instances(
     scene: &Scene,
     poses: &[Posed],
@@ -408,25 +418,23 @@ fn place_instances(
 ) -> (Vec<Instance>, Vec<DeformedMesh>) {
     let mut instances = Vec::new();
     let mut deformed = Vec::new();
-    for (j, &(node, _)) in poses[0].instances.iter().enumerate() {
-        let Some(mesh) = scene.nodes[node as usize].mesh else {
-            continue;
-        };
+    for (j, &(node, _)) in poses[0].draws.iter().enumerate() {
+        let mesh = scene.nodes[node as usize].mesh.expect("draws have a mesh");
         // Rays cannot enter a placement that has no inverse (a zero scale on one axis): bake
         // its vertices into the frame, as for a deformed mesh, so that a mesh flattened onto
         // a plane draws as that plane (the limit of ever thinner scales). A zero scale on
         // every axis leaves only zero-area triangles, which draw nothing.
-        let flattened = poses.len() == 1 && has_no_inverse(&(*relative * poses[0].instances[j].1));
+        let flattened = poses.len() == 1 && has_no_inverse(&(*relative * poses[0].draws[j].1));
         // So is a mesh that its placement would resolve far too coarsely near the camera.
         let coarse = poses.len() == 1
             && coarse_placement(
                 &scene.meshes[mesh as usize],
-                &(*relative * poses[0].instances[j].1),
+                &(*relative * poses[0].draws[j].1),
             );
         if deforming[j] || flattened || coarse {
             let per_step = poses
                 .iter()
-                .map(|posed| deform_instance(scene, posed, node, &posed.instances[j].1, relative))
+                .map(|posed| deform_instance(scene, posed, node, &posed.draws[j].1, relative))
                 .collect();
             let mut d = DeformedMesh::new(mesh, &scene.meshes[mesh as usize], per_step);
             // Skinned vertices are placed by their joints; the others by the node, whose
@@ -437,13 +445,13 @@ fn place_instances(
                     .primitives
                     .iter()
                     .any(|p| !p.joint_sets.is_empty());
-            d.mirrored = !skinned && DMat3::from_mat4(poses[0].instances[j].1).determinant() < 0.0;
+            d.mirrored = !skinned && DMat3::from_mat4(poses[0].draws[j].1).determinant() < 0.0;
             let index = (scene.meshes.len() + deformed.len()) as u32;
             instances.push(Instance::new(index, Affine3A::IDENTITY, &d.bvh.bounds()));
             deformed.push(d);
         } else {
             let bounds = scene.meshes[mesh as usize].bvh.bounds();
-            let worlds: Vec<DMat4> = poses.iter().map(|p| *relative * p.instances[j].1).collect();
+            let worlds: Vec<DMat4> = poses.iter().map(|p| *relative * p.draws[j].1).collect();
             instances.push(if worlds.len() == 1 {
                 Instance::new(mesh, to_f32_affine(&worlds[0]), &bounds)
             } else {
@@ -530,10 +538,8 @@ fn animated_bounds(scene: &Scene, animations: &[usize]) -> Aabb {
     for k in 0..BOUNDS_POSES {
         let seconds = start + (end - start) * k as f64 / (BOUNDS_POSES - 1) as f64;
         let posed = Posed::new(scene, animations, seconds);
-        for (node, world) in &posed.instances {
-            let Some(mesh) = scene.nodes[*node as usize].mesh else {
-                continue;
-            };
+        for (node, world) in &posed.draws {
+            let mesh = scene.nodes[*node as usize].mesh.expect("draws have a mesh");
             if deforms(scene, *node, &[&posed]) {
                 for d in deform_instance(scene, &posed, *node, world, &DMat4::IDENTITY) {
                     d.positions.iter().for_each(|p| bounds.grow(*p));

@@ -84,6 +84,88 @@ impl Scene {
             }
         }
     }
+
+    /// [`Scene::for_each_mesh_draw_with`] with the nodes' own transforms.
+    pub fn for_each_mesh_draw(&self, visit: impl FnMut(u32, &DMat4)) {
+        self.for_each_mesh_draw_with(|i| self.nodes[i as usize].local, visit);
+    }
+
+    /// Calls `visit(node, world)` for every time a mesh is drawn: each node instance with a
+    /// mesh ([`Scene::for_each_node_instance_with`]), once per GPU instance
+    /// ([`Node::gpu_instances`]), with the world transform of that draw.
+    pub fn for_each_mesh_draw_with(
+        &self,
+        local: impl Fn(u32) -> DMat4,
+        mut visit: impl FnMut(u32, &DMat4),
+    ) {
+        self.for_each_node_instance_with(local, |i, world| {
+            let node = &self.nodes[i as usize];
+            if node.mesh.is_none() {
+                return;
+            }
+            for t in node.draw_transforms() {
+                visit(i, &(*world * *t));
+            }
+        });
+    }
+
+    /// How many times the default scene draws a mesh (what
+    /// [`Scene::for_each_mesh_draw_with`] visits), counted without visiting: a node with
+    /// several parents is reached once per path, so a small graph can ask for more draws
+    /// than memory holds. Saturates at `u64::MAX`.
+    pub fn mesh_draw_count(&self) -> u64 {
+        // paths[i]: the number of root-to-node paths reaching node i (its instances).
+        let n = self.nodes.len();
+        let mut paths = vec![0u64; n];
+        for &r in &self.roots {
+            if let Some(p) = paths.get_mut(r as usize) {
+                *p = p.saturating_add(1);
+            }
+        }
+        for i in self.topological_order() {
+            let here = paths[i];
+            for &c in &self.nodes[i].children {
+                if let Some(p) = paths.get_mut(c as usize) {
+                    *p = p.saturating_add(here);
+                }
+            }
+        }
+        self.nodes
+            .iter()
+            .zip(&paths)
+            .filter(|(node, _)| node.mesh.is_some())
+            .map(|(node, &p)| p.saturating_mul(node.draw_transforms().len() as u64))
+            .fold(0, u64::saturating_add)
+    }
+
+    /// Nodes with every parent before its children (Kahn's algorithm); nodes on a cycle
+    /// (which the loader refuses) are left out.
+    fn topological_order(&self) -> Vec<usize> {
+        let n = self.nodes.len();
+        let mut parents = vec![0usize; n];
+        for node in &self.nodes {
+            for &c in &node.children {
+                if let Some(p) = parents.get_mut(c as usize) {
+                    *p += 1;
+                }
+            }
+        }
+        let mut ready: Vec<usize> = (0..n).filter(|&i| parents[i] == 0).collect();
+        let mut order = Vec::with_capacity(n);
+        while let Some(i) = ready.pop() {
+            order.push(i);
+            for &c in &self.nodes[i].children {
+                let c = c as usize;
+                if c < n {
+                    parents[c] -= 1;
+                    if parents[c] == 0 {
+                        ready.push(c);
+                    }
+                }
+            }
+        }
+        order
+    }
 }
 
 /// A glTF node: a local transform and what hangs from it.
@@ -110,6 +192,22 @@ pub struct Node {
     pub skin: Option<u32>,
     /// Morph weights overriding the mesh's default weights.
     pub weights: Option<Vec<f32>>,
+    /// EXT_mesh_gpu_instancing: the mesh is drawn once per transform, each applied in the
+    /// node's space before the node's own (world = node world · instance). Empty: drawn
+    /// once. Cameras, lights and children of the node are not instanced.
+    pub gpu_instances: Vec<DMat4>,
+}
+
+impl Node {
+    /// The transforms its mesh is drawn with, relative to the node: its GPU instances, or
+    /// the node itself once.
+    pub fn draw_transforms(&self) -> &[DMat4] {
+        if self.gpu_instances.is_empty() {
+            std::slice::from_ref(&DMat4::IDENTITY)
+        } else {
+            &self.gpu_instances
+        }
+    }
 }
 
 impl Default for Node {
@@ -124,6 +222,7 @@ impl Default for Node {
             light: None,
             skin: None,
             weights: None,
+            gpu_instances: Vec::new(),
         }
     }
 }

@@ -74,6 +74,48 @@ const MANIFEST: &[Expected] = &[
         lights: 0,
     },
     model("TransmissionTest/TransmissionTest.glb", 128_775, 1, 0),
+    // Added 2026-11-26.
+    Expected {
+        file: "AnisotropyRotationTest/AnisotropyRotationTest.glb",
+        mesh_triangles: 7_476,
+        drawn_triangles: 13_876,
+        cameras: 0,
+        lights: 0,
+    },
+    model(
+        "AnisotropyStrengthTest/AnisotropyStrengthTest.glb",
+        97_240,
+        0,
+        0,
+    ),
+    model("ClearCoatTest/ClearCoatTest.glb", 37_116, 0, 0),
+    model("ClearcoatWicker/ClearcoatWicker.glb", 3_072, 0, 0),
+    model("GlassBrokenWindow/GlassBrokenWindow.glb", 987, 0, 0),
+    Expected {
+        file: "GlassVaseFlowers/GlassVaseFlowers.glb",
+        mesh_triangles: 10_218,
+        drawn_triangles: 14_036,
+        cameras: 0,
+        lights: 0,
+    },
+    model("IridescenceLamp/IridescenceLamp.gltf", 18_866, 0, 0),
+    model(
+        "IridescentDishWithOlives/IridescentDishWithOlives.gltf",
+        24_448,
+        1,
+        0,
+    ),
+    model("SheenChair/SheenChair.gltf", 39_936, 0, 0),
+    model("SheenCloth/SheenCloth.gltf", 115_200, 0, 0),
+    // EXT_mesh_gpu_instancing: one 12-triangle cube drawn 125 times.
+    Expected {
+        file: "SimpleInstancing/SimpleInstancing.glb",
+        mesh_triangles: 12,
+        drawn_triangles: 1_500,
+        cameras: 0,
+        lights: 0,
+    },
+    model("SpecularTest/SpecularTest.glb", 44_828, 0, 0),
 ];
 
 /// The shared scenes folder, if this checkout has one.

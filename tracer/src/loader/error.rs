@@ -93,6 +93,14 @@ pub enum SceneError {
     /// implement, so it cannot be rendered faithfully.
     #[error("required extension '{0}' is not supported")]
     UnsupportedExtension(String),
+    /// The default scene draws meshes more often than [`crate::loader::MAX_MESH_DRAWS`]
+    /// (GPU instances, and nodes reached along several paths, each count).
+    #[error(
+        "the scene draws meshes {0} times, more than the {max} the tracer accepts (GPU \
+         instances and nodes with several parents each count)",
+        max = crate::loader::MAX_MESH_DRAWS
+    )]
+    TooManyDraws(u64),
     /// One element of the document is wrong.
     #[error("{element}: {message}")]
     Element {

@@ -15,15 +15,14 @@ pub const FRAMING_YFOV: f32 = 40.0 * std::f32::consts::PI / 180.0;
 /// little right, above and in front, so boxes show three faces.
 pub const FRAMING_DIRECTION: DVec3 = DVec3::new(0.5, 0.35, 1.0);
 
-/// Every mesh instance of the default scene: (index into [`Scene::meshes`], world
-/// transform), in traversal order.
+/// Every mesh draw of the default scene ([`Scene::for_each_mesh_draw_with`]): (index
+/// into [`Scene::meshes`], world transform), in traversal order.
 pub fn mesh_instances(scene: &Scene) -> Vec<(u32, DMat4)> {
     let mut out = Vec::new();
-    scene.for_each_node_instance(|i, world| {
-        if let Some(m) = scene.nodes[i as usize].mesh {
-            if (m as usize) < scene.meshes.len() {
-                out.push((m, *world));
-            }
+    scene.for_each_mesh_draw(|i, world| {
+        let m = scene.nodes[i as usize].mesh.expect("draws have a mesh");
+        if (m as usize) < scene.meshes.len() {
+            out.push((m, *world));
         }
     });
     out

@@ -12,6 +12,7 @@ use super::accessor::view_bytes;
 use super::animation::{convert_animations, convert_skins};
 use super::container::Resolver;
 use super::error::{Element, SceneError};
+use super::instancing;
 use super::materials::{convert_material, TextureTable};
 use super::meshes::{convert_mesh, fit_weights, MeshOut, SkinLimit};
 use super::SUPPORTED_EXTENSIONS;
@@ -48,7 +49,7 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         view_bytes(&view, input.buffers)?;
     }
 
-    let mut nodes = convert_nodes(doc, &mut warnings)?;
+    let mut nodes = convert_nodes(input, &mut warnings)?;
     let roots = default_roots(doc, &nodes);
     let skins = convert_skins(doc, input.buffers, nodes.len())?;
     let skin_limits = skin_limits(doc.meshes().len(), &nodes, &skins);
@@ -109,12 +110,15 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         features: Features::default(),
         warnings,
     };
+    let draws = scene.mesh_draw_count();
+    if draws > super::MAX_MESH_DRAWS {
+        return Err(SceneError::TooManyDraws(draws));
+    }
     scene.features = features(&scene);
     let mut drawn = 0u64;
-    scene.for_each_node_instance(|i, _| {
-        if let Some(m) = scene.nodes[i as usize].mesh {
-            drawn += scene.meshes[m as usize].triangle_count() as u64;
-        }
+    scene.for_each_mesh_draw(|i, _| {
+        let m = scene.nodes[i as usize].mesh.expect("draws have a mesh");
+        drawn += scene.meshes[m as usize].triangle_count() as u64;
     });
     if drawn == 0 {
         scene
@@ -127,10 +131,8 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
 // ---------------------------------------------------------------------------------------
 // Nodes and scenes
 
-fn convert_nodes(
-    doc: &gltf::Document,
-    warnings: &mut Vec<String>,
-) -> Result<Vec<Node>, SceneError> {
+fn convert_nodes(input: &Input<'_>, warnings: &mut Vec<String>) -> Result<Vec<Node>, SceneError> {
+    let doc = input.doc;
     let mut nodes = Vec::with_capacity(doc.nodes().len());
     for n in doc.nodes() {
         let element = Element::Node(n.index());
@@ -204,6 +206,13 @@ fn convert_nodes(
             light: n.light().map(|l| l.index() as u32),
             skin: n.skin().map(|s| s.index() as u32),
             weights: n.weights().map(<[f32]>::to_vec),
+            gpu_instances: instancing::gpu_instances(
+                doc,
+                input.raw,
+                input.buffers,
+                n.index(),
+                warnings,
+            )?,
         });
     }
     check_node_graph(&nodes, warnings)?;
