@@ -270,6 +270,7 @@ struct Extensions {
     ior: bool,
     specular: bool,
     transmission: bool,
+    unlit: bool,
 }
 
 impl Extensions {
@@ -281,6 +282,7 @@ impl Extensions {
             (self.ior, "KHR_materials_ior"),
             (self.specular, "KHR_materials_specular"),
             (self.transmission, "KHR_materials_transmission"),
+            (self.unlit, "KHR_materials_unlit"),
         ]
         .iter()
         .filter(|(on, _)| *on)
@@ -594,6 +596,10 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
                 .build(),
         );
     }
+    if m.unlit {
+        used.unlit = true;
+        ext = ext.with("KHR_materials_unlit", Obj::default().build());
+    }
     if !ext.0.is_empty() {
         out = out.with("extensions", ext.build());
     }
@@ -795,9 +801,8 @@ fn node(
         used.gpu_instancing = true;
         extensions = extensions.with(INSTANCING, gpu_instances(&el, &n.gpu_instances, bin)?);
     }
-    let extensions = extensions.build();
-    if extensions.as_object().is_some_and(|e| !e.is_empty()) {
-        out = out.with("extensions", extensions);
+    if !extensions.0.is_empty() {
+        out = out.with("extensions", extensions.build());
     }
     if let Some(w) = &n.weights {
         let targets = n.mesh.map_or(0, |m| scene.meshes[m as usize].weights.len());

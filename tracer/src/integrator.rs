@@ -2,7 +2,7 @@
 //! sampling (power heuristic), Russian roulette and splitting, and no NaN or infinity on
 //! the film.
 
-use glam::{Vec2, Vec3, Vec4};
+use glam::{Vec2, Vec3};
 
 use crate::bsdf::Bsdf;
 use crate::film::SampleValue;
@@ -471,9 +471,10 @@ fn emitted_toward(
     if !material.double_sided && tri.front_normal().dot(wi) >= 0.0 {
         return Vec3::ZERO;
     }
-    if material.emissive_texture.is_none() {
-        return material.emissive;
+    if material.uniform_emission(!tri.prim.colors.is_empty()) {
+        return material.emission_factor();
     }
     let uvs = tri.prim.uvs_at(tri.t, b1, b2);
-    material.sample(&scene.textures, uvs, Vec4::ONE).emission
+    let color = tri.prim.color_at(tri.t, b1, b2);
+    material.sample(&scene.textures, uvs, color).emission
 }

@@ -72,11 +72,13 @@ use container::Resolver;
 /// the integer attribute types the accessor reader handles anyway.
 pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "EXT_mesh_gpu_instancing",
+    "EXT_texture_webp",
     "KHR_lights_punctual",
     "KHR_materials_emissive_strength",
     "KHR_materials_ior",
     "KHR_materials_specular",
     "KHR_materials_transmission",
+    "KHR_materials_unlit",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
 ];
@@ -119,7 +121,8 @@ pub fn load_slice(bytes: &[u8], base_dir: Option<&Path>) -> Result<Scene, SceneE
     // Channels the typed parser would refuse (KHR_animation_pointer) go first; without any,
     // parse the text itself so that errors keep their line and column.
     let skipped = animation::strip_unsupported_channels(&mut raw);
-    let mut root: ::gltf::json::Root = if skipped.is_empty() {
+    let webp = materials::prefer_webp_sources(&mut raw);
+    let mut root: ::gltf::json::Root = if skipped.is_empty() && !webp {
         ::gltf::json::deserialize::from_slice(container.json)
             .map_err(|e| typed_json_error(e, || root_at_path_slice(container.json)))?
     } else {

@@ -61,6 +61,10 @@ pub struct Material {
     pub alpha_mode: AlphaMode,
     /// glTF `doubleSided`; single-sided surfaces are invisible from behind.
     pub double_sided: bool,
+    /// KHR_materials_unlit: the surface shows its base colour (times texture and vertex
+    /// colour) as it is, whatever lights it. A path tracer renders that as a surface that
+    /// emits its base colour and scatters nothing, so it also lights what it faces.
+    pub unlit: bool,
 }
 
 impl Default for Material {
@@ -86,6 +90,7 @@ impl Default for Material {
             transmission_texture: None,
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
+            unlit: false,
         }
     }
 }
@@ -113,7 +118,27 @@ impl Material {
 
     /// Whether the surface emits light anywhere.
     pub fn is_emissive(&self) -> bool {
-        self.emissive.max_element() > 0.0
+        self.emission_factor().max_element() > 0.0
+    }
+
+    /// The emitted radiance where textures and vertex colour are white: the emissive
+    /// factor, or an unlit material's base colour.
+    pub fn emission_factor(&self) -> Vec3 {
+        if self.unlit {
+            self.base_color.truncate()
+        } else {
+            self.emissive
+        }
+    }
+
+    /// Whether the emission is the same everywhere on a primitive (no texture, nor, for an
+    /// unlit material, the primitive's `vertex_colors`, changes it).
+    pub fn uniform_emission(&self, vertex_colors: bool) -> bool {
+        if self.unlit {
+            self.base_color_texture.is_none() && !vertex_colors
+        } else {
+            self.emissive_texture.is_none()
+        }
     }
 }
 
@@ -155,6 +180,15 @@ impl Material {
         specular_color: Vec3,
         transmission: f32,
     ) -> SurfaceParams {
+        if self.unlit {
+            // Nothing scatters: the colour is emitted instead (see `Material::unlit`).
+            return SurfaceParams {
+                base_color: Vec3::ZERO,
+                metallic: 0.0,
+                specular: 0.0,
+                ..SurfaceParams::default()
+            };
+        }
         SurfaceParams {
             base_color,
             metallic: metallic.clamp(0.0, 1.0),
@@ -207,7 +241,9 @@ impl Material {
             metallic *= t.z;
         }
         let mut emission = self.emissive;
-        if let Some(t) = read(&self.emissive_texture, true) {
+        if self.unlit {
+            emission = base.truncate();
+        } else if let Some(t) = read(&self.emissive_texture, true) {
             emission *= t.truncate();
         }
         let mut specular = self.specular;

@@ -606,7 +606,7 @@ fn emissive_triangles(
                 };
                 triangles.push(EmissiveTriangle {
                     p: object.map(|x| inst.to_world.transform_point3(x)),
-                    emission: material.emissive,
+                    emission: material.emission_factor(),
                     double_sided: material.double_sided,
                     instance: i as u32,
                     triangle: mesh.first_triangle[p] + t as u32,

@@ -1,4 +1,4 @@
-//! Image decoding: PNG and JPEG bytes into RGBA8 texels, whatever their channel layout
+//! Image decoding: PNG, JPEG and WebP (EXT_texture_webp) bytes into RGBA8 texels, whatever their channel layout
 //! (grey, grey-alpha, RGB, RGBA) or depth (8 or 16 bits). The transfer function is left
 //! alone: base colour stays sRGB-encoded and is decoded when sampled
 //! ([`crate::texture::Texture::sample`]), data textures stay linear.
@@ -20,15 +20,15 @@ pub(crate) fn decode(bytes: &[u8], mime: Option<&str>) -> Result<Decoded, String
     let sniffed = image::guess_format(bytes).ok();
     let format = sniffed.or_else(|| mime.and_then(ImageFormat::from_mime_type));
     let format = match format {
-        Some(f @ (ImageFormat::Png | ImageFormat::Jpeg)) => f,
+        Some(f @ (ImageFormat::Png | ImageFormat::Jpeg | ImageFormat::WebP)) => f,
         Some(f) => {
             return Err(format!(
-                "{f:?} images are not supported (only PNG and JPEG)"
+                "{f:?} images are not supported (only PNG, JPEG and WebP)"
             ))
         }
         None => {
             return Err(format!(
-                "unrecognised image data{} (only PNG and JPEG are supported)",
+                "unrecognised image data{} (only PNG, JPEG and WebP are supported)",
                 mime.map(|m| format!(" declared as '{m}'"))
                     .unwrap_or_default()
             ))

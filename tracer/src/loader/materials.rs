@@ -95,6 +95,25 @@ impl TextureTable {
     }
 }
 
+/// EXT_texture_webp: a texture naming a WebP image in the extension reads that image
+/// instead of its `source` (a PNG or JPEG fallback for other viewers, or none when the
+/// file requires the extension). Rewrites the untyped document before the typed parse,
+/// which would refuse a texture without `source`; returns whether anything changed.
+pub(crate) fn prefer_webp_sources(raw: &mut Value) -> bool {
+    let Some(textures) = raw.get_mut("textures").and_then(Value::as_array_mut) else {
+        return false;
+    };
+    let mut changed = false;
+    for t in textures {
+        let webp = t["extensions"]["EXT_texture_webp"]["source"].clone();
+        if webp.is_u64() {
+            t["source"] = webp;
+            changed = true;
+        }
+    }
+    changed
+}
+
 fn decode_image(input: &Input<'_>, index: usize) -> Result<images::Decoded, SceneError> {
     let element = Element::Image(index);
     // Read the JSON rather than `gltf::Image::source`, which panics on an image with a
@@ -237,6 +256,7 @@ pub(crate) fn convert_material(
             gltf::material::AlphaMode::Blend => AlphaMode::Blend,
         },
         double_sided: m.double_sided(),
+        unlit: m.unlit(),
         ..Material::default()
     };
     out.base_color_texture = pbr
