@@ -73,15 +73,20 @@
 //!
 //! The tests in `bsdf/tests.rs` measure the white furnace of each part.
 
+mod coat;
 mod curve;
 mod fresnel;
+mod layers;
 mod microfacet;
+mod sheen;
 mod tables;
 
 pub use curve::AlbedoCurve;
 
 #[cfg(test)]
 mod chi2;
+#[cfg(test)]
+mod layer_tests;
 #[cfg(test)]
 mod tests;
 
@@ -118,6 +123,22 @@ pub struct SurfaceParams {
     pub specular_color: Vec3,
     /// KHR_materials_transmission factor.
     pub transmission: f32,
+    /// The clear coat and sheen over the base, for a material that has either (`None`
+    /// keeps the parameters of the commonest materials small).
+    pub layers: Option<LayerParams>,
+}
+
+/// The parameters of the layers over the base (see `bsdf/layers.rs`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LayerParams {
+    /// KHR_materials_clearcoat factor, 0..1 (0: no coat).
+    pub clearcoat: f32,
+    /// Its perceptual roughness, 0..1.
+    pub clearcoat_roughness: f32,
+    /// KHR_materials_sheen colour, each channel 0..1 (black: no sheen).
+    pub sheen_color: Vec3,
+    /// Its roughness, 0..1 (the Charlie α itself, as the extension defines it).
+    pub sheen_roughness: f32,
 }
 
 impl Default for SurfaceParams {
@@ -132,6 +153,7 @@ impl Default for SurfaceParams {
             specular: 1.0,
             specular_color: Vec3::ONE,
             transmission: 0.0,
+            layers: None,
         }
     }
 }
@@ -190,6 +212,9 @@ pub struct Bsdf {
     diel: [tables::DielectricCoord; 2],
     /// The material's own albedo curve for (α, η), used instead of both tables.
     curve: Option<&'static AlbedoCurve>,
+    /// The clear coat and sheen over all of the above, where the material has either
+    /// (see `bsdf/layers.rs`).
+    layers: Option<layers::Layers>,
 }
 
 /// Everything about the BSDF that depends on `wo` alone, in the frame where `wo.z > 0`.
@@ -223,10 +248,13 @@ pub struct BsdfAt<'a> {
     /// Whether `wo` lies below the surface (the frame is mirrored).
     inside: bool,
     at: AtWo,
+    /// The layers' terms at `wo`, where the BSDF has layers and `wo` sees them.
+    layers: Option<layers::LayersAt>,
 }
 
 impl BsdfAt<'_> {
     /// `wi` in the frame where `wo.z > 0`; `None` for a non-finite or grazing `wi`.
+    #[inline(always)]
     fn incident(&self, wi: Vec3) -> Option<Vec3> {
         if !wi.is_finite() || wi.z.abs() < COS_EPS {
             return None;
@@ -235,43 +263,70 @@ impl BsdfAt<'_> {
     }
 
     /// f(wo, wi) without the cosine; zero for delta lobes.
+    #[inline(always)]
     pub fn eval(&self, wi: Vec3) -> Vec3 {
         self.incident(wi)
-            .map_or(Vec3::ZERO, |wi| self.bsdf.eval_local(self.wo, wi, &self.at))
+            .map_or(Vec3::ZERO, |wi| self.eval_local(wi))
     }
 
     /// The solid-angle pdf with which [`BsdfAt::sample`] returns `wi`.
+    #[inline(always)]
     pub fn pdf(&self, wi: Vec3) -> f32 {
-        self.incident(wi)
-            .map_or(0.0, |wi| self.bsdf.pdf_local(self.wo, wi, &self.at))
+        self.incident(wi).map_or(0.0, |wi| self.pdf_local(wi))
     }
 
     /// `eval(wi)` and `pdf(wi)` together.
+    #[inline(always)]
     pub fn eval_and_pdf(&self, wi: Vec3) -> (Vec3, f32) {
         self.incident(wi).map_or((Vec3::ZERO, 0.0), |wi| {
-            (
-                self.bsdf.eval_local(self.wo, wi, &self.at),
-                self.bsdf.pdf_local(self.wo, wi, &self.at),
-            )
+            (self.eval_local(wi), self.pdf_local(wi))
         })
     }
 
+    #[inline(always)]
+    fn eval_local(&self, wi: Vec3) -> Vec3 {
+        match &self.layers {
+            None => self.bsdf.eval_local(self.wo, wi, &self.at),
+            Some(l) => self.bsdf.layered_eval(self.wo, wi, &self.at, l),
+        }
+    }
+
+    #[inline(always)]
+    fn pdf_local(&self, wi: Vec3) -> f32 {
+        match &self.layers {
+            None => self.bsdf.pdf_local(self.wo, wi, &self.at),
+            Some(l) => self.bsdf.layered_pdf(self.wo, wi, &self.at, l),
+        }
+    }
+
     /// As [`Bsdf::sample`].
+    #[inline(always)]
     pub fn sample(&self, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-        self.bsdf
-            .sample_at(self.wo, self.inside, &self.at, u_lobe, u)
+        let u_lobe = sane(u_lobe, 0.0, 1.0, 0.0);
+        let u = Vec2::new(sane(u.x, 0.0, 1.0, 0.0), sane(u.y, 0.0, 1.0, 0.0));
+        let s = match &self.layers {
+            None => self.bsdf.sample_base(self.wo, &self.at, u_lobe, u),
+            Some(l) => self.bsdf.layered_sample(self.wo, &self.at, l, u_lobe, u),
+        }?;
+        Some(BsdfSample {
+            wi: if self.inside { flip(s.wi) } else { s.wi },
+            ..s
+        })
     }
 }
 
 /// Builds the energy-compensation tables now rather than at the first rough surface a
 /// render meets (about 0.1 s for the conductor table, 0.25 s more for the dielectric one
-/// with `with_dielectric`, at opt-level 3). Optional: call it while preparing a frame so
-/// that no rendering thread waits on the build, and only ask for the dielectric table
-/// when the scene has transmissive materials.
-pub fn precompute_tables(with_dielectric: bool) {
+/// with `with_dielectric`, and the sheen's albedo with `with_sheen`, at opt-level 3).
+/// Optional: call it while preparing a frame so that no rendering thread waits on the
+/// build, and only ask for the tables the scene's materials use.
+pub fn precompute_tables(with_dielectric: bool, with_sheen: bool) {
     tables::conductor();
     if with_dielectric {
         tables::dielectric();
+    }
+    if with_sheen {
+        sheen::precompute();
     }
 }
 
@@ -319,6 +374,14 @@ impl Bsdf {
         let spec = sane(params.specular, 0.0, 1.0, 1.0);
         let spec_color = sane3(params.specular_color, 0.0, f32::MAX);
         let eta = sane(params.ior, 1.0, IOR_MAX, 1.5);
+        let layers = params.layers.and_then(|l| {
+            layers::Layers::new(
+                sane(l.clearcoat, 0.0, 1.0, 0.0),
+                sane(l.clearcoat_roughness, 0.0, 1.0, 0.0),
+                sane3(l.sheen_color, 0.0, 1.0),
+                sane(l.sheen_roughness, 0.0, 1.0, 0.0),
+            )
+        });
 
         let alpha = roughness * roughness;
         let smooth = alpha < ALPHA_MIN;
@@ -359,6 +422,7 @@ impl Bsdf {
                 Default::default()
             },
             curve: None,
+            layers,
         }
     }
 
@@ -390,7 +454,7 @@ impl Bsdf {
         let metal = self.w_metal == 0.0 || self.smooth;
         let plastic = self.w_plastic == 0.0 || (self.smooth && self.base.max_element() == 0.0);
         let glass = self.w_glass == 0.0 || self.glass_smooth;
-        metal && plastic && glass
+        metal && plastic && glass && self.layers.is_none_or(|l| l.is_delta())
     }
 
     /// A cheap albedo for the denoiser's albedo layer: the base colour of each part,
@@ -435,36 +499,46 @@ impl Bsdf {
     /// The BSDF seen from `wo`, its work that depends on `wo` alone done once for the
     /// light sample and the continuation a bounce takes; `None` for a non-finite or
     /// grazing `wo`, from which nothing scatters.
+    #[inline(always)]
     pub fn at(&self, wo: Vec3) -> Option<BsdfAt<'_>> {
+        self.at_coated(wo, None)
+    }
+
+    /// [`Bsdf::at`] with the clear coat's own normal `coat_normal` (unit, in the same
+    /// local frame; KHR_materials_clearcoat's normal map, or the unmapped normal where
+    /// the base's normal is mapped); `None` puts the coat on the base's normal.
+    #[inline(always)]
+    pub fn at_coated(&self, wo: Vec3, coat_normal: Option<Vec3>) -> Option<BsdfAt<'_>> {
         if !wo.is_finite() || wo.z.abs() < COS_EPS {
             return None;
         }
         let inside = wo.z < 0.0;
         let wo = if inside { flip(wo) } else { wo };
+        let at = self.at_wo(wo.z, inside);
+        // Light inside a refracting object meets the bare interface; an opaque surface is
+        // two-sided, its layers mirrored with it.
+        let layers = if self.layers.is_none() || (inside && self.w_glass > 0.0) {
+            None
+        } else {
+            let coat_normal = coat_normal.map(|n| if inside { flip(n) } else { n });
+            self.layers_at(wo, coat_normal, &at.p)
+        };
         Some(BsdfAt {
             bsdf: self,
             wo,
             inside,
-            at: self.at_wo(wo.z, inside),
+            at,
+            layers,
         })
     }
 
-    /// [`BsdfAt::sample`] in the frame where `wo.z > 0`.
-    fn sample_at(
-        &self,
-        wo: Vec3,
-        inside: bool,
-        at: &AtWo,
-        u_lobe: f32,
-        u: Vec2,
-    ) -> Option<BsdfSample> {
-        let u_lobe = sane(u_lobe, 0.0, 1.0, 0.0);
-        let u = Vec2::new(sane(u.x, 0.0, 1.0, 0.0), sane(u.y, 0.0, 1.0, 0.0));
-
+    /// A sample of the base's lobes in the frame where `wo.z > 0` (the layers aside).
+    #[inline(always)]
+    fn sample_base(&self, wo: Vec3, at: &AtWo, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
         // Choose a lobe; reuse the position of u_lobe within it for the reflect/refract
         // choice of the dielectric interface.
         let [p_ggx, p_diff, p_glass] = at.p;
-        let s = if u_lobe < p_ggx {
+        if u_lobe < p_ggx {
             self.sample_ggx(wo, u, at)
         } else if u_lobe < p_ggx + p_diff {
             let wi = microfacet::sample_cosine_hemisphere(u);
@@ -474,14 +548,11 @@ impl Bsdf {
             self.sample_glass(wo, uc, u, at)
         } else {
             None
-        }?;
-        Some(BsdfSample {
-            wi: if inside { flip(s.wi) } else { s.wi },
-            ..s
-        })
+        }
     }
 
     /// The `wo`-dependent factors: compensation, albedo scaling, lobe probabilities.
+    #[inline(always)]
     fn at_wo(&self, mu_o: f32, inside: bool) -> AtWo {
         if self.is_lambertian() {
             // The commonest surface: nothing depends on `wo`, and the general case

@@ -271,6 +271,8 @@ struct Extensions {
     specular: bool,
     transmission: bool,
     unlit: bool,
+    clearcoat: bool,
+    sheen: bool,
 }
 
 impl Extensions {
@@ -283,6 +285,8 @@ impl Extensions {
             (self.specular, "KHR_materials_specular"),
             (self.transmission, "KHR_materials_transmission"),
             (self.unlit, "KHR_materials_unlit"),
+            (self.clearcoat, "KHR_materials_clearcoat"),
+            (self.sheen, "KHR_materials_sheen"),
         ]
         .iter()
         .filter(|(on, _)| *on)
@@ -393,6 +397,11 @@ fn refuse_unsupported(scene: &Scene) -> Result<(), ExportError> {
             ("specularTexture", &m.specular_texture),
             ("specularColorTexture", &m.specular_color_texture),
             ("transmissionTexture", &m.transmission_texture),
+            ("clearcoatTexture", &m.clearcoat_texture),
+            ("clearcoatRoughnessTexture", &m.clearcoat_roughness_texture),
+            ("clearcoatNormalTexture", &m.clearcoat_normal_texture),
+            ("sheenColorTexture", &m.sheen_color_texture),
+            ("sheenRoughnessTexture", &m.sheen_roughness_texture),
         ];
         if let Some((slot, Some(t))) = slots.iter().find(|(_, t)| t.is_some()) {
             return Err(unsupported(
@@ -497,11 +506,15 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         finite(&el, name, values)?;
     }
     // The loader clamps these to glTF's ranges; a value outside would come back changed.
-    let unit: [(&str, &[f32]); 4] = [
+    let unit: [(&str, &[f32]); 8] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
         ("transmissionFactor", &[m.transmission]),
+        ("clearcoatFactor", &[m.clearcoat]),
+        ("clearcoatRoughnessFactor", &[m.clearcoat_roughness]),
+        ("sheenColorFactor", &m.sheen_color.to_array()),
+        ("sheenRoughnessFactor", &[m.sheen_roughness]),
     ];
     for (name, values) in unit {
         if values.iter().any(|v| !(0.0..=1.0).contains(v)) {
@@ -518,6 +531,15 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         if values.iter().any(|v| *v < 0.0) {
             return Err(invalid(&el, format!("{name} {values:?} is negative")));
         }
+    }
+    if m.clearcoat_normal_scale != 1.0 {
+        return Err(invalid(
+            &el,
+            format!(
+                "clear coat normal scale {} without a clear coat normal texture",
+                m.clearcoat_normal_scale
+            ),
+        ));
     }
     if m.normal_scale != 1.0 {
         // glTF keeps the scale on the normal texture, which textureless materials lack.
@@ -593,6 +615,26 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
             "KHR_materials_transmission",
             Obj::default()
                 .with("transmissionFactor", num(m.transmission))
+                .build(),
+        );
+    }
+    if m.clearcoat != 0.0 || m.clearcoat_roughness != 0.0 {
+        used.clearcoat = true;
+        ext = ext.with(
+            "KHR_materials_clearcoat",
+            Obj::default()
+                .with("clearcoatFactor", num(m.clearcoat))
+                .with("clearcoatRoughnessFactor", num(m.clearcoat_roughness))
+                .build(),
+        );
+    }
+    if m.sheen_color != Vec3::ZERO || m.sheen_roughness != 0.0 {
+        used.sheen = true;
+        ext = ext.with(
+            "KHR_materials_sheen",
+            Obj::default()
+                .with("sheenColorFactor", nums(&m.sheen_color.to_array()))
+                .with("sheenRoughnessFactor", num(m.sheen_roughness))
                 .build(),
         );
     }

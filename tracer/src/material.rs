@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3, Vec4};
 
-use crate::bsdf::SurfaceParams;
+use crate::bsdf::{LayerParams, SurfaceParams};
 use crate::texture::{Texture, TextureRef};
 
 /// How a material's alpha is used (glTF `alphaMode`).
@@ -61,6 +61,28 @@ pub struct Material {
     pub alpha_mode: AlphaMode,
     /// glTF `doubleSided`; single-sided surfaces are invisible from behind.
     pub double_sided: bool,
+    /// KHR_materials_clearcoat `clearcoatFactor`, default 0 (no coat).
+    pub clearcoat: f32,
+    /// Its texture (R channel).
+    pub clearcoat_texture: Option<TextureRef>,
+    /// `clearcoatRoughnessFactor`, default 0.
+    pub clearcoat_roughness: f32,
+    /// Its texture (G channel).
+    pub clearcoat_roughness_texture: Option<TextureRef>,
+    /// `clearcoatNormalTexture`: the coat's own tangent-space normal map. Without it the
+    /// coat lies on the unmapped normal (the spec: the base's normal map is not the
+    /// coat's).
+    pub clearcoat_normal_texture: Option<TextureRef>,
+    /// Its scale.
+    pub clearcoat_normal_scale: f32,
+    /// KHR_materials_sheen `sheenColorFactor`, default black (no sheen).
+    pub sheen_color: Vec3,
+    /// Its sRGB texture (RGB).
+    pub sheen_color_texture: Option<TextureRef>,
+    /// `sheenRoughnessFactor`, default 0.
+    pub sheen_roughness: f32,
+    /// Its texture (alpha channel).
+    pub sheen_roughness_texture: Option<TextureRef>,
     /// KHR_materials_unlit: the surface shows its base colour (times texture and vertex
     /// colour) as it is, whatever lights it. A path tracer renders that as a surface that
     /// emits its base colour and scatters nothing, so it also lights what it faces.
@@ -90,6 +112,16 @@ impl Default for Material {
             transmission_texture: None,
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
+            clearcoat: 0.0,
+            clearcoat_texture: None,
+            clearcoat_roughness: 0.0,
+            clearcoat_roughness_texture: None,
+            clearcoat_normal_texture: None,
+            clearcoat_normal_scale: 1.0,
+            sheen_color: Vec3::ZERO,
+            sheen_color_texture: None,
+            sheen_roughness: 0.0,
+            sheen_roughness_texture: None,
             unlit: false,
         }
     }
@@ -111,9 +143,24 @@ impl Material {
             &self.specular_texture,
             &self.specular_color_texture,
             &self.transmission_texture,
+            &self.clearcoat_texture,
+            &self.clearcoat_roughness_texture,
+            &self.clearcoat_normal_texture,
+            &self.sheen_color_texture,
+            &self.sheen_roughness_texture,
         ]
         .into_iter()
         .flatten()
+    }
+
+    /// Whether the material has a sheen layer.
+    pub fn has_sheen(&self) -> bool {
+        self.sheen_color.max_element() > 0.0
+    }
+
+    /// Whether the material has a clear coat or a sheen over its base.
+    fn has_layers(&self) -> bool {
+        self.clearcoat > 0.0 || self.has_sheen()
     }
 
     /// Whether the surface emits light anywhere.
@@ -142,6 +189,26 @@ impl Material {
     }
 }
 
+/// The base's factors at a point, before clamping.
+struct BaseFactors {
+    color: Vec3,
+    metallic: f32,
+    roughness: f32,
+    specular: f32,
+    specular_color: Vec3,
+    transmission: f32,
+}
+
+/// Layer factors (times textures) clamped to their ranges.
+fn clamped(l: LayerParams) -> LayerParams {
+    LayerParams {
+        clearcoat: l.clearcoat.clamp(0.0, 1.0),
+        clearcoat_roughness: l.clearcoat_roughness.clamp(0.0, 1.0),
+        sheen_color: l.sheen_color.clamp(Vec3::ZERO, Vec3::ONE),
+        sheen_roughness: l.sheen_roughness.clamp(0.0, 1.0),
+    }
+}
+
 /// A material's values at one surface point, after textures and vertex colours.
 #[derive(Clone, Copy, Debug)]
 pub struct MaterialSample {
@@ -154,6 +221,8 @@ pub struct MaterialSample {
     /// Tangent-space normal from the normal map (unit, +Z is the surface normal), already
     /// scaled by `normal_scale`; `None` without a normal map.
     pub normal_map: Option<Vec3>,
+    /// The same from the clear coat's normal map.
+    pub clearcoat_normal_map: Option<Vec3>,
 }
 
 impl Material {
@@ -161,25 +230,20 @@ impl Material {
     /// every texture and the vertex colour are white.
     pub fn factors(&self) -> SurfaceParams {
         self.surface(
-            self.base_color.truncate(),
-            self.metallic,
-            self.roughness,
-            self.specular,
-            self.specular_color,
-            self.transmission,
+            BaseFactors {
+                color: self.base_color.truncate(),
+                metallic: self.metallic,
+                roughness: self.roughness,
+                specular: self.specular,
+                specular_color: self.specular_color,
+                transmission: self.transmission,
+            },
+            self.layer_factors(),
         )
     }
 
     /// The parameters with factors (times textures) clamped to their ranges.
-    fn surface(
-        &self,
-        base_color: Vec3,
-        metallic: f32,
-        roughness: f32,
-        specular: f32,
-        specular_color: Vec3,
-        transmission: f32,
-    ) -> SurfaceParams {
+    fn surface(&self, base: BaseFactors, layers: Option<LayerParams>) -> SurfaceParams {
         if self.unlit {
             // Nothing scatters: the colour is emitted instead (see `Material::unlit`).
             return SurfaceParams {
@@ -190,14 +254,51 @@ impl Material {
             };
         }
         SurfaceParams {
-            base_color,
-            metallic: metallic.clamp(0.0, 1.0),
-            roughness: roughness.clamp(0.0, 1.0),
+            base_color: base.color,
+            metallic: base.metallic.clamp(0.0, 1.0),
+            roughness: base.roughness.clamp(0.0, 1.0),
             ior: self.ior,
-            specular: specular.max(0.0),
-            specular_color,
-            transmission: transmission.clamp(0.0, 1.0),
+            specular: base.specular.max(0.0),
+            specular_color: base.specular_color,
+            transmission: base.transmission.clamp(0.0, 1.0),
+            layers: layers.map(clamped),
         }
+    }
+
+    /// The layers' factors, for a material that has layers.
+    fn layer_factors(&self) -> Option<LayerParams> {
+        self.has_layers().then_some(LayerParams {
+            clearcoat: self.clearcoat,
+            clearcoat_roughness: self.clearcoat_roughness,
+            sheen_color: self.sheen_color,
+            sheen_roughness: self.sheen_roughness,
+        })
+    }
+
+    /// The layers' factors times their textures, `read` sampling a texture slot
+    /// (sRGB-decoded when asked); `None` for a material without layers.
+    fn layers_at(
+        &self,
+        read: &impl Fn(&Option<TextureRef>, bool) -> Option<Vec4>,
+    ) -> Option<LayerParams> {
+        let mut l = self.layer_factors()?;
+        if l.clearcoat > 0.0 {
+            if let Some(t) = read(&self.clearcoat_texture, false) {
+                l.clearcoat *= t.x;
+            }
+            if let Some(t) = read(&self.clearcoat_roughness_texture, false) {
+                l.clearcoat_roughness *= t.y;
+            }
+        }
+        if self.has_sheen() {
+            if let Some(t) = read(&self.sheen_color_texture, true) {
+                l.sheen_color *= t.truncate();
+            }
+            if let Some(t) = read(&self.sheen_roughness_texture, false) {
+                l.sheen_roughness *= t.w;
+            }
+        }
+        Some(l)
     }
 
     /// Only the coverage at a point: what alpha-masked shadow and camera rays need.
@@ -258,26 +359,33 @@ impl Material {
         if let Some(t) = read(&self.transmission_texture, false) {
             transmission *= t.x;
         }
-        let normal_map = read(&self.normal_texture, false).map(|t| {
+        let tangent_normal = |t: Vec4, scale: f32| {
             let n = Vec3::new(
-                (2.0 * t.x - 1.0) * self.normal_scale,
-                (2.0 * t.y - 1.0) * self.normal_scale,
+                (2.0 * t.x - 1.0) * scale,
+                (2.0 * t.y - 1.0) * scale,
                 2.0 * t.z - 1.0,
             );
             n.try_normalize().unwrap_or(Vec3::Z)
-        });
+        };
+        let normal_map =
+            read(&self.normal_texture, false).map(|t| tangent_normal(t, self.normal_scale));
         MaterialSample {
             surface: self.surface(
-                base.truncate(),
-                metallic,
-                roughness,
-                specular,
-                specular_color,
-                transmission,
+                BaseFactors {
+                    color: base.truncate(),
+                    metallic,
+                    roughness,
+                    specular,
+                    specular_color,
+                    transmission,
+                },
+                self.layers_at(&read),
             ),
             alpha: base.w,
             emission,
             normal_map,
+            clearcoat_normal_map: read(&self.clearcoat_normal_texture, false)
+                .map(|t| tangent_normal(t, self.clearcoat_normal_scale)),
         }
     }
 }

@@ -60,6 +60,12 @@ pub fn exp2(x: f32) -> f32 {
     libm::exp2f(x)
 }
 
+/// `e^x`.
+#[inline]
+pub fn exp(x: f32) -> f32 {
+    libm::expf(x)
+}
+
 /// Double-precision `(sin x, cos x)`.
 #[inline]
 pub fn sin_cos_f64(x: f64) -> (f64, f64) {

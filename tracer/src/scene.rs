@@ -394,6 +394,10 @@ pub struct Features {
     pub skinning: bool,
     /// A mesh has morph targets.
     pub morphing: bool,
+    /// Any material has a clear coat (KHR_materials_clearcoat).
+    pub clearcoat: bool,
+    /// Any material has a sheen (KHR_materials_sheen).
+    pub sheen: bool,
 }
 
 impl Features {
@@ -410,6 +414,8 @@ impl Features {
             (self.animation, "animation"),
             (self.skinning, "skinning"),
             (self.morphing, "morphing"),
+            (self.clearcoat, "clearcoat"),
+            (self.sheen, "sheen"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }
@@ -540,6 +546,8 @@ impl SceneBuilder {
             animation: !s.animations.is_empty(),
             skinning: s.nodes.iter().any(|n| n.skin.is_some()),
             morphing: s.meshes.iter().any(|m| !m.weights.is_empty()),
+            clearcoat: mats.iter().any(|m| m.clearcoat > 0.0),
+            sheen: mats.iter().any(Material::has_sheen),
         };
         self.scene
     }

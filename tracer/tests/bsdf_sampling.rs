@@ -32,6 +32,7 @@ fn params(metallic: f32, roughness: f32, ior: f32, transmission: f32) -> Surface
         specular: 1.0,
         specular_color: Vec3::ONE,
         transmission,
+        ..SurfaceParams::default()
     }
 }
 
@@ -42,7 +43,7 @@ fn wo(deg: f32, below: bool) -> Vec3 {
 
 #[test]
 fn samples_agree_with_eval_and_pdf() {
-    precompute_tables(true);
+    precompute_tables(true, false);
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     for p in [
         params(1.0, 0.4, 1.5, 0.0),

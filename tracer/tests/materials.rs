@@ -205,3 +205,187 @@ fn webp_textures_are_read_in_place_of_their_fallback() {
         assert_eq!(scene.textures[0].texels, texels.to_vec());
     }
 }
+
+/// Mean radiance of the pixels fully on a unit sphere of `material` in a uniform
+/// environment of radiance 1.
+fn furnace_radiance(material: Material, spp: u32) -> Vec3 {
+    let mut b = SceneBuilder::default();
+    let m = b.material(material);
+    b.mesh("ball", vec![uv_sphere(m, 64, 128)], DMat4::IDENTITY);
+    camera_at(&mut b, 4.0);
+    b.environment(Environment::Constant(Vec3::ONE));
+    let layers = render(b.finish(), spp);
+    means_by_depth(&layers, 3.9, 1e6).0
+}
+
+#[test]
+fn coated_and_sheened_white_spheres_are_white_furnaces() {
+    // Over a white Lambertian base each layer takes from the base what it reflects: a
+    // sphere in a uniform environment of radiance 1 reflects 1, bounce after bounce.
+    let white = Material {
+        metallic: 0.0,
+        specular: 0.0,
+        double_sided: true,
+        ..Material::default()
+    };
+    let cases = [
+        (
+            "rough clear coat",
+            Material {
+                clearcoat: 1.0,
+                clearcoat_roughness: 0.4,
+                ..white.clone()
+            },
+        ),
+        (
+            "smooth clear coat",
+            Material {
+                clearcoat: 0.7,
+                ..white.clone()
+            },
+        ),
+        (
+            "sheen",
+            Material {
+                sheen_color: Vec3::ONE,
+                sheen_roughness: 0.5,
+                ..white.clone()
+            },
+        ),
+    ];
+    for (name, material) in cases {
+        let l = furnace_radiance(material, 64);
+        assert!((l - Vec3::ONE).abs().max_element() < 0.01, "{name}: {l}");
+    }
+}
+
+#[test]
+fn clearcoat_and_sheen_are_read_with_their_textures() {
+    let mut doc = Doc::default();
+    let p = doc.vec3(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+    let uv = doc.vec2(&[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]);
+    let png = base64(&encoded(
+        image::RgbaImage::from_pixel(1, 1, image::Rgba([255, 128, 64, 32])),
+        image::ImageFormat::Png,
+    ));
+    let document = |material: &str| {
+        doc.json(&format!(
+            r#","extensionsUsed":["KHR_materials_clearcoat","KHR_materials_sheen"],
+            "images":[{{"uri":"data:image/png;base64,{png}"}}],"textures":[{{"source":0}}],
+            "materials":[{material}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":{p},"TEXCOORD_0":{uv}}},"material":0}}]}}],
+            "scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}]"#
+        ))
+    };
+    let json = document(
+        r#"{"extensions":{
+            "KHR_materials_clearcoat":{"clearcoatFactor":0.8,"clearcoatRoughnessFactor":0.3,
+                "clearcoatTexture":{"index":0},"clearcoatRoughnessTexture":{"index":0,"texCoord":1},
+                "clearcoatNormalTexture":{"index":0,"scale":0.5}},
+            "KHR_materials_sheen":{"sheenColorFactor":[1.0,0.5,0.25],"sheenRoughnessFactor":0.7,
+                "sheenColorTexture":{"index":0,"extensions":{"KHR_texture_transform":{"scale":[2,2]}}},
+                "sheenRoughnessTexture":{"index":0}}}}"#,
+    );
+    let scene = loader::load_slice(json.as_bytes(), None).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let m = &scene.materials[0];
+    assert_eq!((m.clearcoat, m.clearcoat_roughness), (0.8, 0.3));
+    assert_eq!(m.clearcoat_normal_scale, 0.5);
+    assert_eq!(m.clearcoat_roughness_texture.as_ref().unwrap().texcoord, 1);
+    assert!(m.clearcoat_texture.is_some() && m.clearcoat_normal_texture.is_some());
+    assert_eq!(
+        (m.sheen_color, m.sheen_roughness),
+        (Vec3::new(1.0, 0.5, 0.25), 0.7)
+    );
+    assert!(m.sheen_color_texture.as_ref().unwrap().transform.is_some());
+    assert!(m.sheen_roughness_texture.is_some());
+    assert!(scene.features.clearcoat && scene.features.sheen);
+    // The textures' channels: clearcoat R, its roughness G, sheen colour RGB (sRGB), sheen
+    // roughness A.
+    let at = m
+        .sample(&scene.textures, [glam::Vec2::ZERO; 2], Vec4::ONE)
+        .surface
+        .layers
+        .expect("the material has layers");
+    assert!((at.clearcoat - 0.8).abs() < 1e-6);
+    assert!((at.clearcoat_roughness - 0.3 * 128.0 / 255.0).abs() < 1e-6);
+    assert!((at.sheen_roughness - 0.7 * 32.0 / 255.0).abs() < 1e-6);
+    assert!((at.sheen_color.x - 1.0).abs() < 1e-6 && at.sheen_color.y < 0.5 * 0.5);
+
+    for (material, expected) in [
+        (
+            r#"{"extensions":{"KHR_materials_clearcoat":{"clearcoatFactor":"lots"}}}"#,
+            "material 0: clearcoatFactor \"lots\" is not a number",
+        ),
+        (
+            r#"{"extensions":{"KHR_materials_sheen":{"sheenColorFactor":[1,2]}}}"#,
+            "material 0: sheenColorFactor [1,2] is not three numbers",
+        ),
+        (
+            r#"{"extensions":{"KHR_materials_clearcoat":{"clearcoatTexture":{"index":7}}}}"#,
+            "material 0: clearcoatTexture names no texture",
+        ),
+    ] {
+        let err = loader::load_slice(document(material).as_bytes(), None).unwrap_err();
+        assert!(err.to_string().contains(expected), "{err}");
+    }
+}
+
+#[test]
+fn khronos_coat_and_sheen_models_load_with_their_layers() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared");
+    let models = [
+        ("scenes/ClearCoatTest/ClearCoatTest.glb", "clearcoat"),
+        ("scenes/ClearcoatWicker/ClearcoatWicker.glb", "clearcoat"),
+        (
+            "scenes-pending/ClearCoatCarPaint/ClearCoatCarPaint.glb",
+            "clearcoat",
+        ),
+        ("scenes/SheenCloth/SheenCloth.gltf", "sheen"),
+        ("scenes/SheenChair/SheenChair.gltf", "sheen"),
+    ];
+    for (file, feature) in models {
+        let path = dir.join(file);
+        if !path.exists() {
+            println!("SKIPPED: {} is not on this machine", path.display());
+            continue;
+        }
+        let scene = loader::load_path(&path).unwrap();
+        assert!(
+            scene.features.names().contains(&feature),
+            "{file}: features {:?}",
+            scene.features.names()
+        );
+        let ignored = scene
+            .warnings
+            .iter()
+            .find(|w| w.contains(&format!("KHR_materials_{feature}")));
+        assert!(ignored.is_none(), "{file}: {ignored:?}");
+    }
+}
+
+#[test]
+fn an_ignored_material_extension_is_named_with_its_materials() {
+    let mut doc = Doc::default();
+    let p = doc.vec3(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+    let json = doc.json(&format!(
+        r#","extensionsUsed":["KHR_materials_volume"],
+        "materials":[{{"name":"Glass","extensions":{{"KHR_materials_volume":{{"thicknessFactor":1}}}}}},{{}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":{p}}},"material":0}}]}}],
+        "scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}]"#
+    ));
+    let scene = loader::load_slice(json.as_bytes(), None).unwrap();
+    assert_eq!(
+        scene.warnings,
+        ["optional extension 'KHR_materials_volume' is not supported; ignored on material 0 'Glass'"]
+    );
+    let required = json.replace(
+        r#""extensionsUsed""#,
+        r#""extensionsRequired":["KHR_materials_volume"],"extensionsUsed""#,
+    );
+    let err = loader::load_slice(required.as_bytes(), None).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "required extension 'KHR_materials_volume' is not supported"
+    );
+}

@@ -29,6 +29,7 @@ fn material(
         specular: 1.0,
         specular_color: Vec3::ONE,
         transmission,
+        ..SurfaceParams::default()
     }
 }
 
@@ -233,6 +234,13 @@ fn random_material(rng: &mut Rng) -> SurfaceParams {
         specular: pick(rng, &[1.0, 0.0, 0.5]),
         specular_color: pick(rng, &[1.0, 0.3, 2.0]) * Vec3::new(1.0, rng.f32(), 1.0),
         transmission: pick(rng, &[0.0, 1.0, 0.5]),
+        // A clear coat and a sheen on a third of the materials each, smooth to rough.
+        layers: Some(LayerParams {
+            clearcoat: pick(rng, &[0.0, 0.0, 1.0, 0.5]) * pick(rng, &[1.0, 1.0, 0.0]),
+            clearcoat_roughness: pick(rng, &[0.0, 0.01, 0.2, 1.0]),
+            sheen_color: Vec3::new(rng.f32(), rng.f32(), rng.f32()) * pick(rng, &[0.0, 0.0, 1.0]),
+            sheen_roughness: pick(rng, &[0.0, 0.3, 1.0, 0.5]),
+        }),
     }
 }
 
@@ -340,6 +348,21 @@ fn degenerate_parameters_stay_finite() {
             specular: -3.0,
             specular_color: Vec3::splat(f32::INFINITY),
             transmission: 7.0,
+            layers: Some(LayerParams {
+                clearcoat: f32::NAN,
+                clearcoat_roughness: f32::INFINITY,
+                sheen_color: Vec3::new(f32::NAN, 3.0, -1.0),
+                sheen_roughness: f32::NAN,
+            }),
+        },
+        SurfaceParams {
+            layers: Some(LayerParams {
+                clearcoat: 5.0,
+                clearcoat_roughness: -1.0,
+                sheen_color: Vec3::splat(f32::INFINITY),
+                sheen_roughness: -2.0,
+            }),
+            ..SurfaceParams::default()
         },
         SurfaceParams {
             ior: 0.0,

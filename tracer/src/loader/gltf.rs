@@ -41,7 +41,8 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
     for ext in doc.extensions_used() {
         if !SUPPORTED_EXTENSIONS.contains(&ext) {
             warnings.push(format!(
-                "optional extension '{ext}' is not supported; ignored"
+                "optional extension '{ext}' is not supported; ignored{}",
+                materials_using(input.raw, ext)
             ));
         }
     }
@@ -58,7 +59,13 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
     let mut table = TextureTable::default();
     let mut materials = Vec::with_capacity(doc.materials().len() + 1);
     for m in doc.materials() {
-        materials.push(convert_material(&m, input.raw, &mut table, &mut warnings)?);
+        materials.push(convert_material(
+            &m,
+            doc,
+            input.raw,
+            &mut table,
+            &mut warnings,
+        )?);
     }
     let textures = table.decode(input)?;
     let default_material = materials.len() as u32;
@@ -126,6 +133,28 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
             .push("the default scene draws no triangles".into());
     }
     Ok(scene)
+}
+
+/// ` on material 0 'Glass', material 3`: the materials whose `extensions` hold `ext`, for
+/// the warning about an extension that is ignored; empty when none does.
+fn materials_using(raw: &Value, ext: &str) -> String {
+    let Some(materials) = raw["materials"].as_array() else {
+        return String::new();
+    };
+    let names: Vec<String> = materials
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m["extensions"].get(ext).is_some())
+        .map(|(i, m)| match m["name"].as_str() {
+            Some(n) => format!("material {i} '{n}'"),
+            None => format!("material {i}"),
+        })
+        .collect();
+    if names.is_empty() {
+        String::new()
+    } else {
+        format!(" on {}", names.join(", "))
+    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -561,6 +590,8 @@ fn features(scene: &Scene) -> Features {
             f.alpha_mask |= !matches!(mat.alpha_mode, AlphaMode::Opaque);
             f.emissive |= mat.is_emissive();
             f.normal_maps |= mat.normal_texture.is_some() && !prim.tangents.is_empty();
+            f.clearcoat |= mat.clearcoat > 0.0;
+            f.sheen |= mat.has_sheen();
         }
     });
     f

@@ -93,11 +93,14 @@ mod tests {
 
     #[test]
     fn garbage_is_refused_with_a_reason() {
-        let e = decode(b"not an image", Some("image/webp")).err().unwrap();
+        let e = decode(b"not an image", Some("image/ktx2")).err().unwrap();
         assert!(
             e.contains("not supported") || e.contains("unrecognised"),
             "{e}"
         );
+        // Declared WebP, but not: the decoder's own reason.
+        let e = decode(b"not an image", Some("image/webp")).err().unwrap();
+        assert!(e.starts_with("cannot decode WebP"), "{e}");
         let mut bad = png(image::DynamicImage::new_rgb8(4, 4));
         bad.truncate(30);
         assert!(decode(&bad, None).is_err());

@@ -208,10 +208,9 @@ fn finish_ref(
     }
 }
 
-/// KHR_texture_transform on a normal texture, read from the raw JSON (the `gltf` crate
-/// exposes it only for `textureInfo`). Returns (texCoord override, transform).
-fn normal_texture_transform(raw: &Value, material: usize) -> (Option<u32>, Option<UvTransform>) {
-    let t = &raw["materials"][material]["normalTexture"]["extensions"]["KHR_texture_transform"];
+/// KHR_texture_transform in a textureInfo's raw JSON: (texCoord override, transform).
+fn raw_texture_transform(info: &Value) -> (Option<u32>, Option<UvTransform>) {
+    let t = &info["extensions"]["KHR_texture_transform"];
     if !t.is_object() {
         return (None, None);
     }
@@ -230,14 +229,119 @@ fn normal_texture_transform(raw: &Value, material: usize) -> (Option<u32>, Optio
     (texcoord, Some(uv_transform(offset, rotation, scale)))
 }
 
+/// What converting one material reads besides the typed material.
+struct RawMaterial<'a> {
+    doc: &'a gltf::Document,
+    /// The material's raw JSON.
+    json: &'a Value,
+    index: usize,
+    element: Element,
+}
+
+impl RawMaterial<'_> {
+    /// A textureInfo of an extension the `gltf` crate does not parse (`info` is null
+    /// when the slot is empty), with its texCoord and KHR_texture_transform.
+    fn texture(
+        &self,
+        info: &Value,
+        slot: &str,
+        table: &mut TextureTable,
+        warnings: &mut Vec<String>,
+    ) -> Result<Option<TextureRef>, SceneError> {
+        if info.is_null() {
+            return Ok(None);
+        }
+        let tex = info["index"]
+            .as_u64()
+            .and_then(|i| self.doc.textures().nth(i as usize))
+            .ok_or_else(|| {
+                SceneError::at(self.element, format!("{slot} names no texture: {info}"))
+            })?;
+        let context = format!("material {} {slot}", self.index);
+        let (cover, transform) = raw_texture_transform(info);
+        let texcoord = cover
+            .or(info["texCoord"]
+                .as_u64()
+                .map(|c| c.min(u32::MAX as u64) as u32))
+            .unwrap_or(0);
+        Ok(Some(finish_ref(
+            table, &tex, texcoord, transform, &context, warnings,
+        )))
+    }
+
+    /// A number of an extension object, `default` when absent.
+    fn number(&self, ext: &Value, key: &str, default: f32) -> Result<f32, SceneError> {
+        match &ext[key] {
+            Value::Null => Ok(default),
+            v => v
+                .as_f64()
+                .map(|x| x as f32)
+                .ok_or_else(|| SceneError::at(self.element, format!("{key} {v} is not a number"))),
+        }
+    }
+
+    /// An RGB factor of an extension object, `default` when absent.
+    fn rgb(&self, ext: &Value, key: &str, default: Vec3) -> Result<Vec3, SceneError> {
+        match &ext[key] {
+            Value::Null => Ok(default),
+            v => match v
+                .as_array()
+                .map(|a| a.iter().map(Value::as_f64).collect::<Vec<_>>())
+            {
+                Some(c) if c.len() == 3 && c.iter().all(Option::is_some) => Ok(Vec3::from_array(
+                    [0, 1, 2].map(|i| c[i].unwrap_or(0.0) as f32),
+                )),
+                _ => Err(SceneError::at(
+                    self.element,
+                    format!("{key} {v} is not three numbers"),
+                )),
+            },
+        }
+    }
+}
+
+/// KHR_materials_clearcoat and KHR_materials_sheen, which the `gltf` crate does not parse.
+fn read_layers(
+    raw: &RawMaterial<'_>,
+    out: &mut Material,
+    table: &mut TextureTable,
+    warnings: &mut Vec<String>,
+) -> Result<(), SceneError> {
+    let mut texture = |ext: &Value, slot: &str| raw.texture(&ext[slot], slot, table, warnings);
+    let cc = &raw.json["extensions"]["KHR_materials_clearcoat"];
+    if cc.is_object() {
+        out.clearcoat = raw.number(cc, "clearcoatFactor", 0.0)?;
+        out.clearcoat_roughness = raw.number(cc, "clearcoatRoughnessFactor", 0.0)?;
+        out.clearcoat_texture = texture(cc, "clearcoatTexture")?;
+        out.clearcoat_roughness_texture = texture(cc, "clearcoatRoughnessTexture")?;
+        out.clearcoat_normal_texture = texture(cc, "clearcoatNormalTexture")?;
+        out.clearcoat_normal_scale = raw.number(&cc["clearcoatNormalTexture"], "scale", 1.0)?;
+    }
+    let sheen = &raw.json["extensions"]["KHR_materials_sheen"];
+    if sheen.is_object() {
+        out.sheen_color = raw.rgb(sheen, "sheenColorFactor", Vec3::ZERO)?;
+        out.sheen_roughness = raw.number(sheen, "sheenRoughnessFactor", 0.0)?;
+        out.sheen_color_texture = texture(sheen, "sheenColorTexture")?;
+        out.sheen_roughness_texture = texture(sheen, "sheenRoughnessTexture")?;
+    }
+    Ok(())
+}
+
 pub(crate) fn convert_material(
     m: &gltf::Material<'_>,
+    doc: &gltf::Document,
     raw: &Value,
     table: &mut TextureTable,
     warnings: &mut Vec<String>,
 ) -> Result<Material, SceneError> {
     let index = m.index().expect("document materials have an index");
     let element = Element::Material(index);
+    let raw = RawMaterial {
+        doc,
+        json: &raw["materials"][index],
+        index,
+        element,
+    };
     let ctx = |slot: &str| format!("material {index} {slot}");
     let pbr = m.pbr_metallic_roughness();
 
@@ -269,7 +373,8 @@ pub(crate) fn convert_material(
         .emissive_texture()
         .map(|i| texture_ref(table, &i, &ctx("emissiveTexture"), warnings));
     if let Some(n) = m.normal_texture() {
-        let (cover, transform) = normal_texture_transform(raw, index);
+        // The gltf crate exposes KHR_texture_transform only for `textureInfo`.
+        let (cover, transform) = raw_texture_transform(&raw.json["normalTexture"]);
         let texcoord = cover.unwrap_or(n.tex_coord());
         out.normal_texture = Some(finish_ref(
             table,
@@ -298,6 +403,8 @@ pub(crate) fn convert_material(
             .map(|i| texture_ref(table, &i, &ctx("transmissionTexture"), warnings));
     }
 
+    read_layers(&raw, &mut out, table, warnings)?;
+
     // A NaN factor would reach every pixel the material covers: refuse it here.
     let cutoff = match out.alpha_mode {
         AlphaMode::Mask { cutoff } => cutoff,
@@ -320,6 +427,14 @@ pub(crate) fn convert_material(
         ),
         ("transmissionFactor", vec![out.transmission]),
         ("alphaCutoff", vec![cutoff]),
+        ("clearcoatFactor", vec![out.clearcoat]),
+        ("clearcoatRoughnessFactor", vec![out.clearcoat_roughness]),
+        (
+            "clearcoatNormalTexture.scale",
+            vec![out.clearcoat_normal_scale],
+        ),
+        ("sheenColorFactor", out.sheen_color.to_array().to_vec()),
+        ("sheenRoughnessFactor", vec![out.sheen_roughness]),
     ];
     for (name, values) in factors {
         if values.iter().any(|v| !v.is_finite()) {
@@ -340,6 +455,10 @@ pub(crate) fn convert_material(
     out.metallic = out.metallic.clamp(0.0, 1.0);
     out.roughness = out.roughness.clamp(0.0, 1.0);
     out.transmission = out.transmission.clamp(0.0, 1.0);
+    out.clearcoat = out.clearcoat.clamp(0.0, 1.0);
+    out.clearcoat_roughness = out.clearcoat_roughness.clamp(0.0, 1.0);
+    out.sheen_color = out.sheen_color.clamp(Vec3::ZERO, Vec3::ONE);
+    out.sheen_roughness = out.sheen_roughness.clamp(0.0, 1.0);
     out.specular = out.specular.max(0.0);
     out.specular_color = out.specular_color.max(Vec3::ZERO);
     Ok(out)
