@@ -114,6 +114,24 @@ fn with_textures() -> Scene {
     scene
 }
 
+/// The demo with a layer on every material: a clear coat (factor 1, roughness 0.1), or a
+/// white sheen (roughness 0.5).
+fn with_layer(clearcoat: bool) -> Scene {
+    let mut scene = tracer::demo::demo_scene();
+    for m in &mut scene.materials {
+        if clearcoat {
+            m.clearcoat = 1.0;
+            m.clearcoat_roughness = 0.1;
+        } else {
+            m.sheen_color = glam::Vec3::ONE;
+            m.sheen_roughness = 0.5;
+        }
+    }
+    scene.features.clearcoat = clearcoat;
+    scene.features.sheen = !clearcoat;
+    scene
+}
+
 /// The demo with its metal sphere skinned to one joint that stands where the sphere's node
 /// does: the same image, but the sphere is posed by skinning, into a mesh (and BVH) of the
 /// frame's own.
@@ -152,7 +170,8 @@ fn with_skinning() -> Scene {
 }
 
 /// The price of an animation with the shutter closed, of the motion path on a still
-/// image, of motion blur, of skinning, of transmission and of textures, on `size` images
+/// image, of motion blur, of skinning, of transmission, of textures, of a clear coat and of
+/// a sheen, on `size` images
 /// at `spp`.
 pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCost>> {
     let still = FrameOptions {
@@ -223,6 +242,16 @@ pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCo
             (demo(), &still),
             (with_textures(), &still),
         )?,
+        cost(
+            "clear coat (demo vs a coat of roughness 0.1 on every material)",
+            (demo(), &still),
+            (with_layer(true), &still),
+        )?,
+        cost(
+            "sheen (demo vs a white sheen of roughness 0.5 on every material)",
+            (demo(), &still),
+            (with_layer(false), &still),
+        )?,
     ])
 }
 
@@ -265,6 +294,21 @@ mod tests {
             textured.features.names().len(),
             opaque.features.names().len() + 2
         );
+        let (coated, sheened) = (with_layer(true), with_layer(false));
+        assert!(coated.materials.iter().all(|m| m.clearcoat == 1.0));
+        assert!(sheened.materials.iter().all(|m| m.has_sheen()));
+        assert_eq!(
+            coated.features.names(),
+            [
+                tracer::demo::demo_scene().features.names(),
+                vec!["clearcoat"]
+            ]
+            .concat()
+        );
+        assert_eq!(
+            sheened.features.names(),
+            [tracer::demo::demo_scene().features.names(), vec!["sheen"]].concat()
+        );
     }
 
     /// The skinned sphere stands where the plain one does, posed into a mesh of the
@@ -305,7 +349,7 @@ mod tests {
     #[test]
     fn every_feature_is_priced() {
         let costs = feature_costs((8, 8), 1).unwrap();
-        assert_eq!(costs.len(), 6);
+        assert_eq!(costs.len(), 8);
         assert!(costs.iter().all(|c| c.without > 0.0 && c.with > 0.0));
         assert!(table(&costs).contains("| motion blur"));
     }

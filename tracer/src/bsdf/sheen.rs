@@ -21,7 +21,7 @@ const N: usize = 32;
 /// Quadrature cells per table entry over the hemisphere of incident directions
 /// (cos θ × φ over half the circle: the lobe is symmetric about the plane of `wo`).
 const Q_MU: usize = 96;
-const Q_PHI: usize = 48;
+const Q_PHI: usize = 32;
 
 /// The Charlie distribution `D(h) = (2 + 1/α) sin^(1/α) θh / 2π` for `cos θh = cos_h`.
 pub(crate) fn d(cos_h: f32, alpha: f32) -> f32 {
@@ -141,23 +141,28 @@ impl Table {
 
 /// `∫ D V μi dωi` at `wo` with cosine `mu`, by the midpoint rule on `q_mu × q_phi` cells
 /// of the hemisphere (cells crowded towards the horizon, where the fibres reflect most).
+/// `V` depends on the two cosines only, so each row of cells shares it, and a cell costs
+/// one power (in `D`).
 pub(crate) fn albedo_by_quadrature(mu: f32, alpha: f32, q_mu: usize, q_phi: usize) -> f32 {
     let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+    let lambda_o = lambda(mu, alpha);
     let mut sum = 0.0f64;
     for a in 0..q_mu {
         // μi = 1 − (1 − v)²: the cell widths shrink towards μi = 0.
         let v = (a as f64 + 0.5) / q_mu as f64;
-        let mu_i = 1.0 - (1.0 - v) * (1.0 - v);
+        let mu_i = (1.0 - (1.0 - v) * (1.0 - v)) as f32;
         let d_mu = 2.0 * (1.0 - v) / q_mu as f64;
         let sin_i = (1.0 - mu_i * mu_i).max(0.0).sqrt();
+        let vis = 1.0 / ((1.0 + lambda_o + lambda(mu_i, alpha)) * (4.0 * mu * mu_i));
+        let mut row = 0.0f64;
         for b in 0..q_phi {
             let phi = std::f64::consts::PI * (b as f64 + 0.5) / q_phi as f64;
             let (s, c) = crate::math::sin_cos_f64(phi);
-            let wi = Vec3::new((sin_i * c) as f32, (sin_i * s) as f32, mu_i as f32);
-            let f = eval(wo, wi, alpha) as f64;
-            // Both halves of the φ circle: 2π / q_phi per cell over [0, π).
-            sum += f * mu_i * d_mu * (std::f64::consts::TAU / q_phi as f64);
+            let wi = Vec3::new(sin_i * c as f32, sin_i * s as f32, mu_i);
+            row += d((wo + wi).normalize_or(Vec3::Z).z, alpha) as f64;
         }
+        // Both halves of the φ circle: 2π / q_phi per cell over [0, π).
+        sum += row * (vis * mu_i) as f64 * d_mu * (std::f64::consts::TAU / q_phi as f64);
     }
     sum as f32
 }
