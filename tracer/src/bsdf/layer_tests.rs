@@ -26,12 +26,17 @@ fn base(color: Vec3, metallic: f32, roughness: f32) -> SurfaceParams {
     }
 }
 
-/// A base that reflects nothing: black, and without the dielectric's specular layer.
-fn black() -> SurfaceParams {
+/// A Lambertian base of colour `color` (no specular layer).
+fn lambert(color: Vec3) -> SurfaceParams {
     SurfaceParams {
         specular: 0.0,
-        ..base(Vec3::ZERO, 0.0, 1.0)
+        ..base(color, 0.0, 1.0)
     }
+}
+
+/// A base that reflects nothing.
+fn black() -> SurfaceParams {
+    lambert(Vec3::ZERO)
 }
 
 fn coated(params: SurfaceParams, weight: f32, roughness: f32) -> SurfaceParams {
@@ -102,10 +107,7 @@ fn chi2_clearcoat_over_plastic() {
 
 #[test]
 fn chi2_sheen_over_diffuse() {
-    let diffuse = SurfaceParams {
-        specular: 0.0,
-        ..base(Vec3::new(0.2, 0.3, 0.8), 0.0, 1.0)
-    };
+    let diffuse = lambert(Vec3::new(0.2, 0.3, 0.8));
     chi2_family(
         "sheen over diffuse",
         |r| with_sheen(diffuse, Vec3::new(1.0, 0.8, 0.6), r),
@@ -148,17 +150,9 @@ fn the_sheen_albedo_table_matches_a_finer_quadrature() {
     assert!(worst.0 < 3e-3, "table off by {:?} (error, μ, α)", worst);
 }
 
-/// Directional albedo ∫ f |cos| dωi at `wo`, by sampling, per channel.
+/// Directional albedo ∫ f |cos| dωi at `wo` of the BSDF of `params`, by sampling.
 fn albedo(params: SurfaceParams, wo: Vec3, n: usize, seed: u64) -> Vec3 {
-    let bsdf = Bsdf::new(params);
-    let mut rng = Rng::new(seed);
-    let mut sum = Vec3::ZERO;
-    for _ in 0..n {
-        if let Some(s) = bsdf.sample(wo, rng.f32(), Vec2::new(rng.f32(), rng.f32())) {
-            sum += s.f * s.wi.z.abs() / s.pdf;
-        }
-    }
-    sum / n as f32
+    super::tests::directional_albedo(&Bsdf::new(params), wo, n, seed)
 }
 
 #[test]
@@ -183,10 +177,7 @@ fn sampling_the_sheen_alone_integrates_to_its_table() {
 fn a_coat_over_white_lambert_is_a_white_furnace() {
     // The coat reflects E_coat(μo) and the base, of albedo exactly 1, returns all it is
     // given: 1 − E_coat(μo). Any weight, any coat roughness, smooth included.
-    let white = SurfaceParams {
-        specular: 0.0,
-        ..base(Vec3::ONE, 0.0, 1.0)
-    };
+    let white = lambert(Vec3::ONE);
     for weight in [0.3, 1.0] {
         for roughness in [0.0, 0.1, 0.5, 1.0] {
             for deg in [0.0, 45.0, 80.0, 89.0] {
@@ -246,10 +237,7 @@ fn furnace_clearcoat_over_white_metal() {
 #[test]
 fn furnace_sheen_over_white_diffuse() {
     // The sheen reflects E(μo) and takes as much from a base that returns all: 1.
-    let white = SurfaceParams {
-        specular: 0.0,
-        ..base(Vec3::ONE, 0.0, 1.0)
-    };
+    let white = lambert(Vec3::ONE);
     furnace(
         "sheen over diffuse",
         |r| with_sheen(white, Vec3::ONE, r),
@@ -272,10 +260,7 @@ fn furnace_coat_and_sheen_over_white_plastic() {
 #[test]
 fn a_tilted_coat_keeps_energy() {
     // A coat on its own normal map, over white Lambert: never above 1.
-    let white = SurfaceParams {
-        specular: 0.0,
-        ..base(Vec3::ONE, 0.0, 1.0)
-    };
+    let white = lambert(Vec3::ONE);
     let bsdf = Bsdf::new(coated(white, 1.0, 0.3));
     for tilt in [0.2f32, 0.6] {
         let n = Vec3::new(tilt.sin(), 0.0, tilt.cos());

@@ -457,7 +457,7 @@ fn is_delta_and_albedo() {
 }
 
 /// Directional albedo ∫ f |cos| dωi at `wo`, by sampling.
-fn directional_albedo(bsdf: &Bsdf, wo: Vec3, n: usize, seed: u64) -> Vec3 {
+pub(super) fn directional_albedo(bsdf: &Bsdf, wo: Vec3, n: usize, seed: u64) -> Vec3 {
     let mut rng = Rng::new(seed);
     let mut sum = Vec3::ZERO;
     for _ in 0..n {
