@@ -122,7 +122,7 @@ fn bench_quick_writes_a_report_with_every_section() {
     let json = std::fs::read_to_string(dir.path().join("report/report.json")).unwrap();
     let report: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(report["scenes"].as_array().unwrap().len(), 3);
-    assert_eq!(report["features"].as_array().unwrap().len(), 6);
+    assert_eq!(report["features"].as_array().unwrap().len(), 8);
     assert_eq!(
         report["farm"]["repeats"].as_u64(),
         Some(1),
