@@ -13,14 +13,16 @@
 //!           Turquin compensation; plus c/π · (1 − E_spec(μo))       (albedo scaling)
 //! glass   = dielectric interface, smooth or rough (Walter et al. 2007), exact Fresnel F:
 //!           reflection s · min(specularColor, 1) · F, refraction c · (1 − s'·F) / η²,
-//!           s' = s · max(min(specularColor, 1)); plus a multiple-scattering lobe
+//!           s' = s · max(min(specularColor, 1)); plus a multiple-scattering lobe;
+//!           or, for transmission without KHR_materials_volume, a thin wall that
+//!           refracts nothing (`bsdf/thin.rs`)
 //! ```
 //!
 //! This is the glTF layering `mix(dielectric_brdf, metal_brdf, metallic)` with
 //! `dielectric_brdf = fresnel_mix(layer = specular_brdf, base = mix(diffuse, btdf, t))`,
 //! except that the transmissive part is one dielectric interface with the exact Fresnel
-//! for both of its lobes: the issue asks for solid refraction (not glTF's thin-walled
-//! default), and a clear glass must be an energy-conserving interface. GGX uses
+//! for both of its lobes: a clear glass must be an energy-conserving interface, and the
+//! boundary of a volume (KHR_materials_volume) refracts as the surface of a solid. GGX uses
 //! height-correlated Smith masking-shadowing and spherical-cap visible-normal sampling
 //! (Dupuy & Benyoub 2023).
 //!
@@ -80,6 +82,7 @@ mod layers;
 mod microfacet;
 mod sheen;
 mod tables;
+mod thin;
 
 pub use curve::AlbedoCurve;
 
@@ -123,6 +126,10 @@ pub struct SurfaceParams {
     pub specular_color: Vec3,
     /// KHR_materials_transmission factor.
     pub transmission: f32,
+    /// Whether the transmitting part is a thin wall (glTF's default without
+    /// KHR_materials_volume): light passes through without bending and both sides are
+    /// outside. Otherwise it is the boundary of a solid that refracts.
+    pub thin_walled: bool,
     /// The clear coat and sheen over the base, for a material that has either (`None`
     /// keeps the parameters of the commonest materials small).
     pub layers: Option<LayerParams>,
@@ -153,6 +160,7 @@ impl Default for SurfaceParams {
             specular: 1.0,
             specular_color: Vec3::ONE,
             transmission: 0.0,
+            thin_walled: false,
             layers: None,
         }
     }
@@ -202,6 +210,9 @@ pub struct Bsdf {
     glass_s: f32,
     /// Whether the refractive interface is smooth (delta reflection and refraction).
     glass_smooth: bool,
+    /// Whether the transmitting part is a thin wall (`bsdf/thin.rs`) rather than an
+    /// interface into a solid.
+    thin: bool,
     /// Whether any microfacet lobe is present (metal, specular layer, rough interface): a
     /// Lambertian surface (specular 0) skips their tables and evaluation.
     microfacet: bool,
@@ -233,6 +244,8 @@ struct AtWo {
     glass_ms: f32,
     /// Fraction of `glass_ms` that is reflected (the rest is transmitted).
     glass_ms_r: f32,
+    /// Turquin factor of a rough thin wall, `1 / E1(μo)` (see `bsdf/thin.rs`).
+    thin_comp: f32,
     /// Lobe-selection probabilities: GGX reflection (metal and specular layer),
     /// diffuse, refractive interface. They sum to 1 (or are all 0: no lobe).
     p: [f32; 3],
@@ -374,6 +387,7 @@ impl Bsdf {
         let spec = sane(params.specular, 0.0, 1.0, 1.0);
         let spec_color = sane3(params.specular_color, 0.0, f32::MAX);
         let eta = sane(params.ior, 1.0, IOR_MAX, 1.5);
+        let thin = params.thin_walled;
         let layers = params.layers.and_then(|l| {
             layers::Layers::new(
                 sane(l.clearcoat, 0.0, 1.0, 0.0),
@@ -408,6 +422,7 @@ impl Bsdf {
             glass_tint,
             glass_s: glass_tint.max_element(),
             glass_smooth,
+            thin,
             microfacet,
             // Table positions only where a lobe looks them up: a Lambertian surface, the
             // commonest, needs none.
@@ -416,7 +431,7 @@ impl Bsdf {
             } else {
                 Default::default()
             },
-            diel: if w_glass > 0.0 && !glass_smooth {
+            diel: if w_glass > 0.0 && !glass_smooth && !thin {
                 [false, true].map(|inside| tables::DielectricTable::coord(table_alpha, eta, inside))
             } else {
                 Default::default()
@@ -432,7 +447,7 @@ impl Bsdf {
     /// on first request (about 0.3 s) and kept for the process.
     pub fn albedo_curve_for(params: SurfaceParams) -> Option<&'static AlbedoCurve> {
         let b = Self::new(params);
-        (b.w_glass > 0.0 && !b.glass_smooth).then(|| curve::interned(b.alpha, b.eta))?
+        (b.w_glass > 0.0 && !b.glass_smooth && !b.thin).then(|| curve::interned(b.alpha, b.eta))?
     }
 
     /// This BSDF with the albedo curve of its material (from [`Bsdf::albedo_curve_for`]);
@@ -469,6 +484,12 @@ impl Bsdf {
     /// The material's index of refraction (clamped to [1, 100]).
     pub fn eta(&self) -> f32 {
         self.eta
+    }
+
+    /// Whether light it transmits passes a thin wall (no bending, no medium entered)
+    /// rather than refracting into or out of a solid.
+    pub fn is_thin_walled(&self) -> bool {
+        self.thin
     }
 
     /// f(wo, wi) without the cosine; zero for delta lobes.
@@ -515,9 +536,9 @@ impl Bsdf {
         let inside = wo.z < 0.0;
         let wo = if inside { flip(wo) } else { wo };
         let at = self.at_wo(wo.z, inside);
-        // Light inside a refracting object meets the bare interface; an opaque surface is
-        // two-sided, its layers mirrored with it.
-        let layers = if self.layers.is_none() || (inside && self.w_glass > 0.0) {
+        // Light inside a refracting object meets the bare interface; an opaque surface or
+        // a thin wall is two-sided, its layers mirrored with it.
+        let layers = if self.layers.is_none() || (inside && self.w_glass > 0.0 && !self.thin) {
             None
         } else {
             let coat_normal = coat_normal.map(|n| if inside { flip(n) } else { n });
@@ -560,6 +581,7 @@ impl Bsdf {
             let diffuse = self.w_plastic * self.base.max_element() > 0.0;
             return AtWo {
                 eta_rel: if inside { 1.0 / self.eta } else { self.eta },
+                thin_comp: 1.0,
                 metal_comp: Vec3::ONE,
                 spec_comp: Vec3::ONE,
                 diffuse_w: 1.0,
@@ -578,7 +600,12 @@ impl Bsdf {
 
     /// [`Bsdf::at_wo`] for any BSDF.
     fn at_wo_general(&self, mu_o: f32, inside: bool) -> AtWo {
-        let eta_rel = if inside { 1.0 / self.eta } else { self.eta };
+        // A thin wall has air on both sides.
+        let eta_rel = if inside && !self.thin {
+            1.0 / self.eta
+        } else {
+            self.eta
+        };
         let f0_max = self.f0_spec.max_element();
         let f0_mean = mean(self.f0_spec);
         let c_mean = mean(self.base);
@@ -620,7 +647,7 @@ impl Bsdf {
         // Refractive interface: the energy single scattering misses goes to a diffuse
         // multiple-scattering lobe, split between reflection and refraction as the
         // single-scattered energy is.
-        let (glass_ms, glass_ms_r) = if self.w_glass > 0.0 && !self.glass_smooth {
+        let (glass_ms, glass_ms_r) = if self.w_glass > 0.0 && !self.glass_smooth && !self.thin {
             let [a, b, c] = match self.curve {
                 Some(curve) => curve.dielectric(mu_o, inside),
                 None => tables::dielectric().lookup(mu_o, self.diel[usize::from(inside)]),
@@ -668,8 +695,14 @@ impl Bsdf {
         } else {
             [0.0; 3]
         };
+        let thin_comp = if self.w_glass > 0.0 && self.thin && !self.glass_smooth {
+            thin::compensation(self, mu_o)
+        } else {
+            1.0
+        };
         AtWo {
             eta_rel,
+            thin_comp,
             metal_comp,
             spec_comp,
             diffuse_w,
@@ -698,7 +731,7 @@ impl Bsdf {
                             * at.spec_comp;
                 if self.w_glass > 0.0 && !self.glass_smooth {
                     let fr = fresnel::dielectric(cos_om, at.eta_rel);
-                    fresnel += self.w_glass * fr * self.glass_tint;
+                    fresnel += self.w_glass * fr * self.glass_tint * at.thin_comp;
                     f += self.w_glass * at.glass_ms * at.glass_ms_r * FRAC_1_PI * self.ms_tint();
                 }
                 f += lobe * fresnel;
@@ -707,6 +740,9 @@ impl Bsdf {
         } else {
             if self.w_glass == 0.0 || self.glass_smooth {
                 return Vec3::ZERO;
+            }
+            if self.thin {
+                return thin::eval_transmission(self, wo, wi, at);
             }
             let radiance_scale = 1.0 / (at.eta_rel * at.eta_rel);
             let mut ft = at.glass_ms * (1.0 - at.glass_ms_r) * FRAC_1_PI;
@@ -797,7 +833,9 @@ impl Bsdf {
                     }
                 }
                 pdf += p_ggx * refl;
-                if glass_rough {
+                if glass_rough && self.thin {
+                    pdf += p_glass * self.glass_s * glass_refl;
+                } else if glass_rough {
                     pdf += p_glass
                         * ((1.0 - at.glass_ms) * self.glass_s * glass_refl
                             + at.glass_ms * at.glass_ms_r * wi.z * FRAC_1_PI);
@@ -807,6 +845,9 @@ impl Bsdf {
         } else {
             if !glass_rough {
                 return 0.0;
+            }
+            if self.thin {
+                return p_glass * thin::pdf_transmission(self, wo, wi, at);
             }
             let mut pdf = at.glass_ms * (1.0 - at.glass_ms_r) * -wi.z * FRAC_1_PI;
             // Refractions reach `wi` directly, or folded from above the horizon.
@@ -867,6 +908,9 @@ impl Bsdf {
     /// smooth), then reflection with probability `glass_s · F`, else refraction.
     fn sample_glass(&self, wo: Vec3, uc: f32, u: Vec2, at: &AtWo) -> Option<BsdfSample> {
         let p_glass = at.p[2];
+        if self.thin {
+            return thin::sample(self, wo, uc, u, at);
+        }
         if self.glass_smooth {
             let fr = if self.eta == 1.0 {
                 0.0

@@ -155,6 +155,9 @@ fn demo_objects(b: &mut SceneBuilder) -> [u32; 3] {
         roughness: 0.0,
         transmission: 1.0,
         ior: 1.5,
+        // A solid ball (KHR_materials_volume), not a soap bubble: the unit sphere's
+        // diameter, in its mesh's units.
+        thickness: 2.0,
         ..Default::default()
     });
     let boxy = Trs {

@@ -5,9 +5,9 @@
 //!
 //! What is written: the node graph (TRS or matrix), the default scene, meshes (triangle
 //! lists with POSITION, NORMAL, TANGENT, TEXCOORD_0/1, COLOR_0, u32 indices, morph targets),
-//! PBR metallic-roughness materials with KHR_materials_emissive_strength, _ior, _specular and
-//! _transmission, cameras, KHR_lights_punctual lights, and animations (every channel with
-//! its own sampler). Each value is written so that the loader's arithmetic gives it back
+//! PBR metallic-roughness materials with KHR_materials_emissive_strength, _ior, _specular,
+//! _transmission, _volume, _clearcoat, _sheen and _unlit, cameras, KHR_lights_punctual
+//! lights, and animations (every channel with its own sampler). Each value is written so that the loader's arithmetic gives it back
 //! bit for bit: emission and light values are split into a factor and a strength whose
 //! product is exact, and every JSON number is checked to parse back to its f32.
 //!
@@ -273,6 +273,7 @@ struct Extensions {
     unlit: bool,
     clearcoat: bool,
     sheen: bool,
+    volume: bool,
 }
 
 impl Extensions {
@@ -287,6 +288,7 @@ impl Extensions {
             (self.unlit, "KHR_materials_unlit"),
             (self.clearcoat, "KHR_materials_clearcoat"),
             (self.sheen, "KHR_materials_sheen"),
+            (self.volume, "KHR_materials_volume"),
         ]
         .iter()
         .filter(|(on, _)| *on)
@@ -397,6 +399,7 @@ fn refuse_unsupported(scene: &Scene) -> Result<(), ExportError> {
             ("specularTexture", &m.specular_texture),
             ("specularColorTexture", &m.specular_color_texture),
             ("transmissionTexture", &m.transmission_texture),
+            ("thicknessTexture", &m.thickness_texture),
             ("clearcoatTexture", &m.clearcoat_texture),
             ("clearcoatRoughnessTexture", &m.clearcoat_roughness_texture),
             ("clearcoatNormalTexture", &m.clearcoat_normal_texture),
@@ -490,7 +493,7 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         AlphaMode::Mask { cutoff } => cutoff,
         _ => 0.5,
     };
-    let factors: [(&str, &[f32]); 10] = [
+    let factors: [(&str, &[f32]); 11] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
@@ -501,12 +504,13 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         ("specularColorFactor", &m.specular_color.to_array()),
         ("transmissionFactor", &[m.transmission]),
         ("alphaCutoff", &[cutoff]),
+        ("thicknessFactor", &[m.thickness]),
     ];
     for (name, values) in factors {
         finite(&el, name, values)?;
     }
     // The loader clamps these to glTF's ranges; a value outside would come back changed.
-    let unit: [(&str, &[f32]); 8] = [
+    let unit: [(&str, &[f32]); 9] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
@@ -515,22 +519,33 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         ("clearcoatRoughnessFactor", &[m.clearcoat_roughness]),
         ("sheenColorFactor", &m.sheen_color.to_array()),
         ("sheenRoughnessFactor", &[m.sheen_roughness]),
+        ("attenuationColor", &m.attenuation_color.to_array()),
     ];
     for (name, values) in unit {
         if values.iter().any(|v| !(0.0..=1.0).contains(v)) {
             return Err(invalid(&el, format!("{name} {values:?} is outside [0, 1]")));
         }
     }
-    let non_negative: [(&str, &[f32]); 4] = [
+    let non_negative: [(&str, &[f32]); 5] = [
         ("emissive", &m.emissive.to_array()),
         ("specularFactor", &[m.specular]),
         ("specularColorFactor", &m.specular_color.to_array()),
         ("alphaCutoff", &[cutoff]),
+        ("thicknessFactor", &[m.thickness]),
     ];
     for (name, values) in non_negative {
         if values.iter().any(|v| *v < 0.0) {
             return Err(invalid(&el, format!("{name} {values:?} is negative")));
         }
+    }
+    if !(m.attenuation_distance > 0.0) {
+        return Err(invalid(
+            &el,
+            format!(
+                "attenuationDistance {} is not above 0",
+                m.attenuation_distance
+            ),
+        ));
     }
     if m.clearcoat_normal_scale != 1.0 {
         return Err(invalid(
@@ -617,6 +632,18 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
                 .with("transmissionFactor", num(m.transmission))
                 .build(),
         );
+    }
+    let attenuates = m.attenuation_distance.is_finite();
+    if m.thickness != 0.0 || attenuates || m.attenuation_color != Vec3::ONE {
+        used.volume = true;
+        let mut volume = Obj::default()
+            .with("thicknessFactor", num(m.thickness))
+            .with("attenuationColor", nums(&m.attenuation_color.to_array()));
+        // JSON has no infinity: the spec's default stands for it.
+        if attenuates {
+            volume = volume.with("attenuationDistance", num(m.attenuation_distance));
+        }
+        ext = ext.with("KHR_materials_volume", volume.build());
     }
     if m.clearcoat != 0.0 || m.clearcoat_roughness != 0.0 {
         used.clearcoat = true;

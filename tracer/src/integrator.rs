@@ -212,6 +212,10 @@ struct PathState {
     /// factor (and its survivors weighted up by η², a firefly per escaping path), as in
     /// pbrt-v4.
     eta_scale: f32,
+    /// Absorption coefficient of the volume the ray travels in (KHR_materials_volume),
+    /// zero outside every volume. Volumes do not nest: leaving one returns to the scene's
+    /// vacuum.
+    absorption: Vec3,
     /// pdf of the BSDF sample that produced `ray` (for MIS on emitters it hits), and
     /// whether it came from a delta lobe (no MIS: lights could not have sampled it).
     prev_pdf: f32,
@@ -283,6 +287,7 @@ pub fn trace_sample(
         depth: 0,
         throughput: Vec3::ONE,
         eta_scale: 1.0,
+        absorption: Vec3::ZERO,
         prev_pdf: 0.0,
         prev_delta: true,
         prev_p: ray.origin,
@@ -315,6 +320,9 @@ fn trace_path(
         out.rays += 1;
         let Some(hit) = frame.intersect(&ray, f32::INFINITY) else {
             // The environment.
+            if s.absorption != Vec3::ZERO {
+                s.throughput *= transmittance(s.absorption, f32::INFINITY);
+            }
             let le = frame.lights.environment().radiance(ray.dir);
             if le != Vec3::ZERO {
                 let w = if s.prev_delta {
@@ -330,6 +338,11 @@ fn trace_path(
             return;
         };
         let sp = surface_point(frame, &ray, &hit);
+        if s.absorption != Vec3::ZERO {
+            // Between the surface points, not from the ray's origin, which is offset past
+            // the previous point's rounding error.
+            s.throughput *= transmittance(s.absorption, (sp.p - s.prev_p).length());
+        }
         let wo = -ray.dir.normalize();
         if depth == 0 {
             out.alpha = 1.0;
@@ -387,7 +400,7 @@ fn trace_path(
                     .map_or((Vec3::ZERO, 0.0), |s| s.eval_and_pdf(wi_local));
                 let f = f * wi_local.z.abs();
                 if ls.pdf > 0.0 && f != Vec3::ZERO && consistent_side(&sp, ls.wi, wi_local) {
-                    let le = match ls.emitter {
+                    let mut le = match ls.emitter {
                         Emitter::Radiance(l) => l,
                         Emitter::Triangle {
                             instance,
@@ -397,6 +410,9 @@ fn trace_path(
                             ..
                         } => emitted_toward(frame, instance, triangle, b1, b2, ls.wi, ray.time),
                     };
+                    if s.absorption != Vec3::ZERO {
+                        le *= transmittance(s.absorption, ls.distance);
+                    }
                     if le != Vec3::ZERO {
                         let mut shadow = spawn(&sp, ls.wi, ray.time);
                         // Aim at the sampled point from the offset origin (else the offset
@@ -441,13 +457,21 @@ fn trace_path(
         if !s.throughput.is_finite() || s.throughput == Vec3::ZERO {
             return;
         }
-        if bs.wi.z * wo_local.z < 0.0 {
-            let eta_rel = if wo_local.z > 0.0 {
+        if bs.wi.z * wo_local.z < 0.0 && !bsdf.is_thin_walled() {
+            // Into or out of a solid: transmissive surfaces keep their front face's frame,
+            // so `wo_local.z > 0` is arriving from outside.
+            let entering = wo_local.z > 0.0;
+            let eta_rel = if entering {
                 bsdf.eta()
             } else {
                 1.0 / bsdf.eta()
             };
             s.eta_scale *= eta_rel * eta_rel;
+            s.absorption = if entering {
+                frame.scene.materials[sp.material_index as usize].absorption()
+            } else {
+                Vec3::ZERO
+            };
         }
         s.prev_pdf = bs.pdf;
         s.prev_delta = bs.delta;
@@ -478,6 +502,18 @@ fn trace_path(
             }
         }
     }
+}
+
+/// Beer–Lambert transmittance over `distance` through a medium of absorption `sigma`; a
+/// channel that absorbs nothing passes everything, even to infinity.
+fn transmittance(sigma: Vec3, distance: f32) -> Vec3 {
+    Vec3::from_array(sigma.to_array().map(|s| {
+        if s > 0.0 {
+            crate::math::exp(-s * distance)
+        } else {
+            1.0
+        }
+    }))
 }
 
 /// Radiance leaving emissive triangle `triangle` of `instance` at barycentrics (b1, b2)

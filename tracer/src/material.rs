@@ -4,6 +4,7 @@
 use glam::{Vec2, Vec3, Vec4};
 
 use crate::bsdf::{LayerParams, SurfaceParams};
+use crate::math;
 use crate::texture::{Texture, TextureRef};
 
 /// How a material's alpha is used (glTF `alphaMode`).
@@ -57,6 +58,18 @@ pub struct Material {
     pub transmission: f32,
     /// Its texture (R channel).
     pub transmission_texture: Option<TextureRef>,
+    /// KHR_materials_volume `thicknessFactor`, default 0: a transmitting surface is a thin
+    /// wall, as glTF's default is; above 0 it bounds a solid that refracts and absorbs. A
+    /// path tracer measures the distance each path travels inside, which the thickness
+    /// stands in for where a renderer cannot, so only 0 or not matters here.
+    pub thickness: f32,
+    /// Its texture (G channel); kept for export (see `thickness`).
+    pub thickness_texture: Option<TextureRef>,
+    /// `attenuationColor`, default white: what white light turns into over
+    /// `attenuation_distance` inside the volume.
+    pub attenuation_color: Vec3,
+    /// `attenuationDistance` in world units, default infinite (no absorption).
+    pub attenuation_distance: f32,
     /// glTF `alphaMode`.
     pub alpha_mode: AlphaMode,
     /// glTF `doubleSided`; single-sided surfaces are invisible from behind.
@@ -110,6 +123,10 @@ impl Default for Material {
             specular_color_texture: None,
             transmission: 0.0,
             transmission_texture: None,
+            thickness: 0.0,
+            thickness_texture: None,
+            attenuation_color: Vec3::ONE,
+            attenuation_distance: f32::INFINITY,
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
             clearcoat: 0.0,
@@ -143,6 +160,7 @@ impl Material {
             &self.specular_texture,
             &self.specular_color_texture,
             &self.transmission_texture,
+            &self.thickness_texture,
             &self.clearcoat_texture,
             &self.clearcoat_roughness_texture,
             &self.clearcoat_normal_texture,
@@ -151,6 +169,27 @@ impl Material {
         ]
         .into_iter()
         .flatten()
+    }
+
+    /// Whether light it transmits crosses a thin wall (no KHR_materials_volume, or a
+    /// thickness of 0) rather than entering a solid.
+    pub fn is_thin_walled(&self) -> bool {
+        !(self.thickness > 0.0)
+    }
+
+    /// The absorption coefficient σ (per world unit, per channel) inside the volume the
+    /// material bounds: Beer–Lambert, `attenuationColor = exp(−σ · attenuationDistance)`.
+    /// Zero for a thin wall, an opaque material, or no attenuation.
+    pub fn absorption(&self) -> Vec3 {
+        if self.transmission <= 0.0
+            || self.is_thin_walled()
+            || !(self.attenuation_distance < f32::INFINITY)
+        {
+            return Vec3::ZERO;
+        }
+        // A black channel absorbs everything: e^-69 is below any radiance that counts.
+        let c = self.attenuation_color.clamp(Vec3::splat(1e-30), Vec3::ONE);
+        -Vec3::new(math::ln(c.x), math::ln(c.y), math::ln(c.z)) / self.attenuation_distance
     }
 
     /// Whether the material has a sheen layer.
@@ -261,6 +300,7 @@ impl Material {
             specular: base.specular.max(0.0),
             specular_color: base.specular_color,
             transmission: base.transmission.clamp(0.0, 1.0),
+            thin_walled: self.is_thin_walled(),
             layers: layers.map(clamped),
         }
     }

@@ -66,6 +66,12 @@ pub fn exp(x: f32) -> f32 {
     libm::expf(x)
 }
 
+/// The natural logarithm.
+#[inline]
+pub fn ln(x: f32) -> f32 {
+    libm::logf(x)
+}
+
 /// Double-precision `(sin x, cos x)`.
 #[inline]
 pub fn sin_cos_f64(x: f64) -> (f64, f64) {

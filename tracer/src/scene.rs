@@ -398,6 +398,8 @@ pub struct Features {
     pub clearcoat: bool,
     /// Any material has a sheen (KHR_materials_sheen).
     pub sheen: bool,
+    /// Any transmitting material bounds a volume that absorbs (KHR_materials_volume).
+    pub volume: bool,
 }
 
 impl Features {
@@ -416,6 +418,7 @@ impl Features {
             (self.morphing, "morphing"),
             (self.clearcoat, "clearcoat"),
             (self.sheen, "sheen"),
+            (self.volume, "volume"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }
@@ -548,6 +551,7 @@ impl SceneBuilder {
             morphing: s.meshes.iter().any(|m| !m.weights.is_empty()),
             clearcoat: mats.iter().any(|m| m.clearcoat > 0.0),
             sheen: mats.iter().any(Material::has_sheen),
+            volume: mats.iter().any(|m| m.absorption() != Vec3::ZERO),
         };
         self.scene
     }

@@ -785,13 +785,14 @@ fn extensions_required_and_used() {
     let ours = r#"{"asset":{"version":"2.0"},"extensionsUsed":["KHR_materials_specular","KHR_texture_transform"],
         "extensionsRequired":["KHR_materials_specular","KHR_texture_transform"]}"#;
     assert!(load(ours).is_ok());
-    let optional = r#"{"asset":{"version":"2.0"},"extensionsUsed":["KHR_materials_volume"]}"#;
+    let optional =
+        r#"{"asset":{"version":"2.0"},"extensionsUsed":["KHR_materials_pbrSpecularGlossiness"]}"#;
     let scene = load(optional).unwrap();
     assert!(
         scene
             .warnings
             .iter()
-            .any(|w| w.contains("'KHR_materials_volume'")),
+            .any(|w| w.contains("'KHR_materials_pbrSpecularGlossiness'")),
         "{:?}",
         scene.warnings
     );

@@ -369,23 +369,23 @@ fn an_ignored_material_extension_is_named_with_its_materials() {
     let mut doc = Doc::default();
     let p = doc.vec3(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
     let json = doc.json(&format!(
-        r#","extensionsUsed":["KHR_materials_volume"],
-        "materials":[{{"name":"Glass","extensions":{{"KHR_materials_volume":{{"thicknessFactor":1}}}}}},{{}}],
+        r#","extensionsUsed":["KHR_materials_pbrSpecularGlossiness"],
+        "materials":[{{"name":"Glass","extensions":{{"KHR_materials_pbrSpecularGlossiness":{{"glossinessFactor":0.5}}}}}},{{}}],
         "meshes":[{{"primitives":[{{"attributes":{{"POSITION":{p}}},"material":0}}]}}],
         "scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}]"#
     ));
     let scene = loader::load_slice(json.as_bytes(), None).unwrap();
     assert_eq!(
         scene.warnings,
-        ["optional extension 'KHR_materials_volume' is not supported; ignored on material 0 'Glass'"]
+        ["optional extension 'KHR_materials_pbrSpecularGlossiness' is not supported; ignored on material 0 'Glass'"]
     );
     let required = json.replace(
         r#""extensionsUsed""#,
-        r#""extensionsRequired":["KHR_materials_volume"],"extensionsUsed""#,
+        r#""extensionsRequired":["KHR_materials_pbrSpecularGlossiness"],"extensionsUsed""#,
     );
     let err = loader::load_slice(required.as_bytes(), None).unwrap_err();
     assert_eq!(
         err.to_string(),
-        "required extension 'KHR_materials_volume' is not supported"
+        "required extension 'KHR_materials_pbrSpecularGlossiness' is not supported"
     );
 }

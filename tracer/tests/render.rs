@@ -91,6 +91,7 @@ fn white_furnace_conserves_energy() {
                 metallic: 0.0,
                 roughness: 0.4,
                 transmission: 1.0,
+                thickness: 1.0,
                 ..white.clone()
             },
         ),

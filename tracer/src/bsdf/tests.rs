@@ -11,8 +11,9 @@ const ANGLES: [f32; 4] = [0.0, 45.0, 80.0, 89.9];
 const ROUGHNESS: [f32; 4] = [0.1, 0.3, 0.6, 1.0];
 /// Number of chi-square tests in this file, for the Šidák correction: conductor (16),
 /// plastic (16), glass at IOR 1.5 from both sides (32) and at IOR 1.1 for two roughness
-/// values (16), a metal/plastic mix (16), two mixes with transmission from both sides (64).
-const CHI2_TESTS: usize = 16 + 16 + 32 + 16 + 16 + 64;
+/// values (16), a metal/plastic mix (16), two mixes with transmission from both sides (64),
+/// a thin wall from both sides (32).
+const CHI2_TESTS: usize = 16 + 16 + 32 + 16 + 16 + 64 + 32;
 
 fn material(
     base: Vec3,
@@ -163,6 +164,71 @@ fn chi2_rough_dielectric_low_ior() {
     );
 }
 
+/// A thin wall (transmission without KHR_materials_volume) of tinted glass half mixed
+/// with plastic, so that both of its lobes and the folds meet the others.
+fn thin_wall(roughness: f32, ior: f32) -> SurfaceParams {
+    SurfaceParams {
+        thin_walled: true,
+        ..material(Vec3::new(0.9, 0.6, 0.8), 0.0, roughness, ior, 0.7)
+    }
+}
+
+#[test]
+fn chi2_thin_wall() {
+    chi2_family(
+        "thin wall",
+        |r| thin_wall(r, 1.5),
+        &ROUGHNESS,
+        &[false, true],
+    );
+}
+
+#[test]
+fn thin_wall_is_the_same_from_both_sides_and_passes_light_straight() {
+    let mut rng = Rng::new(5);
+    for roughness in [0.0, 0.3, 1.0] {
+        let bsdf = Bsdf::new(thin_wall(roughness, 1.5));
+        for _ in 0..200 {
+            let (wo, wi) = (random_direction(&mut rng), random_direction(&mut rng));
+            let (f, pdf) = bsdf.eval_and_pdf(wo, wi);
+            let (g, pdf_g) = bsdf.eval_and_pdf(flip(wo), flip(wi));
+            assert_eq!((f, pdf), (g, pdf_g), "{roughness} {wo} {wi}");
+        }
+    }
+    // Smooth: what is not reflected leaves along −wo, tinted by (1 − F)·base, no 1/η².
+    let bsdf = Bsdf::new(SurfaceParams {
+        thin_walled: true,
+        ..material(Vec3::new(0.5, 0.25, 1.0), 0.0, 0.0, 1.5, 1.0)
+    });
+    let wo = wo_at(40.0, false);
+    let s = bsdf.sample(wo, 0.99, Vec2::splat(0.5)).expect("transmits");
+    let fr = fresnel::dielectric(wo.z, 1.5);
+    assert!(s.delta && s.wi == -wo, "{s:?}");
+    assert!((s.pdf - (1.0 - fr)).abs() < 1e-6 && fr > 0.0, "{s:?}");
+    // Transmitted with probability 1 − F, carrying (1 − F)·base: the weight is the base.
+    let weight = s.f * s.wi.z.abs() / s.pdf;
+    assert!(
+        (weight - Vec3::new(0.5, 0.25, 1.0)).abs().max_element() < 1e-5,
+        "{weight}"
+    );
+}
+
+#[test]
+fn furnace_white_thin_wall() {
+    // Reflection and transmission share one GGX lobe whose Fresnel terms sum to 1, and
+    // its Turquin factor is exact there: a white wall returns everything.
+    for ior in [1.05, 1.5, 10.0] {
+        furnace_opaque(
+            &format!("thin wall ior {ior}"),
+            |r| SurfaceParams {
+                thin_walled: true,
+                ..material(Vec3::ONE, 0.0, r, ior, 1.0)
+            },
+            0.01,
+        );
+    }
+}
+
 #[test]
 fn chi2_gltf_metal_plastic_mix() {
     chi2_family(
@@ -234,6 +300,7 @@ fn random_material(rng: &mut Rng) -> SurfaceParams {
         specular: pick(rng, &[1.0, 0.0, 0.5]),
         specular_color: pick(rng, &[1.0, 0.3, 2.0]) * Vec3::new(1.0, rng.f32(), 1.0),
         transmission: pick(rng, &[0.0, 1.0, 0.5]),
+        thin_walled: rng.f32() < 0.3,
         // A clear coat and a sheen on a third of the materials each, smooth to rough.
         layers: Some(LayerParams {
             clearcoat: pick(rng, &[0.0, 0.0, 1.0, 0.5]) * pick(rng, &[1.0, 1.0, 0.0]),
@@ -348,6 +415,7 @@ fn degenerate_parameters_stay_finite() {
             specular: -3.0,
             specular_color: Vec3::splat(f32::INFINITY),
             transmission: 7.0,
+            thin_walled: true,
             layers: Some(LayerParams {
                 clearcoat: f32::NAN,
                 clearcoat_roughness: f32::INFINITY,

@@ -592,6 +592,7 @@ fn features(scene: &Scene) -> Features {
             f.normal_maps |= mat.normal_texture.is_some() && !prim.tangents.is_empty();
             f.clearcoat |= mat.clearcoat > 0.0;
             f.sheen |= mat.has_sheen();
+            f.volume |= mat.absorption() != Vec3::ZERO;
         }
     });
     f

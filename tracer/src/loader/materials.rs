@@ -300,8 +300,10 @@ impl RawMaterial<'_> {
     }
 }
 
-/// KHR_materials_clearcoat and KHR_materials_sheen, which the `gltf` crate does not parse.
-fn read_layers(
+/// KHR_materials_clearcoat, _sheen and _volume, which the `gltf` crate does not parse
+/// (or, for the volume, parses behind a feature that would pull the rest of its
+/// extension set).
+fn read_raw_extensions(
     raw: &RawMaterial<'_>,
     out: &mut Material,
     table: &mut TextureTable,
@@ -323,6 +325,23 @@ fn read_layers(
         out.sheen_roughness = raw.number(sheen, "sheenRoughnessFactor", 0.0)?;
         out.sheen_color_texture = texture(sheen, "sheenColorTexture")?;
         out.sheen_roughness_texture = texture(sheen, "sheenRoughnessTexture")?;
+    }
+    let volume = &raw.json["extensions"]["KHR_materials_volume"];
+    if volume.is_object() {
+        out.thickness = raw.number(volume, "thicknessFactor", 0.0)?;
+        out.thickness_texture = texture(volume, "thicknessTexture")?;
+        out.attenuation_color = raw.rgb(volume, "attenuationColor", Vec3::ONE)?;
+        out.attenuation_distance = raw.number(volume, "attenuationDistance", f32::INFINITY)?;
+        if !(out.attenuation_distance > 0.0) {
+            return Err(SceneError::at(
+                raw.element,
+                format!(
+                    "attenuationDistance {} is not above 0 (KHR_materials_volume: the \
+                     distance light travels before it turns attenuationColor)",
+                    out.attenuation_distance
+                ),
+            ));
+        }
     }
     Ok(())
 }
@@ -403,7 +422,7 @@ pub(crate) fn convert_material(
             .map(|i| texture_ref(table, &i, &ctx("transmissionTexture"), warnings));
     }
 
-    read_layers(&raw, &mut out, table, warnings)?;
+    read_raw_extensions(&raw, &mut out, table, warnings)?;
 
     // A NaN factor would reach every pixel the material covers: refuse it here.
     let cutoff = match out.alpha_mode {
@@ -435,6 +454,11 @@ pub(crate) fn convert_material(
         ),
         ("sheenColorFactor", out.sheen_color.to_array().to_vec()),
         ("sheenRoughnessFactor", vec![out.sheen_roughness]),
+        ("thicknessFactor", vec![out.thickness]),
+        (
+            "attenuationColor",
+            out.attenuation_color.to_array().to_vec(),
+        ),
     ];
     for (name, values) in factors {
         if values.iter().any(|v| !v.is_finite()) {
@@ -459,6 +483,8 @@ pub(crate) fn convert_material(
     out.clearcoat_roughness = out.clearcoat_roughness.clamp(0.0, 1.0);
     out.sheen_color = out.sheen_color.clamp(Vec3::ZERO, Vec3::ONE);
     out.sheen_roughness = out.sheen_roughness.clamp(0.0, 1.0);
+    out.thickness = out.thickness.max(0.0);
+    out.attenuation_color = out.attenuation_color.clamp(Vec3::ZERO, Vec3::ONE);
     out.specular = out.specular.max(0.0);
     out.specular_color = out.specular_color.max(Vec3::ZERO);
     Ok(out)

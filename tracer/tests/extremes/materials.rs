@@ -161,6 +161,8 @@ fn white(metallic: f32, roughness: f32, ior: f32, transmission: f32) -> Material
         roughness,
         ior,
         transmission,
+        // Solid spheres (KHR_materials_volume), which refract and trap light.
+        thickness: 1.0,
         double_sided: true,
         ..Default::default()
     }
