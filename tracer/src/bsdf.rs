@@ -78,6 +78,7 @@
 mod coat;
 mod curve;
 mod fresnel;
+mod iridescence;
 mod layers;
 mod microfacet;
 mod sheen;
@@ -146,6 +147,12 @@ pub struct LayerParams {
     pub sheen_color: Vec3,
     /// Its roughness, 0..1 (the Charlie α itself, as the extension defines it).
     pub sheen_roughness: f32,
+    /// KHR_materials_iridescence factor, 0..1 (0: no thin film).
+    pub iridescence: f32,
+    /// The film's IOR.
+    pub iridescence_ior: f32,
+    /// The film's thickness in nanometres (0: no film).
+    pub iridescence_thickness: f32,
 }
 
 impl Default for SurfaceParams {
@@ -226,6 +233,8 @@ pub struct Bsdf {
     /// The clear coat and sheen over all of the above, where the material has either
     /// (see `bsdf/layers.rs`).
     layers: Option<layers::Layers>,
+    /// The iridescent film over the base's specular lobes (`bsdf/iridescence.rs`).
+    film: Option<iridescence::ThinFilm>,
 }
 
 /// Everything about the BSDF that depends on `wo` alone, in the frame where `wo.z > 0`.
@@ -246,6 +255,9 @@ struct AtWo {
     glass_ms_r: f32,
     /// Turquin factor of a rough thin wall, `1 / E1(μo)` (see `bsdf/thin.rs`).
     thin_comp: f32,
+    /// Whether the iridescent film lies over the refractive interface as `wo` meets it
+    /// (from outside, or from either side of a thin wall).
+    film_glass: bool,
     /// Lobe-selection probabilities: GGX reflection (metal and specular layer),
     /// diffuse, refractive interface. They sum to 1 (or are all 0: no lobe).
     p: [f32; 3],
@@ -388,6 +400,14 @@ impl Bsdf {
         let spec_color = sane3(params.specular_color, 0.0, f32::MAX);
         let eta = sane(params.ior, 1.0, IOR_MAX, 1.5);
         let thin = params.thin_walled;
+        let film = params.layers.and_then(|l| {
+            iridescence::ThinFilm::new(
+                sane(l.iridescence, 0.0, 1.0, 0.0),
+                sane(l.iridescence_ior, 1.0, IOR_MAX, 1.3),
+                sane(l.iridescence_thickness, 0.0, f32::MAX, 0.0),
+                l.clearcoat > 0.0,
+            )
+        });
         let layers = params.layers.and_then(|l| {
             layers::Layers::new(
                 sane(l.clearcoat, 0.0, 1.0, 0.0),
@@ -438,6 +458,7 @@ impl Bsdf {
             },
             curve: None,
             layers,
+            film,
         }
     }
 
@@ -582,6 +603,7 @@ impl Bsdf {
             return AtWo {
                 eta_rel: if inside { 1.0 / self.eta } else { self.eta },
                 thin_comp: 1.0,
+                film_glass: false,
                 metal_comp: Vec3::ONE,
                 spec_comp: Vec3::ONE,
                 diffuse_w: 1.0,
@@ -642,6 +664,26 @@ impl Bsdf {
         // Albedo scaling: the base gets what the specular layer leaves. Using the
         // largest F0 channel keeps every channel at or below 1 (as glTF's
         // `max_value(fr)` does).
+        let e_spec_max = match &self.film {
+            // The film changes the layer's Fresnel; its albedo follows by the ratio of the
+            // two, at the view direction (exact for a smooth layer, whose albedo that is)
+            // or, where larger, at the microfacet that sends the view to the normal (a
+            // rough layer's facets lie between): the base gets no more than is left.
+            Some(film) if e_spec_max > 0.0 => {
+                let ratio = |cos: f32| {
+                    let plain = fresnel::schlick(self.f0_spec, cos);
+                    let filmed = film.mix(plain, cos, self.f0_spec);
+                    filmed.max_element() / plain.max_element().max(1e-6)
+                };
+                let facet = if self.smooth {
+                    mu_o
+                } else {
+                    (0.5 + 0.5 * mu_o).sqrt()
+                };
+                e_spec_max * ratio(mu_o).max(ratio(facet))
+            }
+            _ => e_spec_max,
+        };
         let diffuse_w = (1.0 - e_spec_max).clamp(0.0, 1.0);
 
         // Refractive interface: the energy single scattering misses goes to a diffuse
@@ -703,6 +745,7 @@ impl Bsdf {
         AtWo {
             eta_rel,
             thin_comp,
+            film_glass: self.film.is_some() && self.w_glass > 0.0 && (!inside || self.thin),
             metal_comp,
             spec_comp,
             diffuse_w,
@@ -723,15 +766,13 @@ impl Bsdf {
                 let cos_om = wo.dot(wm).clamp(0.0, 1.0);
                 let lobe = microfacet::d(wm, self.alpha) * microfacet::g2(mu_o, mu_i, self.alpha)
                     / (4.0 * mu_o * mu_i);
-                let mut fresnel =
-                    self.w_metal * fresnel::schlick(self.base, cos_om) * at.metal_comp
-                        + self.w_plastic
-                            * self.spec
-                            * fresnel::schlick(self.f0_spec, cos_om)
-                            * at.spec_comp;
+                let mut fresnel = self.reflection_fresnel(cos_om, at);
                 if self.w_glass > 0.0 && !self.glass_smooth {
                     let fr = fresnel::dielectric(cos_om, at.eta_rel);
-                    fresnel += self.w_glass * fr * self.glass_tint * at.thin_comp;
+                    fresnel += self.w_glass
+                        * self.glass_fresnel(fr, cos_om, at)
+                        * self.glass_tint
+                        * at.thin_comp;
                     f += self.w_glass * at.glass_ms * at.glass_ms_r * FRAC_1_PI * self.ms_tint();
                 }
                 f += lobe * fresnel;
@@ -745,18 +786,41 @@ impl Bsdf {
                 return thin::eval_transmission(self, wo, wi, at);
             }
             let radiance_scale = 1.0 / (at.eta_rel * at.eta_rel);
-            let mut ft = at.glass_ms * (1.0 - at.glass_ms_r) * FRAC_1_PI;
+            let mut ft = Vec3::splat(at.glass_ms * (1.0 - at.glass_ms_r) * FRAC_1_PI);
             if let Some((wm, cos_om, cos_im, denom)) =
                 Self::refraction_half_vector(wo, wi, at.eta_rel)
             {
                 let fr = fresnel::dielectric(cos_om, at.eta_rel);
-                let t = 1.0 - self.glass_s * fr;
+                let t = Vec3::ONE - self.glass_s * self.glass_fresnel(fr, cos_om, at);
                 ft += t
                     * microfacet::d(wm, self.alpha)
                     * microfacet::g2(mu_o, -mu_i, self.alpha)
                     * (cos_im.abs() * cos_om / (mu_o * -mu_i * denom));
             }
             self.w_glass * ft * radiance_scale * self.base
+        }
+    }
+
+    /// The weighted Fresnel terms of the metal and the specular layer at `cos` (between
+    /// `wo` and the microfacet normal), with their compensation and the film over them.
+    #[inline(always)]
+    fn reflection_fresnel(&self, cos: f32, at: &AtWo) -> Vec3 {
+        let mut metal = fresnel::schlick(self.base, cos);
+        let mut spec = fresnel::schlick(self.f0_spec, cos);
+        if let Some(film) = &self.film {
+            metal = film.mix(metal, cos, self.base);
+            spec = film.mix(spec, cos, self.f0_spec);
+        }
+        self.w_metal * metal * at.metal_comp + self.w_plastic * self.spec * spec * at.spec_comp
+    }
+
+    /// The refractive interface's Fresnel reflectance `fr` at `cos`, with the film over it
+    /// where `wo` sees one (its F0 the specular layer's, as the extension's dielectric).
+    #[inline(always)]
+    fn glass_fresnel(&self, fr: f32, cos: f32, at: &AtWo) -> Vec3 {
+        match &self.film {
+            Some(film) if at.film_glass => film.mix(Vec3::splat(fr), cos, self.f0_spec),
+            _ => Vec3::splat(fr),
         }
     }
 
@@ -889,8 +953,7 @@ impl Bsdf {
     fn sample_ggx(&self, wo: Vec3, u: Vec2, at: &AtWo) -> Option<BsdfSample> {
         if self.smooth {
             let wi = Vec3::new(-wo.x, -wo.y, wo.z);
-            let f = self.w_metal * fresnel::schlick(self.base, wo.z)
-                + self.w_plastic * self.spec * fresnel::schlick(self.f0_spec, wo.z);
+            let f = self.reflection_fresnel(wo.z, at);
             return Some(BsdfSample {
                 wi,
                 f: f / wo.z,
@@ -918,11 +981,13 @@ impl Bsdf {
                 fresnel::dielectric(wo.z, at.eta_rel)
             };
             let pr = self.glass_s * fr;
+            // Chosen by the plain Fresnel term, weighted by the film's.
+            let f_rgb = self.glass_fresnel(fr, wo.z, at);
             if uc < pr {
                 let wi = Vec3::new(-wo.x, -wo.y, wo.z);
                 return Some(BsdfSample {
                     wi,
-                    f: self.w_glass * fr * self.glass_tint / wo.z,
+                    f: self.w_glass * f_rgb * self.glass_tint / wo.z,
                     pdf: p_glass * pr,
                     delta: true,
                 });
@@ -936,7 +1001,8 @@ impl Bsdf {
             let t = 1.0 - pr;
             return Some(BsdfSample {
                 wi,
-                f: self.w_glass * t * self.base / (-wi.z * at.eta_rel * at.eta_rel),
+                f: self.w_glass * (Vec3::ONE - self.glass_s * f_rgb) * self.base
+                    / (-wi.z * at.eta_rel * at.eta_rel),
                 pdf: p_glass * t,
                 delta: true,
             });

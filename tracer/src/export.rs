@@ -274,6 +274,7 @@ struct Extensions {
     clearcoat: bool,
     sheen: bool,
     volume: bool,
+    iridescence: bool,
 }
 
 impl Extensions {
@@ -289,6 +290,7 @@ impl Extensions {
             (self.clearcoat, "KHR_materials_clearcoat"),
             (self.sheen, "KHR_materials_sheen"),
             (self.volume, "KHR_materials_volume"),
+            (self.iridescence, "KHR_materials_iridescence"),
         ]
         .iter()
         .filter(|(on, _)| *on)
@@ -400,6 +402,11 @@ fn refuse_unsupported(scene: &Scene) -> Result<(), ExportError> {
             ("specularColorTexture", &m.specular_color_texture),
             ("transmissionTexture", &m.transmission_texture),
             ("thicknessTexture", &m.thickness_texture),
+            ("iridescenceTexture", &m.iridescence_texture),
+            (
+                "iridescenceThicknessTexture",
+                &m.iridescence_thickness_texture,
+            ),
             ("clearcoatTexture", &m.clearcoat_texture),
             ("clearcoatRoughnessTexture", &m.clearcoat_roughness_texture),
             ("clearcoatNormalTexture", &m.clearcoat_normal_texture),
@@ -493,7 +500,7 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         AlphaMode::Mask { cutoff } => cutoff,
         _ => 0.5,
     };
-    let factors: [(&str, &[f32]); 11] = [
+    let factors: [(&str, &[f32]); 14] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
@@ -505,12 +512,21 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         ("transmissionFactor", &[m.transmission]),
         ("alphaCutoff", &[cutoff]),
         ("thicknessFactor", &[m.thickness]),
+        ("iridescenceIor", &[m.iridescence_ior]),
+        (
+            "iridescenceThicknessMinimum",
+            &[m.iridescence_thickness_min],
+        ),
+        (
+            "iridescenceThicknessMaximum",
+            &[m.iridescence_thickness_max],
+        ),
     ];
     for (name, values) in factors {
         finite(&el, name, values)?;
     }
     // The loader clamps these to glTF's ranges; a value outside would come back changed.
-    let unit: [(&str, &[f32]); 9] = [
+    let unit: [(&str, &[f32]); 10] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
@@ -520,23 +536,38 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         ("sheenColorFactor", &m.sheen_color.to_array()),
         ("sheenRoughnessFactor", &[m.sheen_roughness]),
         ("attenuationColor", &m.attenuation_color.to_array()),
+        ("iridescenceFactor", &[m.iridescence]),
     ];
     for (name, values) in unit {
         if values.iter().any(|v| !(0.0..=1.0).contains(v)) {
             return Err(invalid(&el, format!("{name} {values:?} is outside [0, 1]")));
         }
     }
-    let non_negative: [(&str, &[f32]); 5] = [
+    let non_negative: [(&str, &[f32]); 7] = [
         ("emissive", &m.emissive.to_array()),
         ("specularFactor", &[m.specular]),
         ("specularColorFactor", &m.specular_color.to_array()),
         ("alphaCutoff", &[cutoff]),
         ("thicknessFactor", &[m.thickness]),
+        (
+            "iridescenceThicknessMinimum",
+            &[m.iridescence_thickness_min],
+        ),
+        (
+            "iridescenceThicknessMaximum",
+            &[m.iridescence_thickness_max],
+        ),
     ];
     for (name, values) in non_negative {
         if values.iter().any(|v| *v < 0.0) {
             return Err(invalid(&el, format!("{name} {values:?} is negative")));
         }
+    }
+    if !(m.iridescence_ior >= 1.0) {
+        return Err(invalid(
+            &el,
+            format!("iridescenceIor {} is below 1", m.iridescence_ior),
+        ));
     }
     if !(m.attenuation_distance > 0.0) {
         return Err(invalid(
@@ -644,6 +675,29 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
             volume = volume.with("attenuationDistance", num(m.attenuation_distance));
         }
         ext = ext.with("KHR_materials_volume", volume.build());
+    }
+    let film_defaults = Material::default();
+    if m.iridescence != 0.0
+        || m.iridescence_ior != film_defaults.iridescence_ior
+        || m.iridescence_thickness_min != film_defaults.iridescence_thickness_min
+        || m.iridescence_thickness_max != film_defaults.iridescence_thickness_max
+    {
+        used.iridescence = true;
+        ext = ext.with(
+            "KHR_materials_iridescence",
+            Obj::default()
+                .with("iridescenceFactor", num(m.iridescence))
+                .with("iridescenceIor", num(m.iridescence_ior))
+                .with(
+                    "iridescenceThicknessMinimum",
+                    num(m.iridescence_thickness_min),
+                )
+                .with(
+                    "iridescenceThicknessMaximum",
+                    num(m.iridescence_thickness_max),
+                )
+                .build(),
+        );
     }
     if m.clearcoat != 0.0 || m.clearcoat_roughness != 0.0 {
         used.clearcoat = true;

@@ -96,6 +96,19 @@ pub struct Material {
     pub sheen_roughness: f32,
     /// Its texture (alpha channel).
     pub sheen_roughness_texture: Option<TextureRef>,
+    /// KHR_materials_iridescence `iridescenceFactor`, default 0 (no film).
+    pub iridescence: f32,
+    /// Its texture (R channel).
+    pub iridescence_texture: Option<TextureRef>,
+    /// `iridescenceIor`, default 1.3.
+    pub iridescence_ior: f32,
+    /// `iridescenceThicknessMinimum` in nanometres, default 100.
+    pub iridescence_thickness_min: f32,
+    /// `iridescenceThicknessMaximum` in nanometres, default 400: the thickness where no
+    /// texture says otherwise.
+    pub iridescence_thickness_max: f32,
+    /// `iridescenceThicknessTexture` (G channel): the thickness from minimum to maximum.
+    pub iridescence_thickness_texture: Option<TextureRef>,
     /// KHR_materials_unlit: the surface shows its base colour (times texture and vertex
     /// colour) as it is, whatever lights it. A path tracer renders that as a surface that
     /// emits its base colour and scatters nothing, so it also lights what it faces.
@@ -139,6 +152,12 @@ impl Default for Material {
             sheen_color_texture: None,
             sheen_roughness: 0.0,
             sheen_roughness_texture: None,
+            iridescence: 0.0,
+            iridescence_texture: None,
+            iridescence_ior: 1.3,
+            iridescence_thickness_min: 100.0,
+            iridescence_thickness_max: 400.0,
+            iridescence_thickness_texture: None,
             unlit: false,
         }
     }
@@ -166,6 +185,8 @@ impl Material {
             &self.clearcoat_normal_texture,
             &self.sheen_color_texture,
             &self.sheen_roughness_texture,
+            &self.iridescence_texture,
+            &self.iridescence_thickness_texture,
         ]
         .into_iter()
         .flatten()
@@ -177,14 +198,16 @@ impl Material {
         !(self.thickness > 0.0)
     }
 
+    /// Whether the material transmits into a volume (KHR_materials_volume).
+    pub fn is_volume(&self) -> bool {
+        self.transmission > 0.0 && !self.is_thin_walled()
+    }
+
     /// The absorption coefficient σ (per world unit, per channel) inside the volume the
     /// material bounds: Beer–Lambert, `attenuationColor = exp(−σ · attenuationDistance)`.
     /// Zero for a thin wall, an opaque material, or no attenuation.
     pub fn absorption(&self) -> Vec3 {
-        if self.transmission <= 0.0
-            || self.is_thin_walled()
-            || !(self.attenuation_distance < f32::INFINITY)
-        {
+        if !self.is_volume() || !(self.attenuation_distance < f32::INFINITY) {
             return Vec3::ZERO;
         }
         // A black channel absorbs everything: e^-69 is below any radiance that counts.
@@ -197,9 +220,9 @@ impl Material {
         self.sheen_color.max_element() > 0.0
     }
 
-    /// Whether the material has a clear coat or a sheen over its base.
+    /// Whether the material has a clear coat, a sheen or an iridescent film.
     fn has_layers(&self) -> bool {
-        self.clearcoat > 0.0 || self.has_sheen()
+        self.clearcoat > 0.0 || self.has_sheen() || self.iridescence > 0.0
     }
 
     /// Whether the surface emits light anywhere.
@@ -245,6 +268,9 @@ fn clamped(l: LayerParams) -> LayerParams {
         clearcoat_roughness: l.clearcoat_roughness.clamp(0.0, 1.0),
         sheen_color: l.sheen_color.clamp(Vec3::ZERO, Vec3::ONE),
         sheen_roughness: l.sheen_roughness.clamp(0.0, 1.0),
+        iridescence: l.iridescence.clamp(0.0, 1.0),
+        iridescence_ior: l.iridescence_ior.max(1.0),
+        iridescence_thickness: l.iridescence_thickness.max(0.0),
     }
 }
 
@@ -312,6 +338,9 @@ impl Material {
             clearcoat_roughness: self.clearcoat_roughness,
             sheen_color: self.sheen_color,
             sheen_roughness: self.sheen_roughness,
+            iridescence: self.iridescence,
+            iridescence_ior: self.iridescence_ior,
+            iridescence_thickness: self.iridescence_thickness_max,
         })
     }
 
@@ -338,6 +367,15 @@ impl Material {
                 l.sheen_roughness *= t.w;
             }
         }
+        if l.iridescence > 0.0 {
+            if let Some(t) = read(&self.iridescence_texture, false) {
+                l.iridescence *= t.x;
+            }
+            if let Some(t) = read(&self.iridescence_thickness_texture, false) {
+                l.iridescence_thickness = self.iridescence_thickness_min
+                    + (self.iridescence_thickness_max - self.iridescence_thickness_min) * t.y;
+            }
+        }
         Some(l)
     }
 
@@ -362,6 +400,9 @@ impl Material {
 
     /// Evaluates factors × textures at a point with texture coordinates `uvs` and vertex
     /// colour `vertex_color` (white when the primitive has none).
+    // Inlined into the integrator, as the compiler chose before the layers grew it: its
+    // result then never goes through memory (Cornell box: 0.3% fewer instructions).
+    #[inline(always)]
     pub fn sample(
         &self,
         textures: &[Texture],

@@ -398,8 +398,10 @@ pub struct Features {
     pub clearcoat: bool,
     /// Any material has a sheen (KHR_materials_sheen).
     pub sheen: bool,
-    /// Any transmitting material bounds a volume that absorbs (KHR_materials_volume).
+    /// Any transmitting material bounds a volume (KHR_materials_volume).
     pub volume: bool,
+    /// Any material has an iridescent film (KHR_materials_iridescence).
+    pub iridescence: bool,
 }
 
 impl Features {
@@ -419,6 +421,7 @@ impl Features {
             (self.clearcoat, "clearcoat"),
             (self.sheen, "sheen"),
             (self.volume, "volume"),
+            (self.iridescence, "iridescence"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }
@@ -551,7 +554,8 @@ impl SceneBuilder {
             morphing: s.meshes.iter().any(|m| !m.weights.is_empty()),
             clearcoat: mats.iter().any(|m| m.clearcoat > 0.0),
             sheen: mats.iter().any(Material::has_sheen),
-            volume: mats.iter().any(|m| m.absorption() != Vec3::ZERO),
+            volume: mats.iter().any(Material::is_volume),
+            iridescence: mats.iter().any(|m| m.iridescence > 0.0),
         };
         self.scene
     }

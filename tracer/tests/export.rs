@@ -255,6 +255,17 @@ fn everything_else() -> Scene {
         emissive: Vec3::new(0.3, 1e4 / 3.0, 7.1),
         ior: 1.33,
         transmission: 0.25,
+        thickness: 0.5,
+        attenuation_color: Vec3::new(0.9, 0.5, 0.25),
+        attenuation_distance: 2.0,
+        iridescence: 0.75,
+        iridescence_ior: 1.7,
+        iridescence_thickness_min: 200.0,
+        iridescence_thickness_max: 650.0,
+        clearcoat: 0.5,
+        clearcoat_roughness: 0.25,
+        sheen_color: Vec3::new(0.5, 0.25, 1.0),
+        sheen_roughness: 0.75,
         ..Default::default()
     });
     let mut sheet = quad(

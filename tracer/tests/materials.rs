@@ -332,7 +332,7 @@ fn clearcoat_and_sheen_are_read_with_their_textures() {
 }
 
 #[test]
-fn khronos_coat_and_sheen_models_load_with_their_layers() {
+fn khronos_models_load_with_their_material_extensions() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared");
     let models = [
         ("scenes/ClearCoatTest/ClearCoatTest.glb", "clearcoat"),
@@ -343,6 +343,12 @@ fn khronos_coat_and_sheen_models_load_with_their_layers() {
         ),
         ("scenes/SheenCloth/SheenCloth.gltf", "sheen"),
         ("scenes/SheenChair/SheenChair.gltf", "sheen"),
+        ("scenes/GlassVaseFlowers/GlassVaseFlowers.glb", "volume"),
+        ("scenes/IridescenceLamp/IridescenceLamp.gltf", "iridescence"),
+        (
+            "scenes/IridescentDishWithOlives/IridescentDishWithOlives.gltf",
+            "iridescence",
+        ),
     ];
     for (file, feature) in models {
         let path = dir.join(file);

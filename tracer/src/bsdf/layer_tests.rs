@@ -289,6 +289,22 @@ fn a_tilted_coat_keeps_energy() {
 #[test]
 fn layers_of_zero_leave_the_base_bit_for_bit() {
     let mut rng = Rng::new(10);
+    // Roughnesses without factors: nothing to layer. An iridescence factor of 0, or a
+    // film of thickness 0 (KHR_materials_iridescence): no film.
+    let zeros = [
+        LayerParams {
+            clearcoat_roughness: 0.7,
+            sheen_roughness: 0.4,
+            iridescence_ior: 1.8,
+            iridescence_thickness: 400.0,
+            ..LayerParams::default()
+        },
+        LayerParams {
+            iridescence: 1.0,
+            iridescence_ior: 1.8,
+            ..LayerParams::default()
+        },
+    ];
     for base in [
         base(Vec3::new(0.8, 0.4, 0.2), 0.0, 0.5),
         base(Vec3::ONE, 1.0, 0.2),
@@ -298,23 +314,20 @@ fn layers_of_zero_leave_the_base_bit_for_bit() {
         },
     ] {
         let plain = Bsdf::new(base);
-        // Roughnesses without factors: nothing to layer.
-        let zero = Bsdf::new(SurfaceParams {
-            layers: Some(LayerParams {
-                clearcoat_roughness: 0.7,
-                sheen_roughness: 0.4,
-                ..LayerParams::default()
-            }),
-            ..base
-        });
-        assert!(zero.layers.is_none());
-        for _ in 0..200 {
-            let wo = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.3).normalize();
-            let wi = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5).normalize();
-            let u = (rng.f32(), Vec2::new(rng.f32(), rng.f32()));
-            assert_eq!(plain.eval_and_pdf(wo, wi), zero.eval_and_pdf(wo, wi));
-            let (a, b) = (plain.sample(wo, u.0, u.1), zero.sample(wo, u.0, u.1));
-            assert_eq!(a.map(|s| (s.wi, s.f, s.pdf)), b.map(|s| (s.wi, s.f, s.pdf)));
+        for layers in zeros {
+            let zero = Bsdf::new(SurfaceParams {
+                layers: Some(layers),
+                ..base
+            });
+            assert!(zero.layers.is_none() && zero.film.is_none());
+            for _ in 0..200 {
+                let wo = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.3).normalize();
+                let wi = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5).normalize();
+                let u = (rng.f32(), Vec2::new(rng.f32(), rng.f32()));
+                assert_eq!(plain.eval_and_pdf(wo, wi), zero.eval_and_pdf(wo, wi));
+                let (a, b) = (plain.sample(wo, u.0, u.1), zero.sample(wo, u.0, u.1));
+                assert_eq!(a.map(|s| (s.wi, s.f, s.pdf)), b.map(|s| (s.wi, s.f, s.pdf)));
+            }
         }
     }
 }

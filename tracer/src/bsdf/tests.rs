@@ -307,6 +307,10 @@ fn random_material(rng: &mut Rng) -> SurfaceParams {
             clearcoat_roughness: pick(rng, &[0.0, 0.01, 0.2, 1.0]),
             sheen_color: Vec3::new(rng.f32(), rng.f32(), rng.f32()) * pick(rng, &[0.0, 0.0, 1.0]),
             sheen_roughness: pick(rng, &[0.0, 0.3, 1.0, 0.5]),
+            // An iridescent film on a third, thin to thick.
+            iridescence: pick(rng, &[0.0, 0.0, 1.0, 0.5]) * pick(rng, &[1.0, 1.0, 0.0]),
+            iridescence_ior: pick(rng, &[1.3, 1.0, 2.0, 1.5]),
+            iridescence_thickness: pick(rng, &[400.0, 0.0, 50.0, 1200.0]),
         }),
     }
 }
@@ -421,6 +425,9 @@ fn degenerate_parameters_stay_finite() {
                 clearcoat_roughness: f32::INFINITY,
                 sheen_color: Vec3::new(f32::NAN, 3.0, -1.0),
                 sheen_roughness: f32::NAN,
+                iridescence: f32::NAN,
+                iridescence_ior: f32::NAN,
+                iridescence_thickness: f32::INFINITY,
             }),
         },
         SurfaceParams {
@@ -429,6 +436,9 @@ fn degenerate_parameters_stay_finite() {
                 clearcoat_roughness: -1.0,
                 sheen_color: Vec3::splat(f32::INFINITY),
                 sheen_roughness: -2.0,
+                iridescence: 5.0,
+                iridescence_ior: -1.0,
+                iridescence_thickness: 1e30,
             }),
             ..SurfaceParams::default()
         },

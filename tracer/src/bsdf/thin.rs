@@ -39,7 +39,8 @@ pub(super) fn eval_transmission(b: &Bsdf, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3
     if wm.z <= 0.0 || cos_om <= 0.0 {
         return Vec3::ZERO;
     }
-    let t = 1.0 - b.glass_s * fresnel::dielectric(cos_om, at.eta_rel);
+    let fr = fresnel::dielectric(cos_om, at.eta_rel);
+    let t = Vec3::ONE - b.glass_s * b.glass_fresnel(fr, cos_om, at);
     let lobe = microfacet::d(wm, b.alpha) * microfacet::g2(wo.z, mirrored.z, b.alpha)
         / (4.0 * wo.z * mirrored.z);
     b.w_glass * t * lobe * at.thin_comp * b.base
@@ -66,10 +67,12 @@ pub(super) fn sample(b: &Bsdf, wo: Vec3, uc: f32, u: Vec2, at: &AtWo) -> Option<
             fresnel::dielectric(wo.z, at.eta_rel)
         };
         let pr = b.glass_s * fr;
+        // Chosen by the plain Fresnel term, weighted by the film's.
+        let f_rgb = b.glass_fresnel(fr, wo.z, at);
         if uc < pr {
             return Some(BsdfSample {
                 wi: Vec3::new(-wo.x, -wo.y, wo.z),
-                f: b.w_glass * fr * b.glass_tint / wo.z,
+                f: b.w_glass * f_rgb * b.glass_tint / wo.z,
                 pdf: p_glass * pr,
                 delta: true,
             });
@@ -77,7 +80,7 @@ pub(super) fn sample(b: &Bsdf, wo: Vec3, uc: f32, u: Vec2, at: &AtWo) -> Option<
         let t = 1.0 - pr;
         return Some(BsdfSample {
             wi: -wo,
-            f: b.w_glass * t * b.base / wo.z,
+            f: b.w_glass * (Vec3::ONE - b.glass_s * f_rgb) * b.base / wo.z,
             pdf: p_glass * t,
             delta: true,
         });

@@ -592,7 +592,8 @@ fn features(scene: &Scene) -> Features {
             f.normal_maps |= mat.normal_texture.is_some() && !prim.tangents.is_empty();
             f.clearcoat |= mat.clearcoat > 0.0;
             f.sheen |= mat.has_sheen();
-            f.volume |= mat.absorption() != Vec3::ZERO;
+            f.volume |= mat.is_volume();
+            f.iridescence |= mat.iridescence > 0.0;
         }
     });
     f

@@ -300,7 +300,7 @@ impl RawMaterial<'_> {
     }
 }
 
-/// KHR_materials_clearcoat, _sheen and _volume, which the `gltf` crate does not parse
+/// KHR_materials_clearcoat, _sheen, _volume and _iridescence, which the `gltf` crate does not parse
 /// (or, for the volume, parses behind a feature that would pull the rest of its
 /// extension set).
 fn read_raw_extensions(
@@ -325,6 +325,15 @@ fn read_raw_extensions(
         out.sheen_roughness = raw.number(sheen, "sheenRoughnessFactor", 0.0)?;
         out.sheen_color_texture = texture(sheen, "sheenColorTexture")?;
         out.sheen_roughness_texture = texture(sheen, "sheenRoughnessTexture")?;
+    }
+    let film = &raw.json["extensions"]["KHR_materials_iridescence"];
+    if film.is_object() {
+        out.iridescence = raw.number(film, "iridescenceFactor", 0.0)?;
+        out.iridescence_texture = texture(film, "iridescenceTexture")?;
+        out.iridescence_ior = raw.number(film, "iridescenceIor", 1.3)?;
+        out.iridescence_thickness_min = raw.number(film, "iridescenceThicknessMinimum", 100.0)?;
+        out.iridescence_thickness_max = raw.number(film, "iridescenceThicknessMaximum", 400.0)?;
+        out.iridescence_thickness_texture = texture(film, "iridescenceThicknessTexture")?;
     }
     let volume = &raw.json["extensions"]["KHR_materials_volume"];
     if volume.is_object() {
@@ -455,6 +464,12 @@ pub(crate) fn convert_material(
         ("sheenColorFactor", out.sheen_color.to_array().to_vec()),
         ("sheenRoughnessFactor", vec![out.sheen_roughness]),
         ("thicknessFactor", vec![out.thickness]),
+        ("iridescenceFactor", vec![out.iridescence]),
+        ("iridescenceIor", vec![out.iridescence_ior]),
+        (
+            "iridescenceThicknessMinimum/Maximum",
+            vec![out.iridescence_thickness_min, out.iridescence_thickness_max],
+        ),
         (
             "attenuationColor",
             out.attenuation_color.to_array().to_vec(),
@@ -484,6 +499,10 @@ pub(crate) fn convert_material(
     out.sheen_color = out.sheen_color.clamp(Vec3::ZERO, Vec3::ONE);
     out.sheen_roughness = out.sheen_roughness.clamp(0.0, 1.0);
     out.thickness = out.thickness.max(0.0);
+    out.iridescence = out.iridescence.clamp(0.0, 1.0);
+    out.iridescence_ior = out.iridescence_ior.max(1.0);
+    out.iridescence_thickness_min = out.iridescence_thickness_min.max(0.0);
+    out.iridescence_thickness_max = out.iridescence_thickness_max.max(0.0);
     out.attenuation_color = out.attenuation_color.clamp(Vec3::ZERO, Vec3::ONE);
     out.specular = out.specular.max(0.0);
     out.specular_color = out.specular_color.max(Vec3::ZERO);
