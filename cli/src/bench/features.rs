@@ -76,6 +76,7 @@ fn without_transmission() -> Scene {
         m.transmission = 0.0;
     }
     scene.features.transmission = false;
+    scene.features.volume = false;
     scene
 }
 
@@ -290,25 +291,29 @@ mod tests {
         let textured = with_textures();
         assert!(textured.features.textures);
         assert_eq!(textured.textures.len(), 1);
+        // The textured demo has textures, and its glass the opaque one lacks: transmission
+        // into a volume.
         assert_eq!(
             textured.features.names().len(),
-            opaque.features.names().len() + 2
+            opaque.features.names().len() + 3
         );
+        assert!(!opaque.features.names().contains(&"volume"));
         let (coated, sheened) = (with_layer(true), with_layer(false));
         assert!(coated.materials.iter().all(|m| m.clearcoat == 1.0));
         assert!(sheened.materials.iter().all(|m| m.has_sheen()));
-        assert_eq!(
-            coated.features.names(),
-            [
-                tracer::demo::demo_scene().features.names(),
-                vec!["clearcoat"]
-            ]
-            .concat()
-        );
-        assert_eq!(
-            sheened.features.names(),
-            [tracer::demo::demo_scene().features.names(), vec!["sheen"]].concat()
-        );
+        let plus = |extra: &'static str| {
+            let mut names = tracer::demo::demo_scene().features.names();
+            names.push(extra);
+            names.sort_unstable();
+            names
+        };
+        let sorted = |scene: &Scene| {
+            let mut names = scene.features.names();
+            names.sort_unstable();
+            names
+        };
+        assert_eq!(sorted(&coated), plus("clearcoat"));
+        assert_eq!(sorted(&sheened), plus("sheen"));
     }
 
     /// The skinned sphere stands where the plain one does, posed into a mesh of the

@@ -818,15 +818,22 @@ fn shading_normals_facing_away_from_the_geometry_create_no_energy() {
     let below = run(case, &sphere(), Some(Vec3::new(0.9, 0.0, -0.44)));
     check(case, &below, 1.0, 0.01);
 
+    // A normal map that tilts every shading normal 30° (and its lobe over the surface's
+    // edge with it): the light sent below is folded back, and the sphere stays white.
+    let case = "normal map tilted 30° (sphere)";
+    let tilted_map = run(case, &sphere(), Some(Vec3::new(0.5, 0.0, 0.866)));
+    check(case, &tilted_map, 1.0, 0.01);
+
     // Interpolated normals tilted 60° from the face of a quad facing the camera: the
-    // diffuse lobe around the shading normal loses the part of it below the surface,
-    // (1 − cos 60°)/2, and creates nothing: expected (1 + cos 60°)/2 = 0.75.
+    // diffuse lobe around the shading normal sends (1 − cos 60°)/2 of its light below the
+    // surface. Ending those paths read (1 + cos 60°)/2 = 0.75; folded through the face
+    // (`integrator.rs`, `fold`), that light stays, and a white surface stays white.
     let tilt = 60f32.to_radians();
     let tilted = with_normals(quad(Vec3::ZERO, Vec3::X, Vec3::Y), |_, _| {
         Vec3::new(tilt.sin(), 0.0, tilt.cos())
     });
     let case = "interpolated normals 60° from the face (quad)";
-    check(case, &run(case, &tilted, None), 0.75, 0.01);
+    check(case, &run(case, &tilted, None), 1.0, 0.01);
 
     // Normals 85° from the face, each turned a different way round the sphere: most views
     // see the shading normal's back. Energy may only be lost.
