@@ -80,6 +80,7 @@ mod curve;
 mod fresnel;
 mod iridescence;
 mod layers;
+mod metamaterial;
 mod microfacet;
 mod sheen;
 mod tables;
@@ -153,6 +154,11 @@ pub struct LayerParams {
     pub iridescence_ior: f32,
     /// The film's thickness in nanometres (0: no film).
     pub iridescence_thickness: f32,
+    /// TESSERA_materials_metamaterial: the negative refractive index of the transmitting
+    /// part (0: none, an ordinary dielectric of `ior`).
+    pub metamaterial_index: f32,
+    /// Its impedance relative to the outside (1: matched).
+    pub metamaterial_impedance: f32,
 }
 
 impl Default for SurfaceParams {
@@ -235,6 +241,9 @@ pub struct Bsdf {
     layers: Option<layers::Layers>,
     /// The iridescent film over the base's specular lobes (`bsdf/iridescence.rs`).
     film: Option<iridescence::ThinFilm>,
+    /// The negative-index medium the transmitting part leads into, in place of the
+    /// dielectric (`bsdf/metamaterial.rs`).
+    meta: Option<metamaterial::Metamaterial>,
 }
 
 /// Everything about the BSDF that depends on `wo` alone, in the frame where `wo.z > 0`.
@@ -258,6 +267,8 @@ struct AtWo {
     /// Whether the iridescent film lies over the refractive interface as `wo` meets it
     /// (from outside, or from either side of a thin wall).
     film_glass: bool,
+    /// Whether `wo` lies inside the transmitting object.
+    inside: bool,
     /// Lobe-selection probabilities: GGX reflection (metal and specular layer),
     /// diffuse, refractive interface. They sum to 1 (or are all 0: no lobe).
     p: [f32; 3],
@@ -398,8 +409,25 @@ impl Bsdf {
         let transmission = sane(params.transmission, 0.0, 1.0, 0.0);
         let spec = sane(params.specular, 0.0, 1.0, 1.0);
         let spec_color = sane3(params.specular_color, 0.0, f32::MAX);
-        let eta = sane(params.ior, 1.0, IOR_MAX, 1.5);
-        let thin = params.thin_walled;
+        let meta = params.layers.and_then(|l| {
+            let n = sane(l.metamaterial_index, -IOR_MAX, 0.0, 0.0);
+            (n < 0.0).then(|| metamaterial::Metamaterial {
+                index: n.abs().max(metamaterial::MIN_INDEX),
+                impedance: sane(
+                    l.metamaterial_impedance,
+                    metamaterial::MIN_INDEX,
+                    IOR_MAX,
+                    1.0,
+                ),
+            })
+        });
+        // A metamaterial's interface is smooth and bounds a solid; its |n| is the index
+        // that radiance and path weights see.
+        let eta = match &meta {
+            Some(m) => m.index,
+            None => sane(params.ior, 1.0, IOR_MAX, 1.5),
+        };
+        let thin = params.thin_walled && meta.is_none();
         let film = params.layers.and_then(|l| {
             iridescence::ThinFilm::new(
                 sane(l.iridescence, 0.0, 1.0, 0.0),
@@ -422,7 +450,7 @@ impl Bsdf {
         let r0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
         let f0_spec = (r0 * spec_color).min(Vec3::ONE);
         let glass_tint = spec * spec_color.min(Vec3::ONE);
-        let glass_smooth = smooth || (eta - 1.0).abs() < ETA_SMOOTH;
+        let glass_smooth = smooth || (eta - 1.0).abs() < ETA_SMOOTH || meta.is_some();
         let table_alpha = alpha.max(ALPHA_MIN);
         let w_plastic = (1.0 - metallic) * (1.0 - transmission);
         let w_glass = (1.0 - metallic) * transmission;
@@ -459,6 +487,7 @@ impl Bsdf {
             curve: None,
             layers,
             film,
+            meta,
         }
     }
 
@@ -604,6 +633,7 @@ impl Bsdf {
                 eta_rel: if inside { 1.0 / self.eta } else { self.eta },
                 thin_comp: 1.0,
                 film_glass: false,
+                inside,
                 metal_comp: Vec3::ONE,
                 spec_comp: Vec3::ONE,
                 diffuse_w: 1.0,
@@ -746,6 +776,7 @@ impl Bsdf {
             eta_rel,
             thin_comp,
             film_glass: self.film.is_some() && self.w_glass > 0.0 && (!inside || self.thin),
+            inside,
             metal_comp,
             spec_comp,
             diffuse_w,
@@ -973,6 +1004,9 @@ impl Bsdf {
         let p_glass = at.p[2];
         if self.thin {
             return thin::sample(self, wo, uc, u, at);
+        }
+        if let Some(m) = &self.meta {
+            return metamaterial::sample(self, m, wo, uc, at);
         }
         if self.glass_smooth {
             let fr = if self.eta == 1.0 {

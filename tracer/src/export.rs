@@ -275,6 +275,7 @@ struct Extensions {
     sheen: bool,
     volume: bool,
     iridescence: bool,
+    metamaterial: bool,
 }
 
 impl Extensions {
@@ -291,6 +292,7 @@ impl Extensions {
             (self.sheen, "KHR_materials_sheen"),
             (self.volume, "KHR_materials_volume"),
             (self.iridescence, "KHR_materials_iridescence"),
+            (self.metamaterial, crate::loader::METAMATERIAL),
         ]
         .iter()
         .filter(|(on, _)| *on)
@@ -696,6 +698,24 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
                     "iridescenceThicknessMaximum",
                     num(m.iridescence_thickness_max),
                 )
+                .build(),
+        );
+    }
+    if let Some(meta) = m.metamaterial {
+        let index_ok = meta.refractive_index < 0.0 && meta.refractive_index.is_finite();
+        let impedance_ok = meta.impedance > 0.0 && meta.impedance.is_finite();
+        if !(index_ok && impedance_ok) {
+            return Err(invalid(
+                &el,
+                format!("metamaterial {meta:?} needs a negative index and a positive impedance"),
+            ));
+        }
+        used.metamaterial = true;
+        ext = ext.with(
+            crate::loader::METAMATERIAL,
+            Obj::default()
+                .with("refractiveIndex", num(meta.refractive_index))
+                .with("impedance", num(meta.impedance))
                 .build(),
         );
     }

@@ -85,7 +85,12 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_materials_volume",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
+    METAMATERIAL,
 ];
+
+/// Our own extension for negative-index media, documented in
+/// `docs/TESSERA_materials_metamaterial.md`.
+pub const METAMATERIAL: &str = "TESSERA_materials_metamaterial";
 
 /// Most mesh draws a scene may ask for: each is an instance of the frame's top-level BVH
 /// (about 200 bytes with its share of the tree), so this bounds that tree near 1 GB

@@ -21,6 +21,16 @@ pub enum AlphaMode {
     Blend,
 }
 
+/// TESSERA_materials_metamaterial (`docs/TESSERA_materials_metamaterial.md`): the
+/// transmitting part of the material leads into a medium of negative refractive index.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Metamaterial {
+    /// `refractiveIndex`, below 0 (e.g. −1).
+    pub refractive_index: f32,
+    /// `impedance` relative to the outside, above 0; default 1 (matched).
+    pub impedance: f32,
+}
+
 /// A glTF material. Factors multiply their textures, as the spec says.
 #[derive(Clone, Debug)]
 pub struct Material {
@@ -109,6 +119,9 @@ pub struct Material {
     pub iridescence_thickness_max: f32,
     /// `iridescenceThicknessTexture` (G channel): the thickness from minimum to maximum.
     pub iridescence_thickness_texture: Option<TextureRef>,
+    /// TESSERA_materials_metamaterial, where the material has it: its transmitting part
+    /// refracts negatively, as the boundary of a solid.
+    pub metamaterial: Option<Metamaterial>,
     /// KHR_materials_unlit: the surface shows its base colour (times texture and vertex
     /// colour) as it is, whatever lights it. A path tracer renders that as a surface that
     /// emits its base colour and scatters nothing, so it also lights what it faces.
@@ -158,6 +171,7 @@ impl Default for Material {
             iridescence_thickness_min: 100.0,
             iridescence_thickness_max: 400.0,
             iridescence_thickness_texture: None,
+            metamaterial: None,
             unlit: false,
         }
     }
@@ -193,12 +207,13 @@ impl Material {
     }
 
     /// Whether light it transmits crosses a thin wall (no KHR_materials_volume, or a
-    /// thickness of 0) rather than entering a solid.
+    /// thickness of 0, and no metamaterial) rather than entering a solid.
     pub fn is_thin_walled(&self) -> bool {
-        !(self.thickness > 0.0)
+        !(self.thickness > 0.0) && self.metamaterial.is_none()
     }
 
-    /// Whether the material transmits into a volume (KHR_materials_volume).
+    /// Whether the material transmits into a volume (KHR_materials_volume, or a
+    /// metamaterial).
     pub fn is_volume(&self) -> bool {
         self.transmission > 0.0 && !self.is_thin_walled()
     }
@@ -222,7 +237,10 @@ impl Material {
 
     /// Whether the material has a clear coat, a sheen or an iridescent film.
     fn has_layers(&self) -> bool {
-        self.clearcoat > 0.0 || self.has_sheen() || self.iridescence > 0.0
+        self.clearcoat > 0.0
+            || self.has_sheen()
+            || self.iridescence > 0.0
+            || self.metamaterial.is_some()
     }
 
     /// Whether the surface emits light anywhere.
@@ -271,6 +289,8 @@ fn clamped(l: LayerParams) -> LayerParams {
         iridescence: l.iridescence.clamp(0.0, 1.0),
         iridescence_ior: l.iridescence_ior.max(1.0),
         iridescence_thickness: l.iridescence_thickness.max(0.0),
+        metamaterial_index: l.metamaterial_index.min(0.0),
+        metamaterial_impedance: l.metamaterial_impedance,
     }
 }
 
@@ -341,6 +361,8 @@ impl Material {
             iridescence: self.iridescence,
             iridescence_ior: self.iridescence_ior,
             iridescence_thickness: self.iridescence_thickness_max,
+            metamaterial_index: self.metamaterial.map_or(0.0, |m| m.refractive_index),
+            metamaterial_impedance: self.metamaterial.map_or(1.0, |m| m.impedance),
         })
     }
 

@@ -402,6 +402,8 @@ pub struct Features {
     pub volume: bool,
     /// Any material has an iridescent film (KHR_materials_iridescence).
     pub iridescence: bool,
+    /// Any material refracts negatively (TESSERA_materials_metamaterial).
+    pub metamaterial: bool,
 }
 
 impl Features {
@@ -422,6 +424,7 @@ impl Features {
             (self.sheen, "sheen"),
             (self.volume, "volume"),
             (self.iridescence, "iridescence"),
+            (self.metamaterial, "metamaterial"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }
@@ -556,6 +559,7 @@ impl SceneBuilder {
             sheen: mats.iter().any(Material::has_sheen),
             volume: mats.iter().any(Material::is_volume),
             iridescence: mats.iter().any(|m| m.iridescence > 0.0),
+            metamaterial: mats.iter().any(|m| m.metamaterial.is_some()),
         };
         self.scene
     }

@@ -17,7 +17,7 @@ use tracer::export::{scene_to_glb, ExportError};
 use tracer::film::{SampleRange, TileBuffer, TileRect};
 use tracer::light::{Environment, EnvironmentMap, PunctualLight};
 use tracer::loader::{load_glb, SceneSummary};
-use tracer::material::{AlphaMode, Material};
+use tracer::material::{AlphaMode, Material, Metamaterial};
 use tracer::motion::Shutter;
 use tracer::render::{prepare_frame, render_tile, FrameOptions, RenderSettings};
 use tracer::scene::{CameraDef, MorphTarget, Node, Scene, SceneBuilder, Skin, Trs};
@@ -266,6 +266,10 @@ fn everything_else() -> Scene {
         clearcoat_roughness: 0.25,
         sheen_color: Vec3::new(0.5, 0.25, 1.0),
         sheen_roughness: 0.75,
+        metamaterial: Some(Metamaterial {
+            refractive_index: -1.25,
+            impedance: 0.5,
+        }),
         ..Default::default()
     });
     let mut sheet = quad(

@@ -18,8 +18,12 @@ use tungstenite::{Message, WebSocket};
 
 use crate::common::*;
 
-/// The Chromium binary, installing Debian's package when it is missing.
+/// The Chromium binary, installing Debian's package when it is missing. The tests of
+/// this binary that open a browser run at once: one installs and the others wait for it
+/// (two apt-get runs at once fail on the package system's lock).
 fn chromium() -> PathBuf {
+    static INSTALL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one_at_a_time = INSTALL.lock().unwrap_or_else(|e| e.into_inner());
     let found = || {
         Command::new("sh")
             .args(["-c", "command -v chromium"])

@@ -311,6 +311,10 @@ fn random_material(rng: &mut Rng) -> SurfaceParams {
             iridescence: pick(rng, &[0.0, 0.0, 1.0, 0.5]) * pick(rng, &[1.0, 1.0, 0.0]),
             iridescence_ior: pick(rng, &[1.3, 1.0, 2.0, 1.5]),
             iridescence_thickness: pick(rng, &[400.0, 0.0, 50.0, 1200.0]),
+            // A negative-index medium behind a sixth of the transmitting parts.
+            metamaterial_index: pick(rng, &[0.0, 0.0, 0.0, 0.0, 0.0, -1.0, -0.5, -2.4])
+                * pick(rng, &[1.0, 1.0, 0.0]),
+            metamaterial_impedance: pick(rng, &[1.0, 0.5, 2.0]),
         }),
     }
 }
@@ -428,6 +432,8 @@ fn degenerate_parameters_stay_finite() {
                 iridescence: f32::NAN,
                 iridescence_ior: f32::NAN,
                 iridescence_thickness: f32::INFINITY,
+                metamaterial_index: f32::NAN,
+                metamaterial_impedance: f32::NAN,
             }),
         },
         SurfaceParams {
@@ -439,6 +445,8 @@ fn degenerate_parameters_stay_finite() {
                 iridescence: 5.0,
                 iridescence_ior: -1.0,
                 iridescence_thickness: 1e30,
+                metamaterial_index: -1e30,
+                metamaterial_impedance: 0.0,
             }),
             ..SurfaceParams::default()
         },

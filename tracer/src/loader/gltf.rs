@@ -594,6 +594,7 @@ fn features(scene: &Scene) -> Features {
             f.sheen |= mat.has_sheen();
             f.volume |= mat.is_volume();
             f.iridescence |= mat.iridescence > 0.0;
+            f.metamaterial |= mat.metamaterial.is_some();
         }
     });
     f

@@ -300,7 +300,8 @@ impl RawMaterial<'_> {
     }
 }
 
-/// KHR_materials_clearcoat, _sheen, _volume and _iridescence, which the `gltf` crate does not parse
+/// KHR_materials_clearcoat, _sheen, _volume and _iridescence, and our own
+/// TESSERA_materials_metamaterial, which the `gltf` crate does not parse
 /// (or, for the volume, parses behind a feature that would pull the rest of its
 /// extension set).
 fn read_raw_extensions(
@@ -334,6 +335,34 @@ fn read_raw_extensions(
         out.iridescence_thickness_min = raw.number(film, "iridescenceThicknessMinimum", 100.0)?;
         out.iridescence_thickness_max = raw.number(film, "iridescenceThicknessMaximum", 400.0)?;
         out.iridescence_thickness_texture = texture(film, "iridescenceThicknessTexture")?;
+    }
+    let meta = &raw.json["extensions"][crate::loader::METAMATERIAL];
+    if meta.is_object() {
+        let n = raw.number(meta, "refractiveIndex", f32::NAN)?;
+        let z = raw.number(meta, "impedance", 1.0)?;
+        if !(n < 0.0) || !n.is_finite() {
+            return Err(SceneError::at(
+                raw.element,
+                format!(
+                    "{} refractiveIndex {n} is not a negative number (a positive index is \
+                     KHR_materials_ior's)",
+                    crate::loader::METAMATERIAL
+                ),
+            ));
+        }
+        if !(z > 0.0) || !z.is_finite() {
+            return Err(SceneError::at(
+                raw.element,
+                format!(
+                    "{} impedance {z} is not above 0",
+                    crate::loader::METAMATERIAL
+                ),
+            ));
+        }
+        out.metamaterial = Some(crate::material::Metamaterial {
+            refractive_index: n,
+            impedance: z,
+        });
     }
     let volume = &raw.json["extensions"]["KHR_materials_volume"];
     if volume.is_object() {
