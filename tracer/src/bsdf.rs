@@ -159,6 +159,11 @@ pub struct LayerParams {
     pub metamaterial_index: f32,
     /// Its impedance relative to the outside (1: matched).
     pub metamaterial_impedance: f32,
+    /// KHR_materials_diffuse_transmission factor, 0..1: the share of the diffuse base
+    /// that passes to the other side.
+    pub diffuse_transmission: f32,
+    /// Its colour.
+    pub diffuse_transmission_color: Vec3,
 }
 
 impl Default for SurfaceParams {
@@ -200,6 +205,12 @@ pub struct Bsdf {
     pub params: SurfaceParams,
     /// Base colour clamped to [0, 1].
     base: Vec3,
+    /// The diffuse base's reflection colour, `(1 − dt) · base`, and its transmission
+    /// colour, `dt · diffuseTransmissionColor` (KHR_materials_diffuse_transmission).
+    diffuse_r: Vec3,
+    diffuse_t: Vec3,
+    /// The share of diffuse samples sent to the other side.
+    p_dt: f32,
     /// GGX α = roughness².
     alpha: f32,
     /// Whether the microfacet lobes are delta lobes (`alpha < ALPHA_MIN`).
@@ -445,6 +456,23 @@ impl Bsdf {
             )
         });
 
+        let (dt, dt_color) = params.layers.map_or((0.0, Vec3::ZERO), |l| {
+            (
+                sane(l.diffuse_transmission, 0.0, 1.0, 0.0),
+                sane3(l.diffuse_transmission_color, 0.0, 1.0),
+            )
+        });
+        let (diffuse_r, diffuse_t) = if dt > 0.0 {
+            ((1.0 - dt) * base, dt * dt_color)
+        } else {
+            (base, Vec3::ZERO)
+        };
+        let p_dt = if diffuse_t.max_element() > 0.0 {
+            mean(diffuse_t) / (mean(diffuse_r) + mean(diffuse_t))
+        } else {
+            0.0
+        };
+
         let alpha = roughness * roughness;
         let smooth = alpha < ALPHA_MIN;
         let r0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
@@ -459,6 +487,9 @@ impl Bsdf {
         Self {
             params,
             base,
+            diffuse_r,
+            diffuse_t,
+            p_dt,
             alpha,
             smooth,
             eta,
@@ -517,7 +548,8 @@ impl Bsdf {
     /// everywhere and only `sample` can find directions (no light sampling, no MIS).
     pub fn is_delta(&self) -> bool {
         let metal = self.w_metal == 0.0 || self.smooth;
-        let plastic = self.w_plastic == 0.0 || (self.smooth && self.base.max_element() == 0.0);
+        let plastic = self.w_plastic == 0.0
+            || (self.smooth && self.diffuse_r.max_element() == 0.0 && self.p_dt == 0.0);
         let glass = self.w_glass == 0.0 || self.glass_smooth;
         metal && plastic && glass && self.layers.is_none_or(|l| l.is_delta())
     }
@@ -613,7 +645,9 @@ impl Bsdf {
             self.sample_ggx(wo, u, at)
         } else if u_lobe < p_ggx + p_diff {
             let wi = microfacet::sample_cosine_hemisphere(u);
-            self.continuous_sample(wo, wi, at)
+            // Diffuse transmission: the end of the lobe's share goes to the other side.
+            let through = self.p_dt > 0.0 && (u_lobe - p_ggx) / p_diff >= 1.0 - self.p_dt;
+            self.continuous_sample(wo, if through { flip(wi) } else { wi }, at)
         } else if p_glass > 0.0 {
             let uc = ((u_lobe - p_ggx - p_diff) / p_glass).clamp(0.0, 1.0);
             self.sample_glass(wo, uc, u, at)
@@ -628,7 +662,12 @@ impl Bsdf {
         if self.is_lambertian() {
             // The commonest surface: nothing depends on `wo`, and the general case
             // (`at_wo_general`) comes to the same numbers (a test checks).
-            let diffuse = self.w_plastic * self.base.max_element() > 0.0;
+            let diffuse = self.w_plastic
+                * self
+                    .diffuse_r
+                    .max_element()
+                    .max(self.diffuse_t.max_element())
+                > 0.0;
             return AtWo {
                 eta_rel: if inside { 1.0 / self.eta } else { self.eta },
                 thin_comp: 1.0,
@@ -745,13 +784,17 @@ impl Bsdf {
         };
         let mut e = [
             self.w_metal * e_metal + self.w_plastic * e_spec_mean,
-            self.w_plastic * c_mean * diffuse_w,
+            self.w_plastic * (mean(self.diffuse_r) + mean(self.diffuse_t)) * diffuse_w,
             glass,
         ];
         // A lobe that can carry energy keeps a floor, so that it is always sampled.
         let present = [
             self.w_metal + self.w_plastic * self.spec,
-            self.w_plastic * self.base.max_element(),
+            self.w_plastic
+                * self
+                    .diffuse_r
+                    .max_element()
+                    .max(self.diffuse_t.max_element()),
             if self.glass_s > 0.0 || self.base.max_element() > 0.0 {
                 self.w_glass
             } else {
@@ -790,7 +833,7 @@ impl Bsdf {
     fn eval_local(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3 {
         let (mu_o, mu_i) = (wo.z, wi.z);
         if mu_i > 0.0 {
-            let mut f = self.w_plastic * at.diffuse_w * FRAC_1_PI * self.base;
+            let mut f = self.w_plastic * at.diffuse_w * FRAC_1_PI * self.diffuse_r;
             // (`smooth` implies `glass_smooth`: all microfacet lobes are delta together.)
             if self.microfacet {
                 let wm = (wo + wi).normalize_or(Vec3::Z);
@@ -810,11 +853,12 @@ impl Bsdf {
             }
             f
         } else {
+            let diffuse = self.w_plastic * at.diffuse_w * FRAC_1_PI * self.diffuse_t;
             if self.w_glass == 0.0 || self.glass_smooth {
-                return Vec3::ZERO;
+                return diffuse;
             }
             if self.thin {
-                return thin::eval_transmission(self, wo, wi, at);
+                return diffuse + thin::eval_transmission(self, wo, wi, at);
             }
             let radiance_scale = 1.0 / (at.eta_rel * at.eta_rel);
             let mut ft = Vec3::splat(at.glass_ms * (1.0 - at.glass_ms_r) * FRAC_1_PI);
@@ -828,7 +872,7 @@ impl Bsdf {
                     * microfacet::g2(mu_o, -mu_i, self.alpha)
                     * (cos_im.abs() * cos_om / (mu_o * -mu_i * denom));
             }
-            self.w_glass * ft * radiance_scale * self.base
+            diffuse + self.w_glass * ft * radiance_scale * self.base
         }
     }
 
@@ -913,7 +957,7 @@ impl Bsdf {
         let [p_ggx, p_diff, p_glass] = at.p;
         let glass_rough = p_glass > 0.0 && !self.glass_smooth;
         if wi.z > 0.0 {
-            let mut pdf = p_diff * wi.z * FRAC_1_PI;
+            let mut pdf = p_diff * (1.0 - self.p_dt) * wi.z * FRAC_1_PI;
             if self.microfacet {
                 // Reflections reach `wi` directly, or folded from below the horizon.
                 let mut refl = 0.0;
@@ -938,11 +982,12 @@ impl Bsdf {
             }
             pdf
         } else {
+            let diffuse = p_diff * self.p_dt * -wi.z * FRAC_1_PI;
             if !glass_rough {
-                return 0.0;
+                return diffuse;
             }
             if self.thin {
-                return p_glass * thin::pdf_transmission(self, wo, wi, at);
+                return diffuse + p_glass * thin::pdf_transmission(self, wo, wi, at);
             }
             let mut pdf = at.glass_ms * (1.0 - at.glass_ms_r) * -wi.z * FRAC_1_PI;
             // Refractions reach `wi` directly, or folded from above the horizon.
@@ -959,7 +1004,7 @@ impl Bsdf {
                         * dwm_dwi;
                 }
             }
-            p_glass * pdf
+            diffuse + p_glass * pdf
         }
     }
 

@@ -276,6 +276,7 @@ struct Extensions {
     volume: bool,
     iridescence: bool,
     metamaterial: bool,
+    diffuse_transmission: bool,
 }
 
 impl Extensions {
@@ -293,6 +294,10 @@ impl Extensions {
             (self.volume, "KHR_materials_volume"),
             (self.iridescence, "KHR_materials_iridescence"),
             (self.metamaterial, crate::loader::METAMATERIAL),
+            (
+                self.diffuse_transmission,
+                "KHR_materials_diffuse_transmission",
+            ),
         ]
         .iter()
         .filter(|(on, _)| *on)
@@ -405,6 +410,14 @@ fn refuse_unsupported(scene: &Scene) -> Result<(), ExportError> {
             ("transmissionTexture", &m.transmission_texture),
             ("thicknessTexture", &m.thickness_texture),
             ("iridescenceTexture", &m.iridescence_texture),
+            (
+                "diffuseTransmissionTexture",
+                &m.diffuse_transmission_texture,
+            ),
+            (
+                "diffuseTransmissionColorTexture",
+                &m.diffuse_transmission_color_texture,
+            ),
             (
                 "iridescenceThicknessTexture",
                 &m.iridescence_thickness_texture,
@@ -528,7 +541,7 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         finite(&el, name, values)?;
     }
     // The loader clamps these to glTF's ranges; a value outside would come back changed.
-    let unit: [(&str, &[f32]); 10] = [
+    let unit: [(&str, &[f32]); 12] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
@@ -539,6 +552,11 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         ("sheenRoughnessFactor", &[m.sheen_roughness]),
         ("attenuationColor", &m.attenuation_color.to_array()),
         ("iridescenceFactor", &[m.iridescence]),
+        ("diffuseTransmissionFactor", &[m.diffuse_transmission]),
+        (
+            "diffuseTransmissionColorFactor",
+            &m.diffuse_transmission_color.to_array(),
+        ),
     ];
     for (name, values) in unit {
         if values.iter().any(|v| !(0.0..=1.0).contains(v)) {
@@ -697,6 +715,19 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
                 .with(
                     "iridescenceThicknessMaximum",
                     num(m.iridescence_thickness_max),
+                )
+                .build(),
+        );
+    }
+    if m.diffuse_transmission != 0.0 || m.diffuse_transmission_color != Vec3::ONE {
+        used.diffuse_transmission = true;
+        ext = ext.with(
+            "KHR_materials_diffuse_transmission",
+            Obj::default()
+                .with("diffuseTransmissionFactor", num(m.diffuse_transmission))
+                .with(
+                    "diffuseTransmissionColorFactor",
+                    nums(&m.diffuse_transmission_color.to_array()),
                 )
                 .build(),
         );

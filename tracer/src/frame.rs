@@ -218,7 +218,7 @@ impl PreparedFrame {
         }
         let prim = &mesh.primitives[p];
         let mat = &self.scene.materials[prim.material as usize];
-        if !mat.double_sided && mat.transmission == 0.0 {
+        if !mat.double_sided && !mat.transmits() {
             let tri = self.triangle_at(instance, triangle, ray.time);
             let facing = tri
                 .face_normal()

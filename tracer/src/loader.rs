@@ -75,6 +75,7 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "EXT_texture_webp",
     "KHR_lights_punctual",
     "KHR_materials_clearcoat",
+    "KHR_materials_diffuse_transmission",
     "KHR_materials_emissive_strength",
     "KHR_materials_ior",
     "KHR_materials_iridescence",

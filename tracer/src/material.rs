@@ -119,6 +119,15 @@ pub struct Material {
     pub iridescence_thickness_max: f32,
     /// `iridescenceThicknessTexture` (G channel): the thickness from minimum to maximum.
     pub iridescence_thickness_texture: Option<TextureRef>,
+    /// KHR_materials_diffuse_transmission `diffuseTransmissionFactor`, default 0: the
+    /// share of the diffuse base that passes to the other side (leaves, paper).
+    pub diffuse_transmission: f32,
+    /// Its texture (alpha channel).
+    pub diffuse_transmission_texture: Option<TextureRef>,
+    /// `diffuseTransmissionColorFactor`, default white.
+    pub diffuse_transmission_color: Vec3,
+    /// Its sRGB texture (RGB).
+    pub diffuse_transmission_color_texture: Option<TextureRef>,
     /// TESSERA_materials_metamaterial, where the material has it: its transmitting part
     /// refracts negatively, as the boundary of a solid.
     pub metamaterial: Option<Metamaterial>,
@@ -171,6 +180,10 @@ impl Default for Material {
             iridescence_thickness_min: 100.0,
             iridescence_thickness_max: 400.0,
             iridescence_thickness_texture: None,
+            diffuse_transmission: 0.0,
+            diffuse_transmission_texture: None,
+            diffuse_transmission_color: Vec3::ONE,
+            diffuse_transmission_color_texture: None,
             metamaterial: None,
             unlit: false,
         }
@@ -201,6 +214,8 @@ impl Material {
             &self.sheen_roughness_texture,
             &self.iridescence_texture,
             &self.iridescence_thickness_texture,
+            &self.diffuse_transmission_texture,
+            &self.diffuse_transmission_color_texture,
         ]
         .into_iter()
         .flatten()
@@ -241,6 +256,12 @@ impl Material {
             || self.has_sheen()
             || self.iridescence > 0.0
             || self.metamaterial.is_some()
+            || self.diffuse_transmission > 0.0
+    }
+
+    /// Whether light passes through the surface: it is seen, and lit, from behind too.
+    pub fn transmits(&self) -> bool {
+        self.transmission > 0.0 || self.diffuse_transmission > 0.0
     }
 
     /// Whether the surface emits light anywhere.
@@ -291,6 +312,8 @@ fn clamped(l: LayerParams) -> LayerParams {
         iridescence_thickness: l.iridescence_thickness.max(0.0),
         metamaterial_index: l.metamaterial_index.min(0.0),
         metamaterial_impedance: l.metamaterial_impedance,
+        diffuse_transmission: l.diffuse_transmission.clamp(0.0, 1.0),
+        diffuse_transmission_color: l.diffuse_transmission_color.clamp(Vec3::ZERO, Vec3::ONE),
     }
 }
 
@@ -363,6 +386,8 @@ impl Material {
             iridescence_thickness: self.iridescence_thickness_max,
             metamaterial_index: self.metamaterial.map_or(0.0, |m| m.refractive_index),
             metamaterial_impedance: self.metamaterial.map_or(1.0, |m| m.impedance),
+            diffuse_transmission: self.diffuse_transmission,
+            diffuse_transmission_color: self.diffuse_transmission_color,
         })
     }
 
@@ -387,6 +412,14 @@ impl Material {
             }
             if let Some(t) = read(&self.sheen_roughness_texture, false) {
                 l.sheen_roughness *= t.w;
+            }
+        }
+        if l.diffuse_transmission > 0.0 {
+            if let Some(t) = read(&self.diffuse_transmission_texture, false) {
+                l.diffuse_transmission *= t.w;
+            }
+            if let Some(t) = read(&self.diffuse_transmission_color_texture, true) {
+                l.diffuse_transmission_color *= t.truncate();
             }
         }
         if l.iridescence > 0.0 {

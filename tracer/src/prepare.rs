@@ -502,8 +502,7 @@ fn hit_filters(
                 .iter()
                 .map(|p| {
                     let mat = &scene.materials[p.material as usize];
-                    mat.alpha_mode != AlphaMode::Opaque
-                        || (!mat.double_sided && mat.transmission == 0.0)
+                    mat.alpha_mode != AlphaMode::Opaque || (!mat.double_sided && !mat.transmits())
                 })
                 .collect()
         })

@@ -404,6 +404,8 @@ pub struct Features {
     pub iridescence: bool,
     /// Any material refracts negatively (TESSERA_materials_metamaterial).
     pub metamaterial: bool,
+    /// Any material's diffuse base transmits (KHR_materials_diffuse_transmission).
+    pub diffuse_transmission: bool,
 }
 
 impl Features {
@@ -425,6 +427,7 @@ impl Features {
             (self.volume, "volume"),
             (self.iridescence, "iridescence"),
             (self.metamaterial, "metamaterial"),
+            (self.diffuse_transmission, "diffuse-transmission"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }
@@ -560,6 +563,7 @@ impl SceneBuilder {
             volume: mats.iter().any(Material::is_volume),
             iridescence: mats.iter().any(|m| m.iridescence > 0.0),
             metamaterial: mats.iter().any(|m| m.metamaterial.is_some()),
+            diffuse_transmission: mats.iter().any(|m| m.diffuse_transmission > 0.0),
         };
         self.scene
     }

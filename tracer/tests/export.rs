@@ -266,6 +266,8 @@ fn everything_else() -> Scene {
         clearcoat_roughness: 0.25,
         sheen_color: Vec3::new(0.5, 0.25, 1.0),
         sheen_roughness: 0.75,
+        diffuse_transmission: 0.4,
+        diffuse_transmission_color: Vec3::new(1.0, 0.75, 0.5),
         metamaterial: Some(Metamaterial {
             refractive_index: -1.25,
             impedance: 0.5,

@@ -371,6 +371,54 @@ fn khronos_models_load_with_their_material_extensions() {
 }
 
 #[test]
+fn a_sheet_passes_its_diffuse_transmission_to_the_side_it_does_not_face() {
+    // A single-sided sheet facing away from the camera, lit head-on from its front by a
+    // directional light of illuminance π: seen from behind, a Lambertian transmission of
+    // dt · colour shows radiance dt · colour · E / π = dt · colour, in every pixel. A
+    // single-sided surface is otherwise invisible from behind; one that transmits is not.
+    let (dt, color) = (0.6, Vec3::new(1.0, 0.5, 0.25));
+    let mut b = SceneBuilder::default();
+    let leaf = b.material(Material {
+        base_color: Vec4::new(0.2, 0.9, 0.3, 1.0),
+        metallic: 0.0,
+        specular: 0.0,
+        diffuse_transmission: dt,
+        diffuse_transmission_color: color,
+        ..Material::default()
+    });
+    // Its front faces −z, away from the camera at +z.
+    let sheet = tracer::shapes::quad(
+        [
+            Vec3::new(-5.0, -5.0, 0.0),
+            Vec3::new(-5.0, 5.0, 0.0),
+            Vec3::new(5.0, 5.0, 0.0),
+            Vec3::new(5.0, -5.0, 0.0),
+        ],
+        leaf,
+    );
+    b.mesh("sheet", vec![sheet], DMat4::IDENTITY);
+    // Shining along +z, onto the sheet's front.
+    b.light(
+        tracer::light::PunctualLight::Directional {
+            illuminance: Vec3::splat(std::f32::consts::PI),
+        },
+        DMat4::from_rotation_y(std::f64::consts::PI),
+    );
+    camera_at(&mut b, 4.0);
+    b.environment(Environment::Black);
+    let scene = b.finish();
+    assert!(scene.features.diffuse_transmission);
+    let layers = render(scene, 4);
+    let want = dt * color;
+    for p in &layers.beauty {
+        assert!(
+            (p.truncate() - want).abs().max_element() < 1e-5,
+            "{p}, closed form {want}"
+        );
+    }
+}
+
+#[test]
 fn an_ignored_material_extension_is_named_with_its_materials() {
     let mut doc = Doc::default();
     let p = doc.vec3(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);

@@ -12,8 +12,8 @@ const ROUGHNESS: [f32; 4] = [0.1, 0.3, 0.6, 1.0];
 /// Number of chi-square tests in this file, for the Šidák correction: conductor (16),
 /// plastic (16), glass at IOR 1.5 from both sides (32) and at IOR 1.1 for two roughness
 /// values (16), a metal/plastic mix (16), two mixes with transmission from both sides (64),
-/// a thin wall from both sides (32).
-const CHI2_TESTS: usize = 16 + 16 + 32 + 16 + 16 + 64 + 32;
+/// a thin wall from both sides (32), plastic with diffuse transmission from both sides (32).
+const CHI2_TESTS: usize = 16 + 16 + 32 + 16 + 16 + 64 + 32 + 32;
 
 fn material(
     base: Vec3,
@@ -213,6 +213,63 @@ fn thin_wall_is_the_same_from_both_sides_and_passes_light_straight() {
     );
 }
 
+/// Plastic whose diffuse base passes `dt` of its light to the other side
+/// (KHR_materials_diffuse_transmission) in `color`.
+fn translucent(base: Vec3, roughness: f32, dt: f32, color: Vec3) -> SurfaceParams {
+    SurfaceParams {
+        layers: Some(LayerParams {
+            diffuse_transmission: dt,
+            diffuse_transmission_color: color,
+            ..LayerParams::default()
+        }),
+        ..material(base, 0.0, roughness, 1.5, 0.0)
+    }
+}
+
+#[test]
+fn chi2_diffuse_transmission() {
+    chi2_family(
+        "diffuse transmission",
+        |r| translucent(Vec3::new(0.2, 0.8, 0.4), r, 0.6, Vec3::new(0.9, 0.5, 0.1)),
+        &ROUGHNESS,
+        &[false, true],
+    );
+}
+
+#[test]
+fn furnace_white_diffuse_transmission() {
+    // The specular layer takes what it reflects; the diffuse base under it splits the
+    // rest between its two sides, and a white base on both loses nothing.
+    for dt in [0.3, 1.0] {
+        furnace_opaque(
+            &format!("diffuse transmission {dt}"),
+            |r| translucent(Vec3::ONE, r, dt, Vec3::ONE),
+            0.01,
+        );
+    }
+    // The share transmitted is dt times what the layer leaves: with no specular layer,
+    // dt itself, at every angle.
+    let bsdf = Bsdf::new(SurfaceParams {
+        specular: 0.0,
+        ..translucent(Vec3::ONE, 0.5, 0.3, Vec3::ONE)
+    });
+    let mut rng = Rng::new(9);
+    for deg in [0.0, 45.0, 85.0] {
+        let wo = wo_at(deg, false);
+        let n = 100_000;
+        let mut through = 0.0;
+        for _ in 0..n {
+            if let Some(s) = bsdf.sample(wo, rng.f32(), Vec2::new(rng.f32(), rng.f32())) {
+                if s.wi.z < 0.0 {
+                    through += s.f.x * -s.wi.z / s.pdf;
+                }
+            }
+        }
+        let t = through / n as f32;
+        assert!((t - 0.3).abs() < 0.005, "{deg}°: transmits {t}");
+    }
+}
+
 #[test]
 fn furnace_white_thin_wall() {
     // Reflection and transmission share one GGX lobe whose Fresnel terms sum to 1, and
@@ -315,6 +372,9 @@ fn random_material(rng: &mut Rng) -> SurfaceParams {
             metamaterial_index: pick(rng, &[0.0, 0.0, 0.0, 0.0, 0.0, -1.0, -0.5, -2.4])
                 * pick(rng, &[1.0, 1.0, 0.0]),
             metamaterial_impedance: pick(rng, &[1.0, 0.5, 2.0]),
+            // Diffuse transmission on a third.
+            diffuse_transmission: pick(rng, &[0.0, 0.0, 1.0, 0.4]),
+            diffuse_transmission_color: Vec3::new(rng.f32(), 1.0, rng.f32()),
         }),
     }
 }
@@ -434,6 +494,8 @@ fn degenerate_parameters_stay_finite() {
                 iridescence_thickness: f32::INFINITY,
                 metamaterial_index: f32::NAN,
                 metamaterial_impedance: f32::NAN,
+                diffuse_transmission: f32::NAN,
+                diffuse_transmission_color: Vec3::splat(f32::NAN),
             }),
         },
         SurfaceParams {
@@ -447,6 +509,8 @@ fn degenerate_parameters_stay_finite() {
                 iridescence_thickness: 1e30,
                 metamaterial_index: -1e30,
                 metamaterial_impedance: 0.0,
+                diffuse_transmission: 7.0,
+                diffuse_transmission_color: Vec3::splat(-1.0),
             }),
             ..SurfaceParams::default()
         },

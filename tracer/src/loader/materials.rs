@@ -300,7 +300,8 @@ impl RawMaterial<'_> {
     }
 }
 
-/// KHR_materials_clearcoat, _sheen, _volume and _iridescence, and our own
+/// KHR_materials_clearcoat, _sheen, _volume, _iridescence and _diffuse_transmission, and
+/// our own
 /// TESSERA_materials_metamaterial, which the `gltf` crate does not parse
 /// (or, for the volume, parses behind a feature that would pull the rest of its
 /// extension set).
@@ -335,6 +336,14 @@ fn read_raw_extensions(
         out.iridescence_thickness_min = raw.number(film, "iridescenceThicknessMinimum", 100.0)?;
         out.iridescence_thickness_max = raw.number(film, "iridescenceThicknessMaximum", 400.0)?;
         out.iridescence_thickness_texture = texture(film, "iridescenceThicknessTexture")?;
+    }
+    let dt = &raw.json["extensions"]["KHR_materials_diffuse_transmission"];
+    if dt.is_object() {
+        out.diffuse_transmission = raw.number(dt, "diffuseTransmissionFactor", 0.0)?;
+        out.diffuse_transmission_texture = texture(dt, "diffuseTransmissionTexture")?;
+        out.diffuse_transmission_color =
+            raw.rgb(dt, "diffuseTransmissionColorFactor", Vec3::ONE)?;
+        out.diffuse_transmission_color_texture = texture(dt, "diffuseTransmissionColorTexture")?;
     }
     let meta = &raw.json["extensions"][crate::loader::METAMATERIAL];
     if meta.is_object() {
@@ -494,6 +503,11 @@ pub(crate) fn convert_material(
         ("sheenRoughnessFactor", vec![out.sheen_roughness]),
         ("thicknessFactor", vec![out.thickness]),
         ("iridescenceFactor", vec![out.iridescence]),
+        ("diffuseTransmissionFactor", vec![out.diffuse_transmission]),
+        (
+            "diffuseTransmissionColorFactor",
+            out.diffuse_transmission_color.to_array().to_vec(),
+        ),
         ("iridescenceIor", vec![out.iridescence_ior]),
         (
             "iridescenceThicknessMinimum/Maximum",
@@ -529,6 +543,8 @@ pub(crate) fn convert_material(
     out.sheen_roughness = out.sheen_roughness.clamp(0.0, 1.0);
     out.thickness = out.thickness.max(0.0);
     out.iridescence = out.iridescence.clamp(0.0, 1.0);
+    out.diffuse_transmission = out.diffuse_transmission.clamp(0.0, 1.0);
+    out.diffuse_transmission_color = out.diffuse_transmission_color.clamp(Vec3::ZERO, Vec3::ONE);
     out.iridescence_ior = out.iridescence_ior.max(1.0);
     out.iridescence_thickness_min = out.iridescence_thickness_min.max(0.0);
     out.iridescence_thickness_max = out.iridescence_thickness_max.max(0.0);
