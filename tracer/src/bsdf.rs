@@ -75,6 +75,7 @@
 //!
 //! The tests in `bsdf/tests.rs` measure the white furnace of each part.
 
+mod anisotropy;
 mod coat;
 mod curve;
 mod fresnel;
@@ -88,6 +89,8 @@ mod thin;
 
 pub use curve::AlbedoCurve;
 
+#[cfg(test)]
+mod anisotropy_tests;
 #[cfg(test)]
 mod chi2;
 #[cfg(test)]
@@ -164,6 +167,10 @@ pub struct LayerParams {
     pub diffuse_transmission: f32,
     /// Its colour.
     pub diffuse_transmission_color: Vec3,
+    /// KHR_materials_anisotropy strength, 0..1: the base's microfacet lobes are rougher
+    /// along the shading frame's x axis, `α_x = mix(α, 1, strength²)` (the caller points
+    /// that axis in the material's anisotropy direction).
+    pub anisotropy: f32,
 }
 
 impl Default for SurfaceParams {
@@ -211,8 +218,12 @@ pub struct Bsdf {
     diffuse_t: Vec3,
     /// The share of diffuse samples sent to the other side.
     p_dt: f32,
-    /// GGX α = roughness².
+    /// GGX α = roughness² (along the bitangent where the material is anisotropic).
     alpha: f32,
+    /// The microfacet distribution of the metal, the specular layer and the refractive
+    /// interface: α along both axes, or stretched along the frame's x axis by
+    /// KHR_materials_anisotropy.
+    ggx: microfacet::Ggx,
     /// Whether the microfacet lobes are delta lobes (`alpha < ALPHA_MIN`).
     smooth: bool,
     /// The IOR, clamped to [1, IOR_MAX].
@@ -364,16 +375,20 @@ impl BsdfAt<'_> {
 
 /// Builds the energy-compensation tables now rather than at the first rough surface a
 /// render meets (about 0.1 s for the conductor table, 0.25 s more for the dielectric one
-/// with `with_dielectric`, 0.3 s for the sheen's albedo with `with_sheen`, at opt-level 3).
+/// with `with_dielectric`, 0.3 s for the sheen's albedo with `with_sheen`, and the
+/// anisotropic lobes' equivalent roughness with `with_anisotropy`, at opt-level 3).
 /// Optional: call it while preparing a frame so that no rendering thread waits on the
 /// build, and only ask for the tables the scene's materials use.
-pub fn precompute_tables(with_dielectric: bool, with_sheen: bool) {
+pub fn precompute_tables(with_dielectric: bool, with_sheen: bool, with_anisotropy: bool) {
     tables::conductor();
     if with_dielectric {
         tables::dielectric();
     }
     if with_sheen {
         sheen::precompute();
+    }
+    if with_anisotropy {
+        anisotropy::equivalent_alpha();
     }
 }
 
@@ -474,12 +489,22 @@ impl Bsdf {
         };
 
         let alpha = roughness * roughness;
-        let smooth = alpha < ALPHA_MIN;
+        let strength = params
+            .layers
+            .map_or(0.0, |l| sane(l.anisotropy, 0.0, 1.0, 0.0));
+        let alpha_x = alpha + (1.0 - alpha) * strength * strength;
+        let smooth = alpha_x < ALPHA_MIN;
+        // A lobe rough along one axis only is still rough: the smooth axis keeps the
+        // smallest α whose pdf f32 resolves (see ALPHA_MIN).
+        let ggx = microfacet::Ggx {
+            ax: alpha_x.max(ALPHA_MIN),
+            ay: alpha.max(ALPHA_MIN),
+        };
         let r0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
         let f0_spec = (r0 * spec_color).min(Vec3::ONE);
         let glass_tint = spec * spec_color.min(Vec3::ONE);
         let glass_smooth = smooth || (eta - 1.0).abs() < ETA_SMOOTH || meta.is_some();
-        let table_alpha = alpha.max(ALPHA_MIN);
+        let table_alpha = ggx.ay;
         let w_plastic = (1.0 - metallic) * (1.0 - transmission);
         let w_glass = (1.0 - metallic) * transmission;
         let microfacet = !smooth
@@ -491,6 +516,7 @@ impl Bsdf {
             diffuse_t,
             p_dt,
             alpha,
+            ggx,
             smooth,
             eta,
             w_metal: metallic,
@@ -528,14 +554,15 @@ impl Bsdf {
     /// on first request (about 0.3 s) and kept for the process.
     pub fn albedo_curve_for(params: SurfaceParams) -> Option<&'static AlbedoCurve> {
         let b = Self::new(params);
-        (b.w_glass > 0.0 && !b.glass_smooth && !b.thin).then(|| curve::interned(b.alpha, b.eta))?
+        (b.w_glass > 0.0 && !b.glass_smooth && !b.thin && !b.ggx.is_anisotropic())
+            .then(|| curve::interned(b.alpha, b.eta))?
     }
 
     /// This BSDF with the albedo curve of its material (from [`Bsdf::albedo_curve_for`]);
-    /// a curve made for another (α, η), as where a texture changes the roughness, is
-    /// ignored and the shared tables serve.
+    /// a curve made for another (α, η), as where a texture changes the roughness, or for
+    /// an anisotropic lobe, is ignored and the shared tables serve.
     pub fn with_albedo_curve(mut self, curve: Option<&'static AlbedoCurve>) -> Self {
-        self.curve = curve.filter(|c| c.is_for(self.alpha, self.eta));
+        self.curve = curve.filter(|c| c.is_for(self.alpha, self.eta) && !self.ggx.is_anisotropic());
         self
     }
 
@@ -617,7 +644,7 @@ impl Bsdf {
         }
         let inside = wo.z < 0.0;
         let wo = if inside { flip(wo) } else { wo };
-        let at = self.at_wo(wo.z, inside);
+        let at = self.at_wo(wo, inside);
         // Light inside a refracting object meets the bare interface; an opaque surface or
         // a thin wall is two-sided, its layers mirrored with it.
         let layers = if self.layers.is_none() || (inside && self.w_glass > 0.0 && !self.thin) {
@@ -658,7 +685,7 @@ impl Bsdf {
 
     /// The `wo`-dependent factors: compensation, albedo scaling, lobe probabilities.
     #[inline(always)]
-    fn at_wo(&self, mu_o: f32, inside: bool) -> AtWo {
+    fn at_wo(&self, wo: Vec3, inside: bool) -> AtWo {
         if self.is_lambertian() {
             // The commonest surface: nothing depends on `wo`, and the general case
             // (`at_wo_general`) comes to the same numbers (a test checks).
@@ -681,7 +708,7 @@ impl Bsdf {
                 p: [0.0, if diffuse { 1.0 } else { 0.0 }, 0.0],
             };
         }
-        self.at_wo_general(mu_o, inside)
+        self.at_wo_general(wo, inside)
     }
 
     /// Whether the BSDF is a diffuse lobe alone: no metal, no specular layer, no glass.
@@ -690,7 +717,27 @@ impl Bsdf {
     }
 
     /// [`Bsdf::at_wo`] for any BSDF.
-    fn at_wo_general(&self, mu_o: f32, inside: bool) -> AtWo {
+    fn at_wo_general(&self, wo: Vec3, inside: bool) -> AtWo {
+        let mu_o = wo.z;
+        // The tables hold isotropic lobes: an anisotropic one has its own albedos, and
+        // the dielectric table is looked up at the α of the isotropic lobe with its
+        // albedo at `wo` (see `bsdf/anisotropy.rs`).
+        let (diel, own) = if self.ggx.is_anisotropic() {
+            let [e1, ew, alpha_eq] = anisotropy::equivalent_alpha().lookup(self.ggx, wo);
+            (
+                [false, true]
+                    .map(|inside| tables::DielectricTable::coord(alpha_eq, self.eta, inside)),
+                Some([e1, ew]),
+            )
+        } else {
+            (self.diel, None)
+        };
+        // `[E1, Ew]` of the GGX reflection lobe at `wo`.
+        let lobe_albedo = || match (own, self.curve) {
+            (Some(own), _) => own,
+            (None, Some(c)) => c.conductor(mu_o),
+            (None, None) => tables::conductor().lookup(mu_o, self.cond),
+        };
         // A thin wall has air on both sides.
         let eta_rel = if inside && !self.thin {
             1.0 / self.eta
@@ -715,10 +762,7 @@ impl Bsdf {
                     self.spec * fresnel::schlick_scalar(f0_mean, mu_o),
                 )
             } else {
-                let [e1, ew] = match self.curve {
-                    Some(c) => c.conductor(mu_o),
-                    None => tables::conductor().lookup(mu_o, self.cond),
-                };
+                let [e1, ew] = lobe_albedo();
                 let e1 = e1.clamp(0.05, 1.0);
                 let ew = ew.clamp(0.0, e1);
                 let k = (1.0 - e1) / e1;
@@ -761,7 +805,7 @@ impl Bsdf {
         let (glass_ms, glass_ms_r) = if self.w_glass > 0.0 && !self.glass_smooth && !self.thin {
             let [a, b, c] = match self.curve {
                 Some(curve) => curve.dielectric(mu_o, inside),
-                None => tables::dielectric().lookup(mu_o, self.diel[usize::from(inside)]),
+                None => tables::dielectric().lookup(mu_o, diel[usize::from(inside)]),
             };
             let reflected = self.glass_s * a;
             let single = reflected + b + (1.0 - self.glass_s) * c;
@@ -811,7 +855,7 @@ impl Bsdf {
             [0.0; 3]
         };
         let thin_comp = if self.w_glass > 0.0 && self.thin && !self.glass_smooth {
-            thin::compensation(self, mu_o)
+            1.0 / lobe_albedo()[0].clamp(0.05, 1.0)
         } else {
             1.0
         };
@@ -838,8 +882,7 @@ impl Bsdf {
             if self.microfacet {
                 let wm = (wo + wi).normalize_or(Vec3::Z);
                 let cos_om = wo.dot(wm).clamp(0.0, 1.0);
-                let lobe = microfacet::d(wm, self.alpha) * microfacet::g2(mu_o, mu_i, self.alpha)
-                    / (4.0 * mu_o * mu_i);
+                let lobe = self.ggx.d(wm) * self.ggx.g2(wo, wi) / (4.0 * mu_o * mu_i);
                 let mut fresnel = self.reflection_fresnel(cos_om, at);
                 if self.w_glass > 0.0 && !self.glass_smooth {
                     let fr = fresnel::dielectric(cos_om, at.eta_rel);
@@ -868,8 +911,8 @@ impl Bsdf {
                 let fr = fresnel::dielectric(cos_om, at.eta_rel);
                 let t = Vec3::ONE - self.glass_s * self.glass_fresnel(fr, cos_om, at);
                 ft += t
-                    * microfacet::d(wm, self.alpha)
-                    * microfacet::g2(mu_o, -mu_i, self.alpha)
+                    * self.ggx.d(wm)
+                    * self.ggx.g2(wo, wi)
                     * (cos_im.abs() * cos_om / (mu_o * -mu_i * denom));
             }
             diffuse + self.w_glass * ft * radiance_scale * self.base
@@ -942,7 +985,7 @@ impl Bsdf {
         if wm.z <= 0.0 || cos_om <= 0.0 {
             return None;
         }
-        let pdf = microfacet::g1(wo.z, self.alpha) * microfacet::d(wm, self.alpha) / (4.0 * wo.z);
+        let pdf = self.ggx.g1(wo) * self.ggx.d(wm) / (4.0 * wo.z);
         Some((pdf, cos_om))
     }
 
@@ -998,10 +1041,7 @@ impl Bsdf {
                     let fr = fresnel::dielectric(cos_om, at.eta_rel);
                     let t = 1.0 - self.glass_s * fr;
                     let dwm_dwi = cos_im.abs() / denom;
-                    pdf += (1.0 - at.glass_ms)
-                        * t
-                        * microfacet::pdf_visible_normal(wo, wm, self.alpha)
-                        * dwm_dwi;
+                    pdf += (1.0 - at.glass_ms) * t * self.ggx.pdf_visible_normal(wo, wm) * dwm_dwi;
                 }
             }
             diffuse + p_glass * pdf
@@ -1037,7 +1077,7 @@ impl Bsdf {
                 delta: true,
             });
         }
-        let wm = microfacet::sample_visible_normal(wo, self.alpha, u);
+        let wm = self.ggx.sample_visible_normal(wo, u);
         // A reflection below the horizon is folded back above it (see `pdf_local`).
         let wi = microfacet::reflect(wo, wm);
         self.continuous_sample(wo, if wi.z < 0.0 { flip(wi) } else { wi }, at)
@@ -1093,7 +1133,7 @@ impl Bsdf {
             return self.continuous_sample(wo, if reflect { wi } else { flip(wi) }, at);
         }
         let uc = ((uc - at.glass_ms) / (1.0 - at.glass_ms)).clamp(0.0, 1.0);
-        let wm = microfacet::sample_visible_normal(wo, self.alpha, u);
+        let wm = self.ggx.sample_visible_normal(wo, u);
         let fr = fresnel::dielectric(wo.dot(wm).clamp(0.0, 1.0), at.eta_rel);
         // A reflection below the horizon, or a refraction above it, is folded to its own
         // side (see `pdf_local`) rather than ending the path.

@@ -277,6 +277,7 @@ struct Extensions {
     iridescence: bool,
     metamaterial: bool,
     diffuse_transmission: bool,
+    anisotropy: bool,
 }
 
 impl Extensions {
@@ -298,6 +299,7 @@ impl Extensions {
                 self.diffuse_transmission,
                 "KHR_materials_diffuse_transmission",
             ),
+            (self.anisotropy, "KHR_materials_anisotropy"),
         ]
         .iter()
         .filter(|(on, _)| *on)
@@ -427,6 +429,7 @@ fn refuse_unsupported(scene: &Scene) -> Result<(), ExportError> {
             ("clearcoatNormalTexture", &m.clearcoat_normal_texture),
             ("sheenColorTexture", &m.sheen_color_texture),
             ("sheenRoughnessTexture", &m.sheen_roughness_texture),
+            ("anisotropyTexture", &m.anisotropy_texture),
         ];
         if let Some((slot, Some(t))) = slots.iter().find(|(_, t)| t.is_some()) {
             return Err(unsupported(
@@ -515,7 +518,7 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
         AlphaMode::Mask { cutoff } => cutoff,
         _ => 0.5,
     };
-    let factors: [(&str, &[f32]); 14] = [
+    let factors: [(&str, &[f32]); 16] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
@@ -536,12 +539,14 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
             "iridescenceThicknessMaximum",
             &[m.iridescence_thickness_max],
         ),
+        ("anisotropyStrength", &[m.anisotropy_strength]),
+        ("anisotropyRotation", &[m.anisotropy_rotation]),
     ];
     for (name, values) in factors {
         finite(&el, name, values)?;
     }
     // The loader clamps these to glTF's ranges; a value outside would come back changed.
-    let unit: [(&str, &[f32]); 12] = [
+    let unit: [(&str, &[f32]); 13] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
@@ -557,6 +562,7 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
             "diffuseTransmissionColorFactor",
             &m.diffuse_transmission_color.to_array(),
         ),
+        ("anisotropyStrength", &[m.anisotropy_strength]),
     ];
     for (name, values) in unit {
         if values.iter().any(|v| !(0.0..=1.0).contains(v)) {
@@ -729,6 +735,16 @@ fn material(i: usize, m: &Material, used: &mut Extensions) -> Result<Value, Expo
                     "diffuseTransmissionColorFactor",
                     nums(&m.diffuse_transmission_color.to_array()),
                 )
+                .build(),
+        );
+    }
+    if m.anisotropy_strength != 0.0 || m.anisotropy_rotation != 0.0 {
+        used.anisotropy = true;
+        ext = ext.with(
+            "KHR_materials_anisotropy",
+            Obj::default()
+                .with("anisotropyStrength", num(m.anisotropy_strength))
+                .with("anisotropyRotation", num(m.anisotropy_rotation))
                 .build(),
         );
     }

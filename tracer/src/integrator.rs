@@ -111,17 +111,24 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     };
     let mut shading = Frame::from_normal(ns);
     let unmapped = ns;
-    // Applies a tangent-space normal map to the interpolated normal.
-    let map_normal = |nm: Vec3| -> Option<(Vec3, Vec3)> {
+    // The tangent frame around normal `n`: tangent, bitangent, normal. glTF's bitangent
+    // is cross(normal, tangent) · w in the mesh's space; a mirroring placement (negative
+    // determinant) reverses cross products, so w turns with it.
+    let tangent_frame = |n: Vec3| -> Option<Frame> {
         let [t0, t1, t2] = tri.tangents()?;
         let t4 = barycentric(t0, t1, t2, b1, b2);
-        let tangent = tri.to_world().transform_vector3(t4.truncate());
-        let tf = Frame::from_normal_tangent(unmapped, tangent);
-        // glTF's bitangent is cross(normal, tangent) · w in the mesh's space; a mirroring
-        // placement (negative determinant) reverses cross products, so w turns with it.
+        let tf = Frame::from_normal_tangent(n, tri.to_world().transform_vector3(t4.truncate()));
         let mirrored = tri.to_world().matrix3.determinant() < 0.0;
         let sign = if (t4.w < 0.0) != mirrored { -1.0 } else { 1.0 };
-        let mapped = tf.x * nm.x + tf.y * (nm.y * sign) + tf.z * nm.z;
+        Some(Frame {
+            y: tf.y * sign,
+            ..tf
+        })
+    };
+    // Applies a tangent-space normal map to the interpolated normal.
+    let map_normal = |nm: Vec3| -> Option<(Vec3, Vec3)> {
+        let tf = tangent_frame(unmapped)?;
+        let mapped = tf.to_world(nm);
         // A map that bends the normal below the surface is broken there: it is ignored.
         let m = mapped.try_normalize().filter(|m| m.dot(ng) > 0.0)?;
         Some((m, tf.x))
@@ -129,6 +136,14 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     if let Some((m, tangent)) = sample.normal_map.and_then(map_normal) {
         ns = m;
         shading = Frame::from_normal_tangent(ns, tangent);
+    }
+    // An anisotropic BSDF is rougher along its frame's x axis: point that axis in the
+    // material's direction (tangent space). Without tangents (the loader warns) the frame
+    // keeps an arbitrary, continuous tangent.
+    if let Some(d) = sample.anisotropy_direction {
+        if let Some(tf) = tangent_frame(ns) {
+            shading = Frame::from_normal_tangent(ns, tf.x * d.x + tf.y * d.y);
+        }
     }
     // The clear coat lies on its own normal map, else on the unmapped normal.
     let coat_normal = if sample.surface.layers.is_some_and(|l| l.clearcoat > 0.0) {

@@ -128,6 +128,15 @@ pub struct Material {
     pub diffuse_transmission_color: Vec3,
     /// Its sRGB texture (RGB).
     pub diffuse_transmission_color_texture: Option<TextureRef>,
+    /// KHR_materials_anisotropy `anisotropyStrength`, default 0 (isotropic): how much
+    /// rougher the base's microfacet lobes are along the anisotropy direction.
+    pub anisotropy_strength: f32,
+    /// `anisotropyRotation` in radians, default 0: the direction, counter-clockwise from
+    /// the tangent in the tangent-bitangent plane (rotating the texture's directions).
+    pub anisotropy_rotation: f32,
+    /// `anisotropyTexture`: direction in RG (mapped from [0, 1] to [−1, 1]), strength
+    /// in B (times the factor).
+    pub anisotropy_texture: Option<TextureRef>,
     /// TESSERA_materials_metamaterial, where the material has it: its transmitting part
     /// refracts negatively, as the boundary of a solid.
     pub metamaterial: Option<Metamaterial>,
@@ -184,6 +193,9 @@ impl Default for Material {
             diffuse_transmission_texture: None,
             diffuse_transmission_color: Vec3::ONE,
             diffuse_transmission_color_texture: None,
+            anisotropy_strength: 0.0,
+            anisotropy_rotation: 0.0,
+            anisotropy_texture: None,
             metamaterial: None,
             unlit: false,
         }
@@ -216,6 +228,7 @@ impl Material {
             &self.iridescence_thickness_texture,
             &self.diffuse_transmission_texture,
             &self.diffuse_transmission_color_texture,
+            &self.anisotropy_texture,
         ]
         .into_iter()
         .flatten()
@@ -250,13 +263,20 @@ impl Material {
         self.sheen_color.max_element() > 0.0
     }
 
-    /// Whether the material has a clear coat, a sheen or an iridescent film.
+    /// Whether the material uses any extension that [`LayerParams`] carries.
     fn has_layers(&self) -> bool {
         self.clearcoat > 0.0
             || self.has_sheen()
             || self.iridescence > 0.0
             || self.metamaterial.is_some()
             || self.diffuse_transmission > 0.0
+            || self.is_anisotropic()
+    }
+
+    /// Whether the material has KHR_materials_anisotropy with a strength above 0: its
+    /// shading frames must follow the mesh's tangents.
+    pub fn is_anisotropic(&self) -> bool {
+        self.anisotropy_strength > 0.0
     }
 
     /// Whether light passes through the surface: it is seen, and lit, from behind too.
@@ -314,6 +334,7 @@ fn clamped(l: LayerParams) -> LayerParams {
         metamaterial_impedance: l.metamaterial_impedance,
         diffuse_transmission: l.diffuse_transmission.clamp(0.0, 1.0),
         diffuse_transmission_color: l.diffuse_transmission_color.clamp(Vec3::ZERO, Vec3::ONE),
+        anisotropy: l.anisotropy.clamp(0.0, 1.0),
     }
 }
 
@@ -331,6 +352,9 @@ pub struct MaterialSample {
     pub normal_map: Option<Vec3>,
     /// The same from the clear coat's normal map.
     pub clearcoat_normal_map: Option<Vec3>,
+    /// KHR_materials_anisotropy: the direction along which the base is rougher, a unit
+    /// vector in the tangent-bitangent plane; `None` for an isotropic material.
+    pub anisotropy_direction: Option<Vec2>,
 }
 
 impl Material {
@@ -388,6 +412,7 @@ impl Material {
             metamaterial_impedance: self.metamaterial.map_or(1.0, |m| m.impedance),
             diffuse_transmission: self.diffuse_transmission,
             diffuse_transmission_color: self.diffuse_transmission_color,
+            anisotropy: self.anisotropy_strength,
         })
     }
 
@@ -505,6 +530,15 @@ impl Material {
         };
         let normal_map =
             read(&self.normal_texture, false).map(|t| tangent_normal(t, self.normal_scale));
+        let mut layers = self.layers_at(&read);
+        let mut anisotropy_direction = None;
+        if self.is_anisotropic() {
+            let (strength, direction) = self.anisotropy_at(read(&self.anisotropy_texture, false));
+            if let Some(l) = layers.as_mut() {
+                l.anisotropy = strength;
+            }
+            anisotropy_direction = Some(direction);
+        }
         MaterialSample {
             surface: self.surface(
                 BaseFactors {
@@ -515,13 +549,31 @@ impl Material {
                     specular_color,
                     transmission,
                 },
-                self.layers_at(&read),
+                layers,
             ),
             alpha: base.w,
             emission,
             normal_map,
             clearcoat_normal_map: read(&self.clearcoat_normal_texture, false)
                 .map(|t| tangent_normal(t, self.clearcoat_normal_scale)),
+            anisotropy_direction,
         }
+    }
+
+    /// KHR_materials_anisotropy's strength and direction (unit, tangent-bitangent plane)
+    /// for the texel of `anisotropyTexture` at a point, as the extension defines them:
+    /// the texel's RG direction (default +X) rotated by `anisotropyRotation`, its B times
+    /// the strength factor.
+    fn anisotropy_at(&self, texel: Option<Vec4>) -> (f32, Vec2) {
+        let (sin, cos) = math::sin_cos(self.anisotropy_rotation);
+        let (strength, d) = match texel {
+            None => (self.anisotropy_strength, Vec2::X),
+            Some(t) => (
+                self.anisotropy_strength * t.z,
+                (2.0 * Vec2::new(t.x, t.y) - Vec2::ONE).normalize_or(Vec2::X),
+            ),
+        };
+        let direction = Vec2::new(cos * d.x - sin * d.y, sin * d.x + cos * d.y);
+        (strength.clamp(0.0, 1.0), direction)
     }
 }

@@ -374,7 +374,11 @@ pub fn prepare_frame(
 
     // Build the BSDF's energy tables and curves now rather than inside the first tile's
     // threads.
-    crate::bsdf::precompute_tables(scene.features.transmission, scene.features.sheen);
+    crate::bsdf::precompute_tables(
+        scene.features.transmission,
+        scene.features.sheen,
+        scene.features.anisotropy,
+    );
     let material_bsdfs = material_bsdfs(&scene);
     let mut features = scene.features;
     let environment = frame_environment(options, &scene, punctual.is_empty(), &mut warnings);

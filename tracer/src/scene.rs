@@ -406,6 +406,8 @@ pub struct Features {
     pub metamaterial: bool,
     /// Any material's diffuse base transmits (KHR_materials_diffuse_transmission).
     pub diffuse_transmission: bool,
+    /// Any material is anisotropic (KHR_materials_anisotropy).
+    pub anisotropy: bool,
 }
 
 impl Features {
@@ -428,6 +430,7 @@ impl Features {
             (self.iridescence, "iridescence"),
             (self.metamaterial, "metamaterial"),
             (self.diffuse_transmission, "diffuse-transmission"),
+            (self.anisotropy, "anisotropy"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }
@@ -564,6 +567,7 @@ impl SceneBuilder {
             iridescence: mats.iter().any(|m| m.iridescence > 0.0),
             metamaterial: mats.iter().any(|m| m.metamaterial.is_some()),
             diffuse_transmission: mats.iter().any(|m| m.diffuse_transmission > 0.0),
+            anisotropy: mats.iter().any(Material::is_anisotropic),
         };
         self.scene
     }

@@ -43,7 +43,7 @@ fn wo(deg: f32, below: bool) -> Vec3 {
 
 #[test]
 fn samples_agree_with_eval_and_pdf() {
-    precompute_tables(true, false);
+    precompute_tables(true, false, false);
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     for p in [
         params(1.0, 0.4, 1.5, 0.0),

@@ -239,7 +239,8 @@ fn animated_demo_round_trips_with_motion_blur() {
 
 /// What the demos do not use: a hierarchy with a matrix node, orthographic and perspective
 /// cameras, every kind of light, alpha modes, emission above 1, morph targets with a
-/// weights channel, STEP and scale channels, TEXCOORD_0, TANGENT and COLOR_0.
+/// weights channel, STEP and scale channels, TEXCOORD_0, TANGENT (with anisotropy) and
+/// COLOR_0.
 fn everything_else() -> Scene {
     let mut b = SceneBuilder::default();
     let masked = b.material(Material {
@@ -248,6 +249,8 @@ fn everything_else() -> Scene {
         alpha_mode: AlphaMode::Mask { cutoff: 0.3 },
         emissive: Vec3::new(3.0, 0.1, 0.0),
         specular_color: Vec3::new(0.5, 0.6, 0.7),
+        anisotropy_strength: 0.75,
+        anisotropy_rotation: 0.5,
         ..Default::default()
     });
     let blend = b.material(Material {

@@ -6,15 +6,13 @@
 
 use std::io::Cursor;
 use std::path::Path;
-use std::sync::Arc;
 
 use glam::{DMat4, DVec3, Vec3, Vec4};
 use tracer::camera::Projection;
-use tracer::film::{Layers, SampleRange, TileRect};
+use tracer::film::Layers;
 use tracer::light::Environment;
 use tracer::loader;
 use tracer::material::Material;
-use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
 use tracer::scene::{CameraDef, Scene, SceneBuilder};
 use tracer::shapes::uv_sphere;
 
@@ -25,21 +23,7 @@ use common::gltf_doc::{base64, Doc};
 const SIZE: u32 = 32;
 
 fn render(scene: Scene, spp: u32) -> Layers {
-    let options = FrameOptions {
-        width: SIZE,
-        height: SIZE,
-        ..Default::default()
-    };
-    let frame = prepare_frame(Arc::new(scene), &options).expect("scene prepares");
-    render_region(
-        &frame,
-        &RenderSettings::default(),
-        TileRect::new(0, 0, SIZE, SIZE),
-        SampleRange::new(0, spp),
-        16,
-        &|_| {},
-    )
-    .resolve()
+    common::render_square(scene, SIZE, spp, 8)
 }
 
 fn camera_at(b: &mut SceneBuilder, z: f64) {

@@ -8,40 +8,22 @@
 // Closed forms use the platform's maths; tracer::math is for the tracer.
 #![allow(clippy::disallowed_methods)]
 
-use std::sync::Arc;
-
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
 use tracer::bsdf::{Bsdf, LayerParams, SurfaceParams};
 use tracer::camera::Projection;
-use tracer::film::{Layers, SampleRange, TileRect};
+use tracer::film::Layers;
 use tracer::light::Environment;
 use tracer::loader;
 use tracer::material::{Material, Metamaterial};
-use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
 use tracer::scene::{CameraDef, Scene, SceneBuilder};
 use tracer::shapes::{cube, quad, uv_sphere};
+
+mod common;
 
 const SIZE: u32 = 32;
 
 fn render(scene: Scene, spp: u32) -> Layers {
-    let options = FrameOptions {
-        width: SIZE,
-        height: SIZE,
-        ..Default::default()
-    };
-    let frame = prepare_frame(Arc::new(scene), &options).expect("scene prepares");
-    render_region(
-        &frame,
-        &RenderSettings {
-            max_depth: 64,
-            ..RenderSettings::default()
-        },
-        TileRect::new(0, 0, SIZE, SIZE),
-        SampleRange::new(0, spp),
-        16,
-        &|_| {},
-    )
-    .resolve()
+    common::render_square(scene, SIZE, spp, 64)
 }
 
 /// Clear glass of this negative index and impedance.

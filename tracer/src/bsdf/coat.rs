@@ -15,8 +15,8 @@ pub(crate) const F0: f32 = 0.04;
 pub(crate) struct Coat {
     /// clearcoatFactor (× texture), in (0, 1].
     pub weight: f32,
-    /// GGX α = clearcoatRoughness².
-    pub alpha: f32,
+    /// Its GGX distribution, α = clearcoatRoughness².
+    ggx: microfacet::Ggx,
     /// Whether the coat is a mirror (α below [`ALPHA_MIN`]): a delta lobe.
     pub smooth: bool,
     /// Conductor-table position for α.
@@ -39,7 +39,7 @@ impl Coat {
         let smooth = alpha < ALPHA_MIN;
         Self {
             weight,
-            alpha,
+            ggx: microfacet::Ggx::isotropic(alpha),
             smooth,
             cond: if smooth {
                 Default::default()
@@ -76,8 +76,8 @@ impl Coat {
         let wm = (wo + wi).normalize_or(Vec3::Z);
         let cos_om = wo.dot(wm).clamp(0.0, 1.0);
         self.weight
-            * microfacet::d(wm, self.alpha)
-            * microfacet::g2(wo.z, wi.z, self.alpha)
+            * self.ggx.d(wm)
+            * self.ggx.g2(wo, wi)
             * fresnel::schlick_scalar(F0, cos_om)
             * at.comp
             / (4.0 * wo.z * wi.z)
@@ -94,7 +94,7 @@ impl Coat {
         if wo.dot(wm) <= 0.0 {
             return 0.0;
         }
-        microfacet::g1(wo.z, self.alpha) * microfacet::d(wm, self.alpha) / (4.0 * wo.z)
+        self.ggx.g1(wo) * self.ggx.d(wm) / (4.0 * wo.z)
     }
 
     /// A direction off the coat: the mirror direction of a smooth coat, else the
@@ -103,7 +103,7 @@ impl Coat {
         let wi = if self.smooth {
             Vec3::new(-wo.x, -wo.y, wo.z)
         } else {
-            microfacet::reflect(wo, microfacet::sample_visible_normal(wo, self.alpha, u))
+            microfacet::reflect(wo, self.ggx.sample_visible_normal(wo, u))
         };
         (wi.z > 0.0).then_some(wi)
     }

@@ -1,6 +1,6 @@
-//! The isotropic GGX (Trowbridge-Reitz) microfacet distribution: normal distribution
-//! `D`, height-correlated Smith masking-shadowing, and visible-normal sampling with the
-//! spherical-caps method of Dupuy & Benyoub (2023).
+//! The GGX (Trowbridge-Reitz) microfacet distribution, isotropic or anisotropic: normal
+//! distribution `D`, height-correlated Smith masking-shadowing, and visible-normal
+//! sampling with the spherical-caps method of Dupuy & Benyoub (2023).
 //!
 //! Every function works in the local shading frame (normal +Z) and expects the outgoing
 //! direction `wo` in the upper hemisphere (`wo.z > 0`); the BSDF mirrors directions into
@@ -9,63 +9,95 @@
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, TAU};
 
-/// GGX normal distribution D(wm) for `wm.z >= 0`, written as
-/// `1 / (π α² ((x² + y²)/α² + z²)²)` so that it stays finite for every `alpha` the BSDF
-/// lets through (it treats `alpha < 1e-3` as a delta lobe and never calls this).
-pub(crate) fn d(wm: Vec3, alpha: f32) -> f32 {
-    let a2 = alpha * alpha;
-    let t = (wm.x * wm.x + wm.y * wm.y) / a2 + wm.z * wm.z;
-    FRAC_1_PI / (a2 * t * t)
-}
-
-/// Smith's Λ for a direction with cosine `mu` (> 0) to the normal. Written as
-/// `x / (2 (1 + sqrt(1 + x)))` with `x = α² tan²θ` to avoid the cancellation of
-/// `(sqrt(1 + x) − 1) / 2` near the normal; `x` may become infinite for `mu → 0`, which
-/// gives Λ = ∞ and G = 0, never NaN, because callers only form `1 / (1 + Λ)`.
+/// Smith's Λ for a direction with cosine `mu` (> 0) to the normal, on an isotropic
+/// surface of roughness `alpha` (the tables' form of [`Ggx::lambda`]).
 pub(crate) fn lambda(mu: f32, alpha: f32) -> f32 {
     let mu2 = mu * mu;
-    let x = alpha * alpha * ((1.0 - mu2).max(0.0) / mu2);
+    lambda_of(alpha * alpha * ((1.0 - mu2).max(0.0) / mu2))
+}
+
+/// Λ from `x = α_w² tan²θ`, written as `x / (2 (1 + sqrt(1 + x)))` to avoid the
+/// cancellation of `(sqrt(1 + x) − 1) / 2` near the normal; `x` may become infinite for a
+/// grazing direction, which gives Λ = ∞ and G = 0, never NaN, because callers only form
+/// `1 / (1 + Λ)`.
+fn lambda_of(x: f32) -> f32 {
     if x.is_infinite() {
         return f32::INFINITY;
     }
     x / (2.0 * (1.0 + (1.0 + x).sqrt()))
 }
 
-/// Smith masking G1 for a direction with cosine `mu` (> 0).
-pub(crate) fn g1(mu: f32, alpha: f32) -> f32 {
-    1.0 / (1.0 + lambda(mu, alpha))
+/// A GGX distribution with roughness `ax` along the frame's x axis and `ay` along its
+/// y axis (KHR_materials_anisotropy stretches it along the x axis; equal for the
+/// isotropic distribution of every other lobe).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Ggx {
+    pub ax: f32,
+    pub ay: f32,
 }
 
-/// Height-correlated Smith masking-shadowing G2 (Heitz 2014) for the cosines of the two
-/// directions (absolute values; the same form serves reflection and transmission, as in
-/// pbrt-v4).
-pub(crate) fn g2(mu_o: f32, mu_i: f32, alpha: f32) -> f32 {
-    1.0 / (1.0 + lambda(mu_o, alpha) + lambda(mu_i, alpha))
-}
+impl Ggx {
+    pub(crate) fn isotropic(alpha: f32) -> Self {
+        Self {
+            ax: alpha,
+            ay: alpha,
+        }
+    }
 
-/// The visible-normal density D_wo(wm) = G1(wo) max(0, wo·wm) D(wm) / wo.z.
-pub(crate) fn pdf_visible_normal(wo: Vec3, wm: Vec3, alpha: f32) -> f32 {
-    g1(wo.z, alpha) * wo.dot(wm).max(0.0) * d(wm, alpha) / wo.z
-}
+    /// Whether the two roughnesses differ.
+    pub(crate) fn is_anisotropic(&self) -> bool {
+        self.ax != self.ay
+    }
 
-/// Samples a visible microfacet normal for `wo` (`wo.z > 0`) with the spherical-caps
-/// method (Dupuy & Benyoub 2023): in the configuration stretched to α = 1, the visible
-/// normals of a hemisphere are the points of a spherical cap offset by the view
-/// direction; sample the cap uniformly, offset, and unstretch.
-pub(crate) fn sample_visible_normal(wo: Vec3, alpha: f32, u: Vec2) -> Vec3 {
-    // Stretch the view direction into the α = 1 configuration.
-    let wo_std = Vec3::new(wo.x * alpha, wo.y * alpha, wo.z).normalize_or(Vec3::Z);
-    // Sample the spherical cap z ∈ (-wo_std.z, 1] uniformly.
-    let phi = TAU * u.x;
-    let z = (1.0 - u.y) * (1.0 + wo_std.z) - wo_std.z;
-    let sin_theta = (1.0 - z * z).max(0.0).sqrt();
-    let (sin_phi, cos_phi) = crate::math::sin_cos(phi);
-    let c = Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, z);
-    // Offset by the view direction to get the (stretched) half vector, then unstretch.
-    let h = c + wo_std;
-    let wm = Vec3::new(h.x * alpha, h.y * alpha, h.z.max(0.0));
-    // `h` vanishes only for u.y = 1 exactly at wo.z = 0, a set of measure zero.
-    wm.normalize_or(Vec3::Z)
+    /// D(wm) for `wm.z >= 0`, written as `1 / (π ax ay (x²/ax² + y²/ay² + z²)²)` so that
+    /// it stays finite for every α the BSDF lets through (it treats α < 1e-3 as a delta
+    /// lobe and never calls this).
+    pub(crate) fn d(&self, wm: Vec3) -> f32 {
+        let t = wm.x * wm.x / (self.ax * self.ax) + wm.y * wm.y / (self.ay * self.ay) + wm.z * wm.z;
+        FRAC_1_PI / (self.ax * self.ay * t * t)
+    }
+
+    /// Smith's Λ for a direction `w` (`w.z ≠ 0`; its sign does not matter).
+    pub(crate) fn lambda(&self, w: Vec3) -> f32 {
+        let t2 = self.ax * self.ax * w.x * w.x + self.ay * self.ay * w.y * w.y;
+        lambda_of(t2 / (w.z * w.z))
+    }
+
+    /// Smith masking G1 for `w`.
+    pub(crate) fn g1(&self, w: Vec3) -> f32 {
+        1.0 / (1.0 + self.lambda(w))
+    }
+
+    /// Height-correlated Smith masking-shadowing G2 (Heitz 2014) of two directions (the
+    /// same form serves reflection and transmission, as in pbrt-v4).
+    pub(crate) fn g2(&self, wo: Vec3, wi: Vec3) -> f32 {
+        1.0 / (1.0 + self.lambda(wo) + self.lambda(wi))
+    }
+
+    /// The visible-normal density D_wo(wm) = G1(wo) max(0, wo·wm) D(wm) / wo.z.
+    pub(crate) fn pdf_visible_normal(&self, wo: Vec3, wm: Vec3) -> f32 {
+        self.g1(wo) * wo.dot(wm).max(0.0) * self.d(wm) / wo.z
+    }
+
+    /// Samples a visible microfacet normal for `wo` (`wo.z > 0`) with the spherical-caps
+    /// method (Dupuy & Benyoub 2023): in the configuration stretched to α = 1, the visible
+    /// normals of a hemisphere are the points of a spherical cap offset by the view
+    /// direction; sample the cap uniformly, offset, and unstretch.
+    pub(crate) fn sample_visible_normal(&self, wo: Vec3, u: Vec2) -> Vec3 {
+        // Stretch the view direction into the α = 1 configuration.
+        let wo_std = Vec3::new(wo.x * self.ax, wo.y * self.ay, wo.z).normalize_or(Vec3::Z);
+        // Sample the spherical cap z ∈ (-wo_std.z, 1] uniformly.
+        let phi = TAU * u.x;
+        let z = (1.0 - u.y) * (1.0 + wo_std.z) - wo_std.z;
+        let sin_theta = (1.0 - z * z).max(0.0).sqrt();
+        let (sin_phi, cos_phi) = crate::math::sin_cos(phi);
+        let c = Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, z);
+        // Offset by the view direction to get the (stretched) half vector, then unstretch.
+        let h = c + wo_std;
+        let wm = Vec3::new(h.x * self.ax, h.y * self.ay, h.z.max(0.0));
+        // `h` vanishes only for u.y = 1 exactly at wo.z = 0, a set of measure zero.
+        wm.normalize_or(Vec3::Z)
+    }
 }
 
 /// Mirror reflection of `wo` about the microfacet normal `wm`.

@@ -50,13 +50,13 @@ pub(super) const MU_NODE_MIN: f32 = 1e-4;
 /// A position on one table axis: the lower node and the weight of the upper one.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct AxisCoord {
-    i: usize,
-    t: f32,
+    pub(super) i: usize,
+    pub(super) t: f32,
 }
 
 impl AxisCoord {
     /// Coordinate of `v` in [0, 1] on an axis of `n` uniform nodes (clamped).
-    fn uniform(v: f32, n: usize) -> Self {
+    pub(super) fn uniform(v: f32, n: usize) -> Self {
         let s = (v.clamp(0.0, 1.0) * (n - 1) as f32).min((n - 1) as f32);
         let i = (s as usize).min(n - 2);
         Self {
@@ -64,16 +64,21 @@ impl AxisCoord {
             t: (s - i as f32).clamp(0.0, 1.0),
         }
     }
+
+    /// The two nodes around the position, each with its weight.
+    pub(super) fn corners(self) -> [(usize, f32); 2] {
+        [(self.i, 1.0 - self.t), (self.i + 1, self.t)]
+    }
 }
 
 /// The normalised roughness-axis position for `alpha` (>= ALPHA_MIN).
-fn roughness_axis(alpha: f32) -> f32 {
+pub(super) fn roughness_axis(alpha: f32) -> f32 {
     let r_min = ALPHA_MIN.sqrt();
     (alpha.max(0.0).sqrt() - r_min) / (1.0 - r_min)
 }
 
 /// The α of node `j` of `n` on the roughness axis.
-fn node_alpha(j: usize, n: usize) -> f32 {
+pub(super) fn node_alpha(j: usize, n: usize) -> f32 {
     let r_min = ALPHA_MIN.sqrt();
     let r = r_min + (1.0 - r_min) * j as f32 / (n - 1) as f32;
     r * r

@@ -44,9 +44,10 @@ fn the_lambertian_shortcut_comes_to_the_general_numbers() {
             };
             let bsdf = Bsdf::new(params);
             assert!(bsdf.is_lambertian());
-            for mu in [1.0, 0.5, 0.01] {
+            for mu in [1.0f32, 0.5, 0.01] {
                 for inside in [false, true] {
-                    assert_eq!(bsdf.at_wo(mu, inside), bsdf.at_wo_general(mu, inside));
+                    let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                    assert_eq!(bsdf.at_wo(wo, inside), bsdf.at_wo_general(wo, inside));
                 }
             }
         }
@@ -68,9 +69,16 @@ fn wo_at(deg: f32, below: bool) -> Vec3 {
     Vec3::new(s, 0.0, if below { -c } else { c })
 }
 
-/// Runs the chi-square test of `sample` against `pdf` for one (material, wo) and returns
-/// a line for the failure report, or `None` when it passes.
-fn chi2_case(label: &str, params: SurfaceParams, wo: Vec3, seed: u64) -> Option<String> {
+/// Runs the chi-square test of `sample` against `pdf` for one (material, wo), one of
+/// `tests` in its file (for the Šidák correction), and returns a line for the failure
+/// report, or `None` when it passes.
+pub(super) fn chi2_case(
+    label: &str,
+    params: SurfaceParams,
+    wo: Vec3,
+    seed: u64,
+    tests: usize,
+) -> Option<String> {
     let bsdf = Bsdf::new(params);
     let outcome = chi2::run(
         chi2::Config::default(),
@@ -82,7 +90,7 @@ fn chi2_case(label: &str, params: SurfaceParams, wo: Vec3, seed: u64) -> Option<
         },
         |wi| bsdf.pdf(wo, wi),
     );
-    let threshold = chi2::sidak(0.01, CHI2_TESTS);
+    let threshold = chi2::sidak(0.01, tests);
     (outcome.p_value < threshold).then(|| {
         format!(
             "{label} wo={wo}: chi2 {:.1} dof {} p {:.2e} < {threshold:.2e}; pdf mass {:.5}, \
@@ -112,7 +120,13 @@ fn chi2_family(
             for &below in sides {
                 seed += 1;
                 let label = format!("{name} roughness {roughness} angle {deg} below {below}");
-                failures.extend(chi2_case(&label, make(roughness), wo_at(deg, below), seed));
+                failures.extend(chi2_case(
+                    &label,
+                    make(roughness),
+                    wo_at(deg, below),
+                    seed,
+                    CHI2_TESTS,
+                ));
             }
         }
     }
@@ -375,6 +389,8 @@ fn random_material(rng: &mut Rng) -> SurfaceParams {
             // Diffuse transmission on a third.
             diffuse_transmission: pick(rng, &[0.0, 0.0, 1.0, 0.4]),
             diffuse_transmission_color: Vec3::new(rng.f32(), 1.0, rng.f32()),
+            // Anisotropy on half, weak to full.
+            anisotropy: pick(rng, &[0.0, 0.0, 0.3, 1.0]),
         }),
     }
 }
@@ -496,6 +512,7 @@ fn degenerate_parameters_stay_finite() {
                 metamaterial_impedance: f32::NAN,
                 diffuse_transmission: f32::NAN,
                 diffuse_transmission_color: Vec3::splat(f32::NAN),
+                anisotropy: f32::NAN,
             }),
         },
         SurfaceParams {
@@ -511,6 +528,7 @@ fn degenerate_parameters_stay_finite() {
                 metamaterial_impedance: 0.0,
                 diffuse_transmission: 7.0,
                 diffuse_transmission_color: Vec3::splat(-1.0),
+                anisotropy: 7.0,
             }),
             ..SurfaceParams::default()
         },

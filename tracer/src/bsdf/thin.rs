@@ -21,13 +21,7 @@
 
 use glam::{Vec2, Vec3};
 
-use super::{flip, fresnel, microfacet, tables, AtWo, Bsdf, BsdfSample};
-
-/// Turquin's factor `1 / E1(μo)` of the single-scattering GGX albedo with F = 1.
-pub(super) fn compensation(b: &Bsdf, mu_o: f32) -> f32 {
-    let [e1, _] = tables::conductor().lookup(mu_o, b.cond);
-    1.0 / e1.clamp(0.05, 1.0)
-}
+use super::{flip, fresnel, microfacet, AtWo, Bsdf, BsdfSample};
 
 /// f for `wo.z > 0 > wi.z` of a rough wall (the transmitted lobe).
 pub(super) fn eval_transmission(b: &Bsdf, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3 {
@@ -41,8 +35,7 @@ pub(super) fn eval_transmission(b: &Bsdf, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3
     }
     let fr = fresnel::dielectric(cos_om, at.eta_rel);
     let t = Vec3::ONE - b.glass_s * b.glass_fresnel(fr, cos_om, at);
-    let lobe = microfacet::d(wm, b.alpha) * microfacet::g2(wo.z, mirrored.z, b.alpha)
-        / (4.0 * wo.z * mirrored.z);
+    let lobe = b.ggx.d(wm) * b.ggx.g2(wo, mirrored) / (4.0 * wo.z * mirrored.z);
     b.w_glass * t * lobe * at.thin_comp * b.base
 }
 
@@ -85,7 +78,7 @@ pub(super) fn sample(b: &Bsdf, wo: Vec3, uc: f32, u: Vec2, at: &AtWo) -> Option<
             delta: true,
         });
     }
-    let wm = microfacet::sample_visible_normal(wo, b.alpha, u);
+    let wm = b.ggx.sample_visible_normal(wo, u);
     let fr = fresnel::dielectric(wo.dot(wm).clamp(0.0, 1.0), at.eta_rel);
     let wr = microfacet::reflect(wo, wm);
     let above = if wr.z < 0.0 { flip(wr) } else { wr };

@@ -596,6 +596,7 @@ fn features(scene: &Scene) -> Features {
             f.iridescence |= mat.iridescence > 0.0;
             f.metamaterial |= mat.metamaterial.is_some();
             f.diffuse_transmission |= mat.diffuse_transmission > 0.0;
+            f.anisotropy |= mat.is_anisotropic();
         }
     });
     f

@@ -300,9 +300,9 @@ impl RawMaterial<'_> {
     }
 }
 
-/// KHR_materials_clearcoat, _sheen, _volume, _iridescence and _diffuse_transmission, and
-/// our own
-/// TESSERA_materials_metamaterial, which the `gltf` crate does not parse
+/// KHR_materials_clearcoat, _sheen, _volume, _iridescence, _diffuse_transmission and
+/// _anisotropy, and our own TESSERA_materials_metamaterial, which the `gltf` crate does
+/// not parse
 /// (or, for the volume, parses behind a feature that would pull the rest of its
 /// extension set).
 fn read_raw_extensions(
@@ -344,6 +344,12 @@ fn read_raw_extensions(
         out.diffuse_transmission_color =
             raw.rgb(dt, "diffuseTransmissionColorFactor", Vec3::ONE)?;
         out.diffuse_transmission_color_texture = texture(dt, "diffuseTransmissionColorTexture")?;
+    }
+    let aniso = &raw.json["extensions"]["KHR_materials_anisotropy"];
+    if aniso.is_object() {
+        out.anisotropy_strength = raw.number(aniso, "anisotropyStrength", 0.0)?;
+        out.anisotropy_rotation = raw.number(aniso, "anisotropyRotation", 0.0)?;
+        out.anisotropy_texture = texture(aniso, "anisotropyTexture")?;
     }
     let meta = &raw.json["extensions"][crate::loader::METAMATERIAL];
     if meta.is_object() {
@@ -509,6 +515,8 @@ pub(crate) fn convert_material(
             out.diffuse_transmission_color.to_array().to_vec(),
         ),
         ("iridescenceIor", vec![out.iridescence_ior]),
+        ("anisotropyStrength", vec![out.anisotropy_strength]),
+        ("anisotropyRotation", vec![out.anisotropy_rotation]),
         (
             "iridescenceThicknessMinimum/Maximum",
             vec![out.iridescence_thickness_min, out.iridescence_thickness_max],
@@ -543,6 +551,7 @@ pub(crate) fn convert_material(
     out.sheen_roughness = out.sheen_roughness.clamp(0.0, 1.0);
     out.thickness = out.thickness.max(0.0);
     out.iridescence = out.iridescence.clamp(0.0, 1.0);
+    out.anisotropy_strength = out.anisotropy_strength.clamp(0.0, 1.0);
     out.diffuse_transmission = out.diffuse_transmission.clamp(0.0, 1.0);
     out.diffuse_transmission_color = out.diffuse_transmission_color.clamp(Vec3::ZERO, Vec3::ONE);
     out.iridescence_ior = out.iridescence_ior.max(1.0);

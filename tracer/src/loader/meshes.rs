@@ -89,15 +89,12 @@ pub(crate) fn convert_mesh(
                 default_material
             }
         };
-        let normal_texcoord = materials
-            .get(material as usize)
-            .and_then(|m| m.normal_texture.as_ref())
-            .map(|t| t.texcoord as usize);
+        let tangent_texcoord = materials.get(material as usize).and_then(tangent_set);
         if let Some(out) = convert_primitive(
             &prim,
             buffers,
             material,
-            normal_texcoord,
+            tangent_texcoord,
             skin,
             &where_,
             &mut warnings,
@@ -202,7 +199,7 @@ fn convert_primitive(
     prim: &gltf::Primitive<'_>,
     buffers: &[Cow<'_, [u8]>],
     material: u32,
-    normal_texcoord: Option<usize>,
+    tangent_texcoord: Option<usize>,
     skin: Option<SkinLimit>,
     where_: &str,
     warnings: &mut Vec<String>,
@@ -355,7 +352,7 @@ fn convert_primitive(
             }
         ));
     }
-    if let Some(set) = normal_texcoord {
+    if let Some(set) = tangent_texcoord {
         if !tangents_ok {
             need_tangents(&mut out, set, where_, warnings);
         }
@@ -658,13 +655,24 @@ fn copy_vertex(prim: &mut Primitive, v: usize) -> u32 {
     prim.positions.len() as u32 - 1
 }
 
-/// Generates MikkTSpace tangents for a normal-mapped primitive, first giving it flat
-/// normals if it has none.
+/// The texture coordinate set a material's tangents follow, where it needs tangents: its
+/// normal map's, else, for an anisotropic material (whose direction is given in tangent
+/// space), its anisotropy texture's or TEXCOORD_0.
+fn tangent_set(m: &Material) -> Option<usize> {
+    let set = |t: &Option<crate::texture::TextureRef>| t.as_ref().map(|t| t.texcoord as usize);
+    set(&m.normal_texture).or_else(|| {
+        m.is_anisotropic()
+            .then(|| set(&m.anisotropy_texture).unwrap_or(0))
+    })
+}
+
+/// Generates MikkTSpace tangents for a normal-mapped or anisotropic primitive, first
+/// giving it flat normals if it has none.
 fn need_tangents(prim: &mut Primitive, set: usize, where_: &str, warnings: &mut Vec<String>) {
     if set > 1 || prim.uvs[set].is_empty() {
         warnings.push(format!(
-            "{where_}: normal map reads TEXCOORD_{set}, which the primitive lacks; \
-             no tangents generated"
+            "{where_}: its material needs tangents (a normal map or anisotropy) from \
+             TEXCOORD_{set}, which the primitive lacks; no tangents generated"
         ));
         return;
     }

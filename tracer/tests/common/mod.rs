@@ -3,7 +3,35 @@
 
 pub mod gltf_doc;
 
+use std::sync::Arc;
+
 use glam::{Vec2, Vec3};
+use tracer::film::{Layers, SampleRange, TileRect};
+use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
+use tracer::scene::Scene;
+
+/// Renders frame 0 of `scene` at `size` × `size` pixels and `spp` samples per pixel,
+/// paths up to `max_depth` bounces, on 16 threads' worth of work.
+pub fn render_square(scene: Scene, size: u32, spp: u32, max_depth: u32) -> Layers {
+    let options = FrameOptions {
+        width: size,
+        height: size,
+        ..Default::default()
+    };
+    let frame = prepare_frame(Arc::new(scene), &options).expect("scene prepares");
+    render_region(
+        &frame,
+        &RenderSettings {
+            max_depth,
+            ..RenderSettings::default()
+        },
+        TileRect::new(0, 0, size, size),
+        SampleRange::new(0, spp),
+        16,
+        &|_| {},
+    )
+    .resolve()
+}
 
 /// SplitMix64: small, deterministic, good enough for Monte Carlo tests and test geometry.
 pub struct Rng(pub u64);
