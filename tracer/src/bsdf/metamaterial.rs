@@ -61,12 +61,7 @@ pub(super) fn sample(
     let (r, cos_t) = fresnel(wo.z, n, z);
     let pr = b.glass_s * r;
     if uc < pr {
-        return Some(BsdfSample {
-            wi: Vec3::new(-wo.x, -wo.y, wo.z),
-            f: b.w_glass * r * b.glass_tint / wo.z,
-            pdf: p_glass * pr,
-            delta: true,
-        });
+        return Some(b.smooth_reflection(wo, Vec3::splat(r), pr, at));
     }
     // Under total internal reflection, the 1 − specular left over is absorbed.
     let cos_t = cos_t.filter(|c| *c > COS_EPS)?;

@@ -63,12 +63,7 @@ pub(super) fn sample(b: &Bsdf, wo: Vec3, uc: f32, u: Vec2, at: &AtWo) -> Option<
         // Chosen by the plain Fresnel term, weighted by the film's.
         let f_rgb = b.glass_fresnel(fr, wo.z, at);
         if uc < pr {
-            return Some(BsdfSample {
-                wi: Vec3::new(-wo.x, -wo.y, wo.z),
-                f: b.w_glass * f_rgb * b.glass_tint / wo.z,
-                pdf: p_glass * pr,
-                delta: true,
-            });
+            return Some(b.smooth_reflection(wo, f_rgb, pr, at));
         }
         let t = 1.0 - pr;
         return Some(BsdfSample {
