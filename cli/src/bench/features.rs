@@ -13,7 +13,8 @@ use tracer::film::{SampleRange, TileRect};
 use tracer::motion::Shutter;
 use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
 
-use tracer::scene::{JointSet, Node, Scene, Skin};
+use tracer::material::{Material, Metamaterial};
+use tracer::scene::{Features, JointSet, Node, Scene, Skin};
 use tracer::texture::{Texture, TextureRef};
 
 /// One feature's price.
@@ -115,21 +116,88 @@ fn with_textures() -> Scene {
     scene
 }
 
+/// The demo with `edit` applied to every material, its feature flags set by `mark`.
+fn with_every_material(edit: impl Fn(&mut Material), mark: impl Fn(&mut Features)) -> Scene {
+    let mut scene = tracer::demo::demo_scene();
+    scene.materials.iter_mut().for_each(edit);
+    mark(&mut scene.features);
+    scene
+}
+
 /// The demo with a layer on every material: a clear coat (factor 1, roughness 0.1), or a
 /// white sheen (roughness 0.5).
 fn with_layer(clearcoat: bool) -> Scene {
-    let mut scene = tracer::demo::demo_scene();
-    for m in &mut scene.materials {
-        if clearcoat {
-            m.clearcoat = 1.0;
-            m.clearcoat_roughness = 0.1;
-        } else {
-            m.sheen_color = glam::Vec3::ONE;
-            m.sheen_roughness = 0.5;
-        }
+    with_every_material(
+        |m| {
+            if clearcoat {
+                m.clearcoat = 1.0;
+                m.clearcoat_roughness = 0.1;
+            } else {
+                m.sheen_color = glam::Vec3::ONE;
+                m.sheen_roughness = 0.5;
+            }
+        },
+        |f| {
+            f.clearcoat = clearcoat;
+            f.sheen = !clearcoat;
+        },
+    )
+}
+
+/// The demo with its glass sphere a thin wall (KHR_materials_transmission without a
+/// volume), or a solid whose inside absorbs (KHR_materials_volume with attenuation).
+fn with_glass_volume(volume: bool) -> Scene {
+    with_every_material(
+        |m| {
+            if m.transmission > 0.0 {
+                m.thickness = if volume { 2.0 } else { 0.0 };
+                m.attenuation_color = glam::Vec3::new(0.9, 0.95, 1.0);
+                m.attenuation_distance = 1.0;
+            }
+        },
+        |f| f.volume = volume,
+    )
+}
+
+/// The demo with its glass sphere an impedance-matched n = −1 metamaterial.
+fn with_metamaterial() -> Scene {
+    with_every_material(
+        |m| {
+            if m.transmission > 0.0 {
+                m.metamaterial = Some(Metamaterial {
+                    refractive_index: -1.0,
+                    impedance: 1.0,
+                });
+            }
+        },
+        |f| f.metamaterial = true,
+    )
+}
+
+/// The demo with an iridescent film (factor 1, 400 nm, IOR 1.3) on every material.
+fn with_iridescence() -> Scene {
+    with_every_material(|m| m.iridescence = 1.0, |f| f.iridescence = true)
+}
+
+/// The demo with half of every diffuse base's light passed to the other side.
+fn with_diffuse_transmission() -> Scene {
+    with_every_material(
+        |m| m.diffuse_transmission = 0.5,
+        |f| f.diffuse_transmission = true,
+    )
+}
+
+/// The demo with anisotropy of strength 0.8 on every material, along tangents given to
+/// every primitive (the demo's meshes have none).
+fn with_anisotropy() -> Scene {
+    let mut scene = with_every_material(|m| m.anisotropy_strength = 0.8, |f| f.anisotropy = true);
+    for prim in scene.meshes.iter_mut().flat_map(|m| &mut m.primitives) {
+        prim.tangents = prim
+            .normals
+            .iter()
+            .map(|&n| tracer::geometry::Frame::from_normal(n).x.extend(1.0))
+            .collect();
     }
-    scene.features.clearcoat = clearcoat;
-    scene.features.sheen = !clearcoat;
     scene
 }
 
@@ -171,9 +239,8 @@ fn with_skinning() -> Scene {
 }
 
 /// The price of an animation with the shutter closed, of the motion path on a still
-/// image, of motion blur, of skinning, of transmission, of textures, of a clear coat and of
-/// a sheen, on `size` images
-/// at `spp`.
+/// image, of motion blur, of skinning, of transmission, of textures, and of each material
+/// extension where every material (or the glass) has it, on `size` images at `spp`.
 pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCost>> {
     let still = FrameOptions {
         width: size.0,
@@ -253,6 +320,31 @@ pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCo
             (demo(), &still),
             (with_layer(false), &still),
         )?,
+        cost(
+            "volume (demo with its glass sphere a thin wall vs a solid that absorbs)",
+            (with_glass_volume(false), &still),
+            (with_glass_volume(true), &still),
+        )?,
+        cost(
+            "iridescence (demo vs a 400 nm film on every material)",
+            (demo(), &still),
+            (with_iridescence(), &still),
+        )?,
+        cost(
+            "diffuse transmission (demo vs half of every diffuse base passed through)",
+            (demo(), &still),
+            (with_diffuse_transmission(), &still),
+        )?,
+        cost(
+            "anisotropy (demo vs strength 0.8 on every material)",
+            (demo(), &still),
+            (with_anisotropy(), &still),
+        )?,
+        cost(
+            "metamaterial (demo's glass sphere vs the sphere as n = -1)",
+            (demo(), &still),
+            (with_metamaterial(), &still),
+        )?,
     ])
 }
 
@@ -314,6 +406,23 @@ mod tests {
         };
         assert_eq!(sorted(&coated), plus("clearcoat"));
         assert_eq!(sorted(&sheened), plus("sheen"));
+        assert_eq!(sorted(&with_iridescence()), plus("iridescence"));
+        assert_eq!(sorted(&with_metamaterial()), plus("metamaterial"));
+        assert_eq!(
+            sorted(&with_diffuse_transmission()),
+            plus("diffuse-transmission")
+        );
+        let anisotropic = with_anisotropy();
+        assert_eq!(sorted(&anisotropic), plus("anisotropy"));
+        assert!(anisotropic.meshes.iter().all(|m| m
+            .primitives
+            .iter()
+            .all(|p| p.tangents.len() == p.positions.len())));
+        // The volume row differs in that alone: a thin wall against a solid.
+        let (thin, solid) = (with_glass_volume(false), with_glass_volume(true));
+        assert!(!thin.features.volume && solid.features.volume);
+        assert_eq!(sorted(&solid), sorted(&tracer::demo::demo_scene()));
+        assert!(thin.materials.iter().all(|m| !m.is_volume()));
     }
 
     /// The skinned sphere stands where the plain one does, posed into a mesh of the
@@ -354,7 +463,7 @@ mod tests {
     #[test]
     fn every_feature_is_priced() {
         let costs = feature_costs((8, 8), 1).unwrap();
-        assert_eq!(costs.len(), 8);
+        assert_eq!(costs.len(), 13);
         assert!(costs.iter().all(|c| c.without > 0.0 && c.with > 0.0));
         assert!(table(&costs).contains("| motion blur"));
     }
