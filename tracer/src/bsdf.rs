@@ -140,14 +140,15 @@ pub struct SurfaceParams {
     /// KHR_materials_volume): light passes through without bending and both sides are
     /// outside. Otherwise it is the boundary of a solid that refracts.
     pub thin_walled: bool,
-    /// The clear coat and sheen over the base, for a material that has either (`None`
-    /// keeps the parameters of the commonest materials small).
-    pub layers: Option<LayerParams>,
+    /// The parameters of the material extensions beyond the base, for a material that
+    /// has any (`None` keeps the parameters of the commonest materials small).
+    pub extensions: Option<ExtensionParams>,
 }
 
-/// The parameters of the layers over the base (see `bsdf/layers.rs`).
+/// The parameters of the material extensions: the layers over the base (see
+/// `bsdf/layers.rs`), the film, the metamaterial, diffuse transmission, anisotropy.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct LayerParams {
+pub struct ExtensionParams {
     /// KHR_materials_clearcoat factor, 0..1 (0: no coat).
     pub clearcoat: f32,
     /// Its perceptual roughness, 0..1.
@@ -191,7 +192,7 @@ impl Default for SurfaceParams {
             specular_color: Vec3::ONE,
             transmission: 0.0,
             thin_walled: false,
-            layers: None,
+            extensions: None,
         }
     }
 }
@@ -335,7 +336,7 @@ impl Bsdf {
         let transmission = sane(params.transmission, 0.0, 1.0, 0.0);
         let spec = sane(params.specular, 0.0, 1.0, 1.0);
         let spec_color = sane3(params.specular_color, 0.0, f32::MAX);
-        let meta = params.layers.and_then(|l| {
+        let meta = params.extensions.and_then(|l| {
             let n = sane(l.metamaterial_index, -IOR_MAX, 0.0, 0.0);
             (n < 0.0).then(|| metamaterial::Metamaterial {
                 index: n.abs().max(metamaterial::MIN_INDEX),
@@ -354,7 +355,7 @@ impl Bsdf {
             None => sane(params.ior, 1.0, IOR_MAX, 1.5),
         };
         let thin = params.thin_walled && meta.is_none();
-        let film = params.layers.and_then(|l| {
+        let film = params.extensions.and_then(|l| {
             iridescence::ThinFilm::new(
                 sane(l.iridescence, 0.0, 1.0, 0.0),
                 sane(l.iridescence_ior, 1.0, IOR_MAX, 1.3),
@@ -362,7 +363,7 @@ impl Bsdf {
                 l.clearcoat > 0.0,
             )
         });
-        let layers = params.layers.and_then(|l| {
+        let layers = params.extensions.and_then(|l| {
             layers::Layers::new(
                 sane(l.clearcoat, 0.0, 1.0, 0.0),
                 sane(l.clearcoat_roughness, 0.0, 1.0, 0.0),
@@ -371,7 +372,7 @@ impl Bsdf {
             )
         });
 
-        let (dt, dt_color) = params.layers.map_or((0.0, Vec3::ZERO), |l| {
+        let (dt, dt_color) = params.extensions.map_or((0.0, Vec3::ZERO), |l| {
             (
                 sane(l.diffuse_transmission, 0.0, 1.0, 0.0),
                 sane3(l.diffuse_transmission_color, 0.0, 1.0),
@@ -390,7 +391,7 @@ impl Bsdf {
 
         let alpha = roughness * roughness;
         let strength = params
-            .layers
+            .extensions
             .map_or(0.0, |l| sane(l.anisotropy, 0.0, 1.0, 0.0));
         let alpha_x = alpha + (1.0 - alpha) * strength * strength;
         let smooth = alpha_x < ALPHA_MIN;

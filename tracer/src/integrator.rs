@@ -146,7 +146,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
         }
     }
     // The clear coat lies on its own normal map, else on the unmapped normal.
-    let coat_normal = if sample.surface.layers.is_some_and(|l| l.clearcoat > 0.0) {
+    let coat_normal = if sample.surface.extensions.is_some_and(|l| l.clearcoat > 0.0) {
         sample
             .clearcoat_normal_map
             .and_then(map_normal)

@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3, Vec4};
 
-use crate::bsdf::{LayerParams, SurfaceParams};
+use crate::bsdf::{ExtensionParams, SurfaceParams};
 use crate::math;
 use crate::texture::{Texture, TextureRef};
 
@@ -263,8 +263,8 @@ impl Material {
         self.sheen_color.max_element() > 0.0
     }
 
-    /// Whether the material uses any extension that [`LayerParams`] carries.
-    fn has_layers(&self) -> bool {
+    /// Whether the material uses any extension that [`ExtensionParams`] carries.
+    fn has_extensions(&self) -> bool {
         self.clearcoat > 0.0
             || self.has_sheen()
             || self.iridescence > 0.0
@@ -321,8 +321,8 @@ struct BaseFactors {
 }
 
 /// Layer factors (times textures) clamped to their ranges.
-fn clamped(l: LayerParams) -> LayerParams {
-    LayerParams {
+fn clamped(l: ExtensionParams) -> ExtensionParams {
+    ExtensionParams {
         clearcoat: l.clearcoat.clamp(0.0, 1.0),
         clearcoat_roughness: l.clearcoat_roughness.clamp(0.0, 1.0),
         sheen_color: l.sheen_color.clamp(Vec3::ZERO, Vec3::ONE),
@@ -370,12 +370,12 @@ impl Material {
                 specular_color: self.specular_color,
                 transmission: self.transmission,
             },
-            self.layer_factors(),
+            self.extension_factors(),
         )
     }
 
     /// The parameters with factors (times textures) clamped to their ranges.
-    fn surface(&self, base: BaseFactors, layers: Option<LayerParams>) -> SurfaceParams {
+    fn surface(&self, base: BaseFactors, extensions: Option<ExtensionParams>) -> SurfaceParams {
         if self.unlit {
             // Nothing scatters: the colour is emitted instead (see `Material::unlit`).
             return SurfaceParams {
@@ -394,13 +394,13 @@ impl Material {
             specular_color: base.specular_color,
             transmission: base.transmission.clamp(0.0, 1.0),
             thin_walled: self.is_thin_walled(),
-            layers: layers.map(clamped),
+            extensions: extensions.map(clamped),
         }
     }
 
-    /// The layers' factors, for a material that has layers.
-    fn layer_factors(&self) -> Option<LayerParams> {
-        self.has_layers().then_some(LayerParams {
+    /// The extensions' factors, for a material that has any.
+    fn extension_factors(&self) -> Option<ExtensionParams> {
+        self.has_extensions().then_some(ExtensionParams {
             clearcoat: self.clearcoat,
             clearcoat_roughness: self.clearcoat_roughness,
             sheen_color: self.sheen_color,
@@ -416,13 +416,13 @@ impl Material {
         })
     }
 
-    /// The layers' factors times their textures, `read` sampling a texture slot
-    /// (sRGB-decoded when asked); `None` for a material without layers.
-    fn layers_at(
+    /// The extensions' factors times their textures, `read` sampling a texture slot
+    /// (sRGB-decoded when asked); `None` for a material without extensions.
+    fn extensions_at(
         &self,
         read: &impl Fn(&Option<TextureRef>, bool) -> Option<Vec4>,
-    ) -> Option<LayerParams> {
-        let mut l = self.layer_factors()?;
+    ) -> Option<ExtensionParams> {
+        let mut l = self.extension_factors()?;
         if l.clearcoat > 0.0 {
             if let Some(t) = read(&self.clearcoat_texture, false) {
                 l.clearcoat *= t.x;
@@ -530,11 +530,11 @@ impl Material {
         };
         let normal_map =
             read(&self.normal_texture, false).map(|t| tangent_normal(t, self.normal_scale));
-        let mut layers = self.layers_at(&read);
+        let mut extensions = self.extensions_at(&read);
         let mut anisotropy_direction = None;
         if self.is_anisotropic() {
             let (strength, direction) = self.anisotropy_at(read(&self.anisotropy_texture, false));
-            if let Some(l) = layers.as_mut() {
+            if let Some(l) = extensions.as_mut() {
                 l.anisotropy = strength;
             }
             anisotropy_direction = Some(direction);
@@ -549,7 +549,7 @@ impl Material {
                     specular_color,
                     transmission,
                 },
-                layers,
+                extensions,
             ),
             alpha: base.w,
             emission,

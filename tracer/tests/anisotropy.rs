@@ -58,7 +58,7 @@ fn anisotropy_is_read_with_its_texture_rotation_and_tangents() {
     let sample = m.sample(&scene.textures, [Vec2::ZERO; 2], Vec4::ONE);
     let strength = sample
         .surface
-        .layers
+        .extensions
         .expect("anisotropy is carried")
         .anisotropy;
     assert!((strength - 0.8 * 128.0 / 255.0).abs() < 1e-6, "{strength}");
@@ -80,7 +80,7 @@ fn anisotropy_is_read_with_its_texture_rotation_and_tangents() {
     let got = sample.anisotropy_direction.unwrap();
     let (s, c) = tracer::math::sin_cos(1.0);
     assert!((got - Vec2::new(c, s)).length() < 1e-6);
-    assert_eq!(sample.surface.layers.unwrap().anisotropy, 0.3);
+    assert_eq!(sample.surface.extensions.unwrap().anisotropy, 0.3);
 
     // No texture coordinates: no tangent space, said so.
     let json = document(

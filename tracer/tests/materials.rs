@@ -289,7 +289,7 @@ fn clearcoat_and_sheen_are_read_with_their_textures() {
     let at = m
         .sample(&scene.textures, [glam::Vec2::ZERO; 2], Vec4::ONE)
         .surface
-        .layers
+        .extensions
         .expect("the material has layers");
     assert!((at.clearcoat - 0.8).abs() < 1e-6);
     assert!((at.clearcoat_roughness - 0.3 * 128.0 / 255.0).abs() < 1e-6);

@@ -9,7 +9,7 @@
 #![allow(clippy::disallowed_methods)]
 
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
-use tracer::bsdf::{Bsdf, LayerParams, SurfaceParams};
+use tracer::bsdf::{Bsdf, ExtensionParams, SurfaceParams};
 use tracer::camera::Projection;
 use tracer::film::Layers;
 use tracer::light::Environment;
@@ -147,10 +147,10 @@ fn params(index: f32, impedance: f32) -> SurfaceParams {
         roughness: 0.0,
         transmission: 1.0,
         base_color: Vec3::ONE,
-        layers: Some(LayerParams {
+        extensions: Some(ExtensionParams {
             metamaterial_index: index,
             metamaterial_impedance: impedance,
-            ..LayerParams::default()
+            ..ExtensionParams::default()
         }),
         ..SurfaceParams::default()
     }

@@ -18,9 +18,9 @@ const AZIMUTHS: [f32; 3] = [0.0, 45.0, 90.0];
 
 fn anisotropic(params: SurfaceParams, strength: f32) -> SurfaceParams {
     SurfaceParams {
-        layers: Some(LayerParams {
+        extensions: Some(ExtensionParams {
             anisotropy: strength,
-            ..LayerParams::default()
+            ..ExtensionParams::default()
         }),
         ..params
     }

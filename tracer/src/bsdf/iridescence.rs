@@ -181,7 +181,7 @@ mod tests {
     #![allow(clippy::disallowed_methods)] // the reference uses the platform's maths
 
     use super::*;
-    use crate::bsdf::{Bsdf, LayerParams, SurfaceParams};
+    use crate::bsdf::{Bsdf, ExtensionParams, SurfaceParams};
     use crate::test_rng::Rng;
     use glam::DVec3;
 
@@ -276,11 +276,11 @@ mod tests {
             roughness,
             transmission,
             thin_walled: transmission > 0.0,
-            layers: Some(LayerParams {
+            extensions: Some(ExtensionParams {
                 iridescence: 1.0,
                 iridescence_ior: 1.8,
                 iridescence_thickness: 350.0,
-                ..LayerParams::default()
+                ..ExtensionParams::default()
             }),
             ..SurfaceParams::default()
         }
@@ -303,7 +303,7 @@ mod tests {
         ] {
             let bsdf = Bsdf::new(params);
             let plain = Bsdf::new(SurfaceParams {
-                layers: None,
+                extensions: None,
                 ..params
             });
             for deg in [0.0f32, 40.0, 75.0] {

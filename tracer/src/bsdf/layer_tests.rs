@@ -40,9 +40,9 @@ fn black() -> SurfaceParams {
 }
 
 fn coated(params: SurfaceParams, weight: f32, roughness: f32) -> SurfaceParams {
-    let layers = params.layers.unwrap_or_default();
+    let layers = params.extensions.unwrap_or_default();
     SurfaceParams {
-        layers: Some(LayerParams {
+        extensions: Some(ExtensionParams {
             clearcoat: weight,
             clearcoat_roughness: roughness,
             ..layers
@@ -52,9 +52,9 @@ fn coated(params: SurfaceParams, weight: f32, roughness: f32) -> SurfaceParams {
 }
 
 fn with_sheen(params: SurfaceParams, color: Vec3, roughness: f32) -> SurfaceParams {
-    let layers = params.layers.unwrap_or_default();
+    let layers = params.extensions.unwrap_or_default();
     SurfaceParams {
-        layers: Some(LayerParams {
+        extensions: Some(ExtensionParams {
             sheen_color: color,
             sheen_roughness: roughness,
             ..layers
@@ -292,17 +292,17 @@ fn layers_of_zero_leave_the_base_bit_for_bit() {
     // Roughnesses without factors: nothing to layer. An iridescence factor of 0, or a
     // film of thickness 0 (KHR_materials_iridescence): no film.
     let zeros = [
-        LayerParams {
+        ExtensionParams {
             clearcoat_roughness: 0.7,
             sheen_roughness: 0.4,
             iridescence_ior: 1.8,
             iridescence_thickness: 400.0,
-            ..LayerParams::default()
+            ..ExtensionParams::default()
         },
-        LayerParams {
+        ExtensionParams {
             iridescence: 1.0,
             iridescence_ior: 1.8,
-            ..LayerParams::default()
+            ..ExtensionParams::default()
         },
     ];
     for base in [
@@ -316,7 +316,7 @@ fn layers_of_zero_leave_the_base_bit_for_bit() {
         let plain = Bsdf::new(base);
         for layers in zeros {
             let zero = Bsdf::new(SurfaceParams {
-                layers: Some(layers),
+                extensions: Some(layers),
                 ..base
             });
             assert!(zero.layers.is_none() && zero.film.is_none());

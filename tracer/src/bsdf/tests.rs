@@ -231,10 +231,10 @@ fn thin_wall_is_the_same_from_both_sides_and_passes_light_straight() {
 /// (KHR_materials_diffuse_transmission) in `color`.
 fn translucent(base: Vec3, roughness: f32, dt: f32, color: Vec3) -> SurfaceParams {
     SurfaceParams {
-        layers: Some(LayerParams {
+        extensions: Some(ExtensionParams {
             diffuse_transmission: dt,
             diffuse_transmission_color: color,
-            ..LayerParams::default()
+            ..ExtensionParams::default()
         }),
         ..material(base, 0.0, roughness, 1.5, 0.0)
     }
@@ -373,7 +373,7 @@ fn random_material(rng: &mut Rng) -> SurfaceParams {
         transmission: pick(rng, &[0.0, 1.0, 0.5]),
         thin_walled: rng.f32() < 0.3,
         // A clear coat and a sheen on a third of the materials each, smooth to rough.
-        layers: Some(LayerParams {
+        extensions: Some(ExtensionParams {
             clearcoat: pick(rng, &[0.0, 0.0, 1.0, 0.5]) * pick(rng, &[1.0, 1.0, 0.0]),
             clearcoat_roughness: pick(rng, &[0.0, 0.01, 0.2, 1.0]),
             sheen_color: Vec3::new(rng.f32(), rng.f32(), rng.f32()) * pick(rng, &[0.0, 0.0, 1.0]),
@@ -500,7 +500,7 @@ fn degenerate_parameters_stay_finite() {
             specular_color: Vec3::splat(f32::INFINITY),
             transmission: 7.0,
             thin_walled: true,
-            layers: Some(LayerParams {
+            extensions: Some(ExtensionParams {
                 clearcoat: f32::NAN,
                 clearcoat_roughness: f32::INFINITY,
                 sheen_color: Vec3::new(f32::NAN, 3.0, -1.0),
@@ -516,7 +516,7 @@ fn degenerate_parameters_stay_finite() {
             }),
         },
         SurfaceParams {
-            layers: Some(LayerParams {
+            extensions: Some(ExtensionParams {
                 clearcoat: 5.0,
                 clearcoat_roughness: -1.0,
                 sheen_color: Vec3::splat(f32::INFINITY),
