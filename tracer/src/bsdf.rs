@@ -102,6 +102,8 @@ mod chi2;
 mod layer_tests;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod transmission_tests;
 
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
