@@ -182,19 +182,13 @@ impl Bsdf {
         // The tables hold isotropic lobes: an anisotropic one has its own albedos, and
         // the dielectric table is looked up at the α of the isotropic lobe with its
         // albedo at `wo` (see `bsdf/anisotropy.rs`).
-        let (diel, own) = if self.ggx.is_anisotropic() {
-            let [e1, ew, alpha_eq] = anisotropy::equivalent_alpha().lookup(self.ggx, wo);
-            (
-                [false, true]
-                    .map(|inside| tables::DielectricTable::coord(alpha_eq, self.eta, inside)),
-                Some([e1, ew]),
-            )
-        } else {
-            (self.diel, None)
-        };
+        let anisotropic = self
+            .ggx
+            .is_anisotropic()
+            .then(|| anisotropy::equivalent_alpha().lookup(self.ggx, wo));
         // `[E1, Ew]` of the GGX reflection lobe at `wo`.
-        let lobe_albedo = || match (own, self.curve) {
-            (Some(own), _) => own,
+        let lobe_albedo = || match (anisotropic, self.curve) {
+            (Some([e1, ew, _]), _) => [e1, ew],
             (None, Some(c)) => c.conductor(mu_o),
             (None, None) => tables::conductor().lookup(mu_o, self.cond),
         };
@@ -265,7 +259,15 @@ impl Bsdf {
         let (glass_ms, glass_ms_r) = if self.w_glass > 0.0 && !self.glass_smooth && !self.thin {
             let [a, b, c] = match self.curve {
                 Some(curve) => curve.dielectric(mu_o, inside),
-                None => tables::dielectric().lookup(mu_o, diel[usize::from(inside)]),
+                None => {
+                    let coord = match anisotropic {
+                        Some([_, _, alpha]) => {
+                            tables::DielectricTable::coord(alpha, self.eta, inside)
+                        }
+                        None => self.diel[usize::from(inside)],
+                    };
+                    tables::dielectric().lookup(mu_o, coord)
+                }
             };
             let reflected = self.glass_s * a;
             let single = reflected + b + (1.0 - self.glass_s) * c;
