@@ -97,6 +97,7 @@ fn run() -> anyhow::Result<()> {
             Some(bench::BenchCommand::Overhead(o)) => bench::scaling::run(o),
             Some(bench::BenchCommand::Cornell(c)) => bench::cornell::run_cornell(c),
             Some(bench::BenchCommand::Rays(r)) => bench::rays::run(r),
+            Some(bench::BenchCommand::Features(f)) => bench::features::run(f),
             None => bench::run(args),
         },
         Command::Server(args) => server::run(args, layers),

@@ -1143,6 +1143,12 @@ mod tests {
         };
         assert_eq!((c.quick, c.runs), (true, 5));
         assert!(parse(&["bench", "cornell", "--runs", "21"]).is_err());
+        let b = parse(&["bench", "features", "--size", "32x16", "--runs", "4"]).unwrap();
+        let Some(BenchCommand::Features(f)) = b.command else {
+            panic!("no features subcommand")
+        };
+        assert_eq!((f.size, f.spp, f.runs), ((32, 16), 32, 4));
+        assert!(parse(&["bench", "features", "--runs", "0"]).is_err());
     }
 
     #[test]

@@ -11,11 +11,31 @@ use serde::Serialize;
 use glam::DMat4;
 use tracer::film::{SampleRange, TileRect};
 use tracer::motion::Shutter;
-use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
+use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
 
 use tracer::material::{Material, Metamaterial};
 use tracer::scene::{Features, JointSet, Node, Scene, Skin};
 use tracer::texture::{Texture, TextureRef};
+
+/// `tessera bench features`: the report's feature table alone.
+#[derive(clap::Args)]
+pub struct FeaturesArgs {
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "64x64", value_parser = crate::args::parse_size)]
+    pub size: (u32, u32),
+    /// Samples per pixel of each timed render.
+    #[arg(long, default_value_t = 32)]
+    pub spp: u32,
+    /// Timed renders of each scene, taken in turn with its comparison; the fastest counts.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=20))]
+    pub runs: u32,
+}
+
+/// Prints the feature table.
+pub fn run(args: FeaturesArgs) -> anyhow::Result<()> {
+    print!("{}", table(&feature_costs(args.size, args.spp, args.runs)?));
+    Ok(())
+}
 
 /// One feature's price.
 #[derive(Serialize)]
@@ -42,17 +62,20 @@ impl FeatureCost {
 /// Each measurement renders for at least this long, so that short renders time well.
 const MIN_SECONDS: f64 = 0.5;
 
-/// Seconds to prepare `scene`'s frame and camera paths per second rendering it at `spp`
-/// and depth 8, after one warm-up render (the first render of a process builds the BSDF
-/// tables).
-fn measure(scene: Scene, options: &FrameOptions, spp: u32) -> anyhow::Result<(f64, f64)> {
+/// `scene`'s frame prepared (posed, deformed, its BVHs built), and the seconds it took.
+fn prepare(scene: Scene, options: &FrameOptions) -> anyhow::Result<(PreparedFrame, f64)> {
     let start = Instant::now();
     let frame = prepare_frame(Arc::new(scene), options)?;
-    let prepare = start.elapsed().as_secs_f64();
+    Ok((frame, start.elapsed().as_secs_f64()))
+}
+
+/// Renders `frame` at `spp` and depth 8 for at least [`MIN_SECONDS`]: camera paths per
+/// second.
+fn paths_per_second(frame: &PreparedFrame, spp: u32) -> f64 {
     let rect = TileRect::new(0, 0, frame.width, frame.height);
     let render = |spp| {
         render_region(
-            &frame,
+            frame,
             &RenderSettings::default(),
             rect,
             SampleRange::new(0, spp),
@@ -60,14 +83,43 @@ fn measure(scene: Scene, options: &FrameOptions, spp: u32) -> anyhow::Result<(f6
             &|_| {},
         )
     };
-    render(1);
     let (start, mut renders) = (Instant::now(), 0u32);
     while renders == 0 || start.elapsed().as_secs_f64() < MIN_SECONDS {
         render(spp);
         renders += 1;
     }
     let paths = rect.area() as f64 * f64::from(spp) * f64::from(renders);
-    Ok((prepare, paths / start.elapsed().as_secs_f64()))
+    paths / start.elapsed().as_secs_f64()
+}
+
+/// One feature's price: both frames prepared, each rendered once to warm up (the first
+/// render of a process builds the BSDF tables), then timed in turn `runs` times, the
+/// fastest of each counting: on a shared machine the speed drifts between runs, and the
+/// fastest is the one least disturbed.
+fn price(
+    feature: &str,
+    without: (Scene, &FrameOptions),
+    with: (Scene, &FrameOptions),
+    spp: u32,
+    runs: u32,
+) -> anyhow::Result<FeatureCost> {
+    let (frame_without, prepare_without) = prepare(without.0, without.1)?;
+    let (frame_with, prepare_with) = prepare(with.0, with.1)?;
+    let (mut fastest_without, mut fastest_with) = (0.0f64, 0.0f64);
+    for frame in [&frame_without, &frame_with] {
+        paths_per_second(frame, 1);
+    }
+    for _ in 0..runs {
+        fastest_without = fastest_without.max(paths_per_second(&frame_without, spp));
+        fastest_with = fastest_with.max(paths_per_second(&frame_with, spp));
+    }
+    Ok(FeatureCost {
+        feature: feature.into(),
+        without: fastest_without,
+        with: fastest_with,
+        prepare_without,
+        prepare_with,
+    })
 }
 
 /// The demo with its glass sphere opaque (a dielectric that does not transmit).
@@ -241,7 +293,7 @@ fn with_skinning() -> Scene {
 /// The price of an animation with the shutter closed, of the motion path on a still
 /// image, of motion blur, of skinning, of transmission, of textures, and of each material
 /// extension where every material (or the glass) has it, on `size` images at `spp`.
-pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCost>> {
+pub fn feature_costs(size: (u32, u32), spp: u32, runs: u32) -> anyhow::Result<Vec<FeatureCost>> {
     let still = FrameOptions {
         width: size.0,
         height: size.1,
@@ -268,15 +320,7 @@ pub fn feature_costs(size: (u32, u32), spp: u32) -> anyhow::Result<Vec<FeatureCo
     let demo = tracer::demo::demo_scene;
     let animated = tracer::demo::animated_demo_scene;
     let cost = |feature: &str, without: (Scene, &FrameOptions), with: (Scene, &FrameOptions)| {
-        let (prepare_without, without) = measure(without.0, without.1, spp)?;
-        let (prepare_with, with) = measure(with.0, with.1, spp)?;
-        Ok::<_, anyhow::Error>(FeatureCost {
-            feature: feature.into(),
-            without,
-            with,
-            prepare_without,
-            prepare_with,
-        })
+        price(feature, without, with, spp, runs)
     };
     Ok(vec![
         cost(
@@ -462,7 +506,7 @@ mod tests {
 
     #[test]
     fn every_feature_is_priced() {
-        let costs = feature_costs((8, 8), 1).unwrap();
+        let costs = feature_costs((8, 8), 1, 1).unwrap();
         assert_eq!(costs.len(), 13);
         assert!(costs.iter().all(|c| c.without > 0.0 && c.with > 0.0));
         assert!(table(&costs).contains("| motion blur"));

@@ -26,7 +26,7 @@ pub mod cornell;
 #[cfg(feature = "embree")]
 mod embree;
 pub mod farm;
-mod features;
+pub mod features;
 mod plots;
 pub mod rays;
 pub mod scaling;
@@ -72,6 +72,9 @@ pub enum BenchCommand {
     /// Closest-hit and any-hit rays per second through the BVH of one mesh on one thread,
     /// and beside native Embree's on the same rays with `--embree`.
     Rays(rays::RaysArgs),
+    /// What each scene feature costs (the report's feature table alone): camera paths per
+    /// second of the demo without and with it, the fastest of several runs taken in turn.
+    Features(features::FeaturesArgs),
 }
 
 /// The generated mesh is a grid of this many quads a side: 1,002,528 triangles.
@@ -169,7 +172,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
             let mesh = rays::big_mesh(BIG_MESH_SIDE)?;
             eprintln!("feature costs ...");
             let spp = if args.quick { 8 } else { 32 };
-            let features = features::feature_costs(size, spp)?;
+            let features = features::feature_costs(size, spp, if args.quick { 1 } else { 2 })?;
             // The full report takes the fastest of two runs of each: a shared machine's
             // speed drifts by more than the farm's overhead.
             let farm = scaling::farm_costs(
