@@ -545,15 +545,20 @@ fn trace_path(
             return;
         }
         if bs.wi.z * wo_local.z < 0.0 && !bsdf.is_thin_walled() {
-            // Into or out of a solid: transmissive surfaces keep their front face's frame,
-            // so `wo_local.z > 0` is arriving from outside.
-            let entering = wo_local.z > 0.0;
-            let eta_rel = if entering {
-                bsdf.eta()
-            } else {
-                1.0 / bsdf.eta()
-            };
-            s.eta_scale *= eta_rel * eta_rel;
+            // Into or out of a solid. A refracting surface keeps its front face's frame,
+            // so `wo_local.z > 0` is arriving from outside; one that passes light only
+            // diffusely is shaded from the side the ray came from, which its front face
+            // tells, and its Lambertian crossing changes no radiance scale.
+            let refracts = sp.material.surface.transmission > 0.0;
+            let entering = if refracts { wo_local.z > 0.0 } else { sp.front };
+            if refracts {
+                let eta_rel = if entering {
+                    bsdf.eta()
+                } else {
+                    1.0 / bsdf.eta()
+                };
+                s.eta_scale *= eta_rel * eta_rel;
+            }
             s.absorption = if entering {
                 frame.scene.materials[sp.material_index as usize].absorption()
             } else {

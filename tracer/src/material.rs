@@ -241,9 +241,11 @@ impl Material {
     }
 
     /// Whether the material transmits into a volume (KHR_materials_volume, or a
-    /// metamaterial).
+    /// metamaterial), by refraction or diffusely (KHR_materials_diffuse_transmission:
+    /// "a diffuse transmission BTDF describes the transmission of light through the
+    /// volume boundary").
     pub fn is_volume(&self) -> bool {
-        self.transmission > 0.0 && !self.is_thin_walled()
+        (self.transmission > 0.0 || self.diffuse_transmission > 0.0) && !self.is_thin_walled()
     }
 
     /// The absorption coefficient σ (per world unit, per channel) inside the volume the

@@ -134,6 +134,53 @@ fn a_slab_transmits_by_beer_lambert() {
 }
 
 #[test]
+fn diffuse_transmission_into_a_volume_absorbs_along_each_crossing() {
+    // A slab that passes all light diffusely (KHR_materials_diffuse_transmission 1, no
+    // specular layer) before an emitter that fills the half-space behind it. As a thin
+    // sheet each face passes everything on, and the camera sees 1. As the boundary of a
+    // volume absorbing σ per unit, light crosses the thickness d once, along a direction
+    // the front face sent with a cosine distribution: E[exp(−σd/μ)] = ∫ 2μ exp(−σd/μ) dμ
+    // = 2·E3(σd), the exponential integral (not exp(−σd): the slanted crossings are
+    // longer).
+    let d = 0.5f64;
+    let sheet = |thickness: f32| Material {
+        base_color: Vec4::ONE,
+        metallic: 0.0,
+        specular: 0.0,
+        diffuse_transmission: 1.0,
+        thickness,
+        attenuation_color: Vec3::splat((-1.0f32).exp()),
+        attenuation_distance: 1.0,
+        ..Material::default()
+    };
+    let n = 1_000_000;
+    let two_e3 = (0..n)
+        .map(|i| {
+            let mu = (i as f64 + 0.5) / n as f64;
+            2.0 * mu * (-d / mu).exp()
+        })
+        .sum::<f64>()
+        / n as f64;
+    for (thickness, want) in [(0.0, 1.0), (1.0, two_e3 as f32)] {
+        let (mut b, m) = bench(1000.0, sheet(thickness));
+        b.mesh(
+            "slab",
+            vec![cube(m)],
+            DMat4::from_scale(DVec3::new(50.0, 50.0, d)),
+        );
+        let scene = b.finish();
+        assert_eq!(scene.features.volume, thickness > 0.0);
+        let seen = mean(&render(scene, 64));
+        println!("thickness {thickness}: {seen}, closed form {want}");
+        assert!(
+            (seen - Vec3::splat(want)).abs().max_element() < 3e-3,
+            "thickness {thickness}: {seen}, closed form {want} (exp(−σd) would be {})",
+            (-d).exp()
+        );
+    }
+}
+
+#[test]
 fn without_a_volume_nothing_is_absorbed_and_nothing_bends() {
     // Tilted 45° about y: a solid slab of thickness d and IOR n shifts what is behind it
     // sideways by d·sin(θ − θt)/cos θt; a thin wall (no KHR_materials_volume) shifts
