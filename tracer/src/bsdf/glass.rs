@@ -8,6 +8,18 @@ use glam::{Vec2, Vec3};
 use super::{flip, fresnel, metamaterial, microfacet, thin, AtWo, Bsdf, BsdfSample, COS_EPS};
 
 impl Bsdf {
+    /// A smooth interface's reflection at `wo`: its probability `s · F` (by the plain
+    /// Fresnel term) and its Fresnel term per channel (the film's, where one lies over
+    /// the interface).
+    pub(super) fn smooth_fresnel(&self, wo: Vec3, at: &AtWo) -> (f32, Vec3) {
+        let fr = if self.eta == 1.0 {
+            0.0
+        } else {
+            fresnel::dielectric(wo.z, at.eta_rel)
+        };
+        (self.glass_s * fr, self.glass_fresnel(fr, wo.z, at))
+    }
+
     /// The mirror reflection of a smooth interface, chosen with probability `pr` within
     /// the interface's share of the samples, with its Fresnel term `fresnel` per channel.
     pub(super) fn smooth_reflection(
@@ -82,14 +94,7 @@ impl Bsdf {
             return metamaterial::sample(self, m, wo, uc, at);
         }
         if self.glass_smooth {
-            let fr = if self.eta == 1.0 {
-                0.0
-            } else {
-                fresnel::dielectric(wo.z, at.eta_rel)
-            };
-            let pr = self.glass_s * fr;
-            // Chosen by the plain Fresnel term, weighted by the film's.
-            let f_rgb = self.glass_fresnel(fr, wo.z, at);
+            let (pr, f_rgb) = self.smooth_fresnel(wo, at);
             if uc < pr {
                 return Some(self.smooth_reflection(wo, f_rgb, pr, at));
             }

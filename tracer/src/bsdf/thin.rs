@@ -54,14 +54,7 @@ pub(super) fn pdf_transmission(b: &Bsdf, wo: Vec3, wi: Vec3, at: &AtWo) -> f32 {
 pub(super) fn sample(b: &Bsdf, wo: Vec3, uc: f32, u: Vec2, at: &AtWo) -> Option<BsdfSample> {
     let p_glass = at.p[2];
     if b.glass_smooth {
-        let fr = if b.eta == 1.0 {
-            0.0
-        } else {
-            fresnel::dielectric(wo.z, at.eta_rel)
-        };
-        let pr = b.glass_s * fr;
-        // Chosen by the plain Fresnel term, weighted by the film's.
-        let f_rgb = b.glass_fresnel(fr, wo.z, at);
+        let (pr, f_rgb) = b.smooth_fresnel(wo, at);
         if uc < pr {
             return Some(b.smooth_reflection(wo, f_rgb, pr, at));
         }
