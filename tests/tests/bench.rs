@@ -93,6 +93,30 @@ fn bench_farm_measures_upload_and_assembly_with_noisy_tiles() {
 /// feature costs and the farm against a direct render (real worker processes), and a
 /// figure of error against time per scene.
 #[test]
+fn bench_features_prints_the_feature_table_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "bench", "features", "--size", "8x8", "--spp", "1", "--runs", "1",
+    ];
+    let table = tessera_ok(&args, dir.path());
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| ")).collect();
+    // The header and one row per feature, each with its two speeds.
+    assert_eq!(rows.len(), 1 + 13, "{table}");
+    for name in [
+        "| anisotropy",
+        "| iridescence",
+        "| volume",
+        "| metamaterial",
+    ] {
+        assert!(table.contains(name), "{name}:\n{table}");
+    }
+    assert!(
+        !dir.path().join("bench-report").exists(),
+        "no report is written"
+    );
+}
+
+#[test]
 fn bench_quick_writes_a_report_with_every_section() {
     let dir = tempfile::tempdir().unwrap();
     let args = [
@@ -122,7 +146,7 @@ fn bench_quick_writes_a_report_with_every_section() {
     let json = std::fs::read_to_string(dir.path().join("report/report.json")).unwrap();
     let report: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(report["scenes"].as_array().unwrap().len(), 3);
-    assert_eq!(report["features"].as_array().unwrap().len(), 8);
+    assert_eq!(report["features"].as_array().unwrap().len(), 13);
     assert_eq!(
         report["farm"]["repeats"].as_u64(),
         Some(1),
