@@ -291,7 +291,7 @@ pub fn precompute_tables(with_dielectric: bool, with_sheen: bool, with_anisotrop
         sheen::precompute();
     }
     if with_anisotropy {
-        anisotropy::equivalent_alpha();
+        anisotropy::table();
     }
 }
 

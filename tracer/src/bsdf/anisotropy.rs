@@ -35,13 +35,13 @@ const N_ALPHA: usize = 16;
 const N_STRENGTH: usize = 12;
 const N_AZIMUTH: usize = 8;
 const N_MU: usize = 24;
-/// Quadrature points around and along the visible-normal sample space (the conductor
-/// table's density; it visits half the circle).
+/// Quadrature points around the whole circle and along the visible-normal sample space
+/// (an anisotropic lobe has no mirror symmetry about the plane of `wo` to halve it).
 const Q_PHI: usize = 24;
 const Q_Z: usize = 32;
 
 /// The table of `[E1, Ew, equivalent isotropic α]`, indexed `[α][s][cos²φ][μ]`.
-pub(crate) struct EquivalentAlpha {
+pub(crate) struct AnisotropicAlbedo {
     data: Vec<[f32; 3]>,
 }
 
@@ -120,7 +120,7 @@ fn isotropic_alpha_for(mu: f32, e1: f32) -> f32 {
     0.5 * (lo + hi)
 }
 
-impl EquivalentAlpha {
+impl AnisotropicAlbedo {
     fn build() -> Self {
         let mut data = Vec::with_capacity(N_ALPHA * N_STRENGTH * N_AZIMUTH * N_MU);
         for k in 0..N_ALPHA {
@@ -171,9 +171,9 @@ impl EquivalentAlpha {
 }
 
 /// The table, built on first use.
-pub(crate) fn equivalent_alpha() -> &'static EquivalentAlpha {
-    static TABLE: OnceLock<EquivalentAlpha> = OnceLock::new();
-    TABLE.get_or_init(EquivalentAlpha::build)
+pub(crate) fn table() -> &'static AnisotropicAlbedo {
+    static TABLE: OnceLock<AnisotropicAlbedo> = OnceLock::new();
+    TABLE.get_or_init(AnisotropicAlbedo::build)
 }
 
 #[cfg(test)]
@@ -187,7 +187,7 @@ mod tests {
     #[test]
     fn strength_zero_gives_the_isotropic_lobe_back() {
         let start = std::time::Instant::now();
-        let t = equivalent_alpha();
+        let t = table();
         println!("built in {:?}", start.elapsed());
         for k in 0..N_ALPHA {
             let ay = tables::node_alpha(k, N_ALPHA);

@@ -185,7 +185,7 @@ impl Bsdf {
         let anisotropic = self
             .ggx
             .is_anisotropic()
-            .then(|| anisotropy::equivalent_alpha().lookup(self.ggx, wo));
+            .then(|| anisotropy::table().lookup(self.ggx, wo));
         // `[E1, Ew]` of the GGX reflection lobe at `wo`.
         let lobe_albedo = || match (anisotropic, self.curve) {
             (Some([e1, ew, _]), _) => [e1, ew],
