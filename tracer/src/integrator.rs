@@ -243,19 +243,27 @@ fn fold(sp: &SurfacePoint, w: Vec3) -> Vec3 {
     w - 2.0 * w.dot(sp.ng) * sp.ng
 }
 
+/// The mirror of a consistent `v`, in local coordinates, where it lies in the wedge, so
+/// that `g` at `v` gathers it too (see [`fold`]); `None` on a flat point or where the
+/// mirror is consistent itself.
+fn wedge_mirror(sp: &SurfacePoint, v: Vec3) -> Option<Vec3> {
+    if !sp.curved {
+        return None;
+    }
+    let u = fold(sp, v);
+    let u_local = sp.frame.to_local(u);
+    (!consistent_side(sp, u, u_local)).then_some(u_local)
+}
+
 /// `g(wi)` (cosine included) and its density, for a consistent `wi` (see [`fold`]).
 fn eval_folded(sp: &SurfacePoint, scatter: &BsdfAt<'_>, wi: Vec3, wi_local: Vec3) -> (Vec3, f32) {
     let (f, pdf) = scatter.eval_and_pdf(wi_local);
     let mut f = f * wi_local.z.abs();
     let mut pdf = pdf;
-    if sp.curved {
-        let u = fold(sp, wi);
-        let u_local = sp.frame.to_local(u);
-        if !consistent_side(sp, u, u_local) {
-            let (fu, pu) = scatter.eval_and_pdf(u_local);
-            f += fu * u_local.z.abs();
-            pdf += pu;
-        }
+    if let Some(u_local) = wedge_mirror(sp, wi) {
+        let (fu, pu) = scatter.eval_and_pdf(u_local);
+        f += fu * u_local.z.abs();
+        pdf += pu;
     }
     (f, pdf)
 }
@@ -270,13 +278,7 @@ fn pdf_folded(sp: &SurfacePoint, scatter: &BsdfAt<'_>, v: Vec3, folded: bool, sa
         // The mirror of `v` is `w`, in the wedge: both ways count.
         return sampled + scatter.pdf(sp.frame.to_local(v));
     }
-    let u = fold(sp, v);
-    let u_local = sp.frame.to_local(u);
-    if consistent_side(sp, u, u_local) {
-        sampled
-    } else {
-        sampled + scatter.pdf(u_local)
-    }
+    sampled + wedge_mirror(sp, v).map_or(0.0, |u_local| scatter.pdf(u_local))
 }
 
 /// A path between two bounces: everything needed to continue it, so that a path that
