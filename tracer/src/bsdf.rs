@@ -232,7 +232,8 @@ pub struct Bsdf {
     /// interface: α along both axes, or stretched along the frame's x axis by
     /// KHR_materials_anisotropy.
     ggx: microfacet::Ggx,
-    /// Whether the microfacet lobes are delta lobes (`alpha < ALPHA_MIN`).
+    /// Whether the microfacet lobes are delta lobes (α below `ALPHA_MIN` along both
+    /// axes).
     smooth: bool,
     /// The IOR, clamped to [1, IOR_MAX].
     eta: f32,
@@ -278,8 +279,8 @@ pub struct Bsdf {
 
 /// Builds the energy-compensation tables now rather than at the first rough surface a
 /// render meets (about 0.1 s for the conductor table, 0.25 s more for the dielectric one
-/// with `with_dielectric`, 0.3 s for the sheen's albedo with `with_sheen`, and the
-/// anisotropic lobes' equivalent roughness with `with_anisotropy`, at opt-level 3).
+/// with `with_dielectric`, 0.3 s for the sheen's albedo with `with_sheen`, 0.7 s for
+/// the anisotropic lobes' albedo table with `with_anisotropy`, at opt-level 3).
 /// Optional: call it while preparing a frame so that no rendering thread waits on the
 /// build, and only ask for the tables the scene's materials use.
 pub fn precompute_tables(with_dielectric: bool, with_sheen: bool, with_anisotropy: bool) {

@@ -46,6 +46,7 @@ impl Bsdf {
             _ => Vec3::splat(fr),
         }
     }
+
     /// Colour of the reflected multiple-scattering energy of the refractive interface:
     /// the reflection tint normalised to a largest channel of 1.
     pub(super) fn ms_tint(&self) -> Vec3 {
@@ -55,6 +56,7 @@ impl Bsdf {
             Vec3::ONE
         }
     }
+
     /// The generalised half vector of a refraction pair (`wo.z > 0 > wi.z`), oriented to
     /// +Z, with `wo·wm`, `wi·wm` and Walter's `(wi·wm + wo·wm/η)²`. `None` when the pair
     /// cannot come from a refraction through a front-facing microfacet.
@@ -83,6 +85,7 @@ impl Bsdf {
         }
         Some((wm, cos_om, cos_im, denom))
     }
+
     /// Samples the dielectric interface: a microfacet normal (or the macro normal when
     /// smooth), then reflection with probability `glass_s · F`, else refraction.
     pub(super) fn sample_glass(&self, wo: Vec3, uc: f32, u: Vec2, at: &AtWo) -> Option<BsdfSample> {

@@ -118,6 +118,7 @@ impl Bsdf {
     pub fn at(&self, wo: Vec3) -> Option<BsdfAt<'_>> {
         self.at_coated(wo, None)
     }
+
     /// [`Bsdf::at`] with the clear coat's own normal `coat_normal` (unit, in the same
     /// local frame; KHR_materials_clearcoat's normal map, or the unmapped normal where
     /// the base's normal is mapped); `None` puts the coat on the base's normal.
@@ -145,6 +146,7 @@ impl Bsdf {
             layers,
         })
     }
+
     /// The `wo`-dependent factors: compensation, albedo scaling, lobe probabilities.
     #[inline(always)]
     pub(super) fn at_wo(&self, wo: Vec3, inside: bool) -> AtWo {
@@ -172,10 +174,12 @@ impl Bsdf {
         }
         self.at_wo_general(wo, inside)
     }
+
     /// Whether the BSDF is a diffuse lobe alone: no metal, no specular layer, no glass.
     pub(super) fn is_lambertian(&self) -> bool {
         self.w_metal == 0.0 && self.w_plastic * self.spec == 0.0 && self.w_glass == 0.0
     }
+
     /// [`Bsdf::at_wo`] for any BSDF.
     pub(super) fn at_wo_general(&self, wo: Vec3, inside: bool) -> AtWo {
         let mu_o = wo.z;
