@@ -245,7 +245,7 @@ impl Material {
     /// "a diffuse transmission BTDF describes the transmission of light through the
     /// volume boundary").
     pub fn is_volume(&self) -> bool {
-        (self.transmission > 0.0 || self.diffuse_transmission > 0.0) && !self.is_thin_walled()
+        self.transmits() && !self.is_thin_walled()
     }
 
     /// The absorption coefficient σ (per world unit, per channel) inside the volume the
