@@ -411,6 +411,22 @@ pub struct Features {
 }
 
 impl Features {
+    /// Adds what `m` needs from the tracer (its normal map aside: whether one counts
+    /// depends on the primitive's tangents).
+    pub fn add_material(&mut self, m: &Material) {
+        self.textures |= m.has_textures();
+        self.transmission |= m.transmission > 0.0;
+        self.alpha_mask |= m.alpha_mode != crate::material::AlphaMode::Opaque;
+        self.emissive |= m.is_emissive();
+        self.clearcoat |= m.clearcoat > 0.0;
+        self.sheen |= m.has_sheen();
+        self.volume |= m.is_volume();
+        self.iridescence |= m.iridescence > 0.0;
+        self.metamaterial |= m.metamaterial.is_some();
+        self.diffuse_transmission |= m.diffuse_transmission > 0.0;
+        self.anisotropy |= m.is_anisotropic();
+    }
+
     /// Names of the features in use, for summaries and EXR metadata.
     pub fn names(&self) -> Vec<&'static str> {
         let all = [
@@ -548,27 +564,17 @@ impl SceneBuilder {
     pub fn finish(mut self) -> Scene {
         let s = &self.scene;
         let mats = &s.materials;
-        self.scene.features = Features {
-            textures: mats.iter().any(Material::has_textures),
-            transmission: mats.iter().any(|m| m.transmission > 0.0),
-            alpha_mask: mats
-                .iter()
-                .any(|m| m.alpha_mode != crate::material::AlphaMode::Opaque),
-            emissive: mats.iter().any(Material::is_emissive),
+        let mut features = Features {
             punctual_lights: !s.lights.is_empty(),
             environment: s.environment.as_ref().is_some_and(|e| !e.is_black()),
             normal_maps: mats.iter().any(|m| m.normal_texture.is_some()),
             animation: !s.animations.is_empty(),
             skinning: s.nodes.iter().any(|n| n.skin.is_some()),
             morphing: s.meshes.iter().any(|m| !m.weights.is_empty()),
-            clearcoat: mats.iter().any(|m| m.clearcoat > 0.0),
-            sheen: mats.iter().any(Material::has_sheen),
-            volume: mats.iter().any(Material::is_volume),
-            iridescence: mats.iter().any(|m| m.iridescence > 0.0),
-            metamaterial: mats.iter().any(|m| m.metamaterial.is_some()),
-            diffuse_transmission: mats.iter().any(|m| m.diffuse_transmission > 0.0),
-            anisotropy: mats.iter().any(Material::is_anisotropic),
+            ..Features::default()
         };
+        mats.iter().for_each(|m| features.add_material(m));
+        self.scene.features = features;
         self.scene
     }
 }

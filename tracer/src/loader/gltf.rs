@@ -18,7 +18,7 @@ use super::meshes::{convert_mesh, fit_weights, MeshOut, SkinLimit};
 use super::SUPPORTED_EXTENSIONS;
 use crate::camera::Projection;
 use crate::light::{Environment, PunctualLight};
-use crate::material::{AlphaMode, Material};
+use crate::material::Material;
 use crate::scene::{CameraDef, Features, Mesh, Node, Scene, Skin, Trs};
 
 /// What the conversion reads from.
@@ -585,18 +585,8 @@ fn features(scene: &Scene) -> Features {
                 continue;
             }
             let mat = &scene.materials[prim.material as usize];
-            f.textures |= mat.has_textures();
-            f.transmission |= mat.transmission > 0.0;
-            f.alpha_mask |= !matches!(mat.alpha_mode, AlphaMode::Opaque);
-            f.emissive |= mat.is_emissive();
+            f.add_material(mat);
             f.normal_maps |= mat.normal_texture.is_some() && !prim.tangents.is_empty();
-            f.clearcoat |= mat.clearcoat > 0.0;
-            f.sheen |= mat.has_sheen();
-            f.volume |= mat.is_volume();
-            f.iridescence |= mat.iridescence > 0.0;
-            f.metamaterial |= mat.metamaterial.is_some();
-            f.diffuse_transmission |= mat.diffuse_transmission > 0.0;
-            f.anisotropy |= mat.is_anisotropic();
         }
     });
     f
