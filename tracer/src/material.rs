@@ -210,28 +210,45 @@ impl Material {
 
     /// Every texture reference of the material.
     pub fn texture_refs(&self) -> impl Iterator<Item = &TextureRef> {
+        self.texture_slots()
+            .into_iter()
+            .filter_map(|(_, t)| t.as_ref())
+    }
+
+    /// Every texture slot of the material with its glTF name, empty or not.
+    pub fn texture_slots(&self) -> [(&'static str, &Option<TextureRef>); 18] {
         [
-            &self.base_color_texture,
-            &self.metallic_roughness_texture,
-            &self.normal_texture,
-            &self.emissive_texture,
-            &self.specular_texture,
-            &self.specular_color_texture,
-            &self.transmission_texture,
-            &self.thickness_texture,
-            &self.clearcoat_texture,
-            &self.clearcoat_roughness_texture,
-            &self.clearcoat_normal_texture,
-            &self.sheen_color_texture,
-            &self.sheen_roughness_texture,
-            &self.iridescence_texture,
-            &self.iridescence_thickness_texture,
-            &self.diffuse_transmission_texture,
-            &self.diffuse_transmission_color_texture,
-            &self.anisotropy_texture,
+            ("baseColorTexture", &self.base_color_texture),
+            ("metallicRoughnessTexture", &self.metallic_roughness_texture),
+            ("normalTexture", &self.normal_texture),
+            ("emissiveTexture", &self.emissive_texture),
+            ("specularTexture", &self.specular_texture),
+            ("specularColorTexture", &self.specular_color_texture),
+            ("transmissionTexture", &self.transmission_texture),
+            ("thicknessTexture", &self.thickness_texture),
+            ("clearcoatTexture", &self.clearcoat_texture),
+            (
+                "clearcoatRoughnessTexture",
+                &self.clearcoat_roughness_texture,
+            ),
+            ("clearcoatNormalTexture", &self.clearcoat_normal_texture),
+            ("sheenColorTexture", &self.sheen_color_texture),
+            ("sheenRoughnessTexture", &self.sheen_roughness_texture),
+            ("iridescenceTexture", &self.iridescence_texture),
+            (
+                "iridescenceThicknessTexture",
+                &self.iridescence_thickness_texture,
+            ),
+            (
+                "diffuseTransmissionTexture",
+                &self.diffuse_transmission_texture,
+            ),
+            (
+                "diffuseTransmissionColorTexture",
+                &self.diffuse_transmission_color_texture,
+            ),
+            ("anisotropyTexture", &self.anisotropy_texture),
         ]
-        .into_iter()
-        .flatten()
     }
 
     /// Whether light it transmits crosses a thin wall (no KHR_materials_volume, or a

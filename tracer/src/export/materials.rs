@@ -8,35 +8,7 @@ pub(super) const NO_SKINS: &str = "the exporter does not write skins";
 
 pub(super) fn refuse_unsupported(scene: &Scene) -> Result<(), ExportError> {
     for (i, m) in scene.materials.iter().enumerate() {
-        let slots = [
-            ("baseColorTexture", &m.base_color_texture),
-            ("metallicRoughnessTexture", &m.metallic_roughness_texture),
-            ("normalTexture", &m.normal_texture),
-            ("emissiveTexture", &m.emissive_texture),
-            ("specularTexture", &m.specular_texture),
-            ("specularColorTexture", &m.specular_color_texture),
-            ("transmissionTexture", &m.transmission_texture),
-            ("thicknessTexture", &m.thickness_texture),
-            ("iridescenceTexture", &m.iridescence_texture),
-            (
-                "diffuseTransmissionTexture",
-                &m.diffuse_transmission_texture,
-            ),
-            (
-                "diffuseTransmissionColorTexture",
-                &m.diffuse_transmission_color_texture,
-            ),
-            (
-                "iridescenceThicknessTexture",
-                &m.iridescence_thickness_texture,
-            ),
-            ("clearcoatTexture", &m.clearcoat_texture),
-            ("clearcoatRoughnessTexture", &m.clearcoat_roughness_texture),
-            ("clearcoatNormalTexture", &m.clearcoat_normal_texture),
-            ("sheenColorTexture", &m.sheen_color_texture),
-            ("sheenRoughnessTexture", &m.sheen_roughness_texture),
-            ("anisotropyTexture", &m.anisotropy_texture),
-        ];
+        let slots = m.texture_slots();
         if let Some((slot, Some(t))) = slots.iter().find(|(_, t)| t.is_some()) {
             return Err(unsupported(
                 &label("material", i, m.name.as_deref()),
