@@ -49,13 +49,23 @@ pub struct PreparedFrame {
     pub(crate) filtered_instances: Vec<bool>,
     /// Whether any instance needs the hit filter.
     pub(crate) any_hit_filter: bool,
-    /// Per scene material, its BSDF where every texture and the vertex colour are white
-    /// (with the albedo curve of rough glass).
-    pub(crate) material_bsdfs: Vec<crate::bsdf::Bsdf>,
+    /// Per scene material, what the integrator reuses at every point that sees it.
+    pub(crate) materials: Vec<PreparedMaterial>,
     /// What the frame uses.
     pub features: Features,
     /// Remarks for the user (for example, the default environment was used).
     pub warnings: Vec<String>,
+}
+
+/// A scene material with what does not change from point to point.
+pub(crate) struct PreparedMaterial {
+    /// Its BSDF where every texture and the vertex colour are white (with the albedo
+    /// curve of rough glass), so that points that see it so (most, in most scenes) need
+    /// not build it again.
+    pub bsdf: crate::bsdf::Bsdf,
+    /// For a material without textures, its values at every point of a primitive
+    /// without vertex colours: [`crate::material::Material::sample`] there, once.
+    pub uniform: Option<crate::material::MaterialSample>,
 }
 
 /// One triangle of an instance at a ray's time: where its data lives, its vertex

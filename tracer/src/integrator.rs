@@ -4,7 +4,7 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::bsdf::{Bsdf, BsdfAt};
+use crate::bsdf::{Bsdf, BsdfAt, SurfaceParams};
 use crate::film::SampleValue;
 use crate::frame::PreparedFrame;
 use crate::geometry::{
@@ -45,8 +45,11 @@ pub(crate) struct SurfacePoint {
     pub curved: bool,
     /// Whether the ray arrived on the front face.
     pub front: bool,
-    /// Material values at the point.
-    pub material: crate::material::MaterialSample,
+    /// Emitted radiance at the point.
+    pub emission: Vec3,
+    /// The BSDF's parameters at the point where textures or vertex colours may change
+    /// them; `None` where they are the material's factors (its prepared BSDF applies).
+    pub varying: Option<SurfaceParams>,
     /// Whether the material emits only from its front face.
     pub single_sided: bool,
     /// The material's index in the scene.
@@ -89,9 +92,17 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     };
     let front = ng.dot(ray.dir) < 0.0;
 
-    let (uvs, color) = (prim.uvs_at(t, b1, b2), prim.color_at(t, b1, b2));
     let material = &scene.materials[prim.material as usize];
-    let sample = material.sample(&scene.textures, uvs, color);
+    // Borrowed where it is the same everywhere: it is large enough that copying it shows.
+    let varying_sample;
+    let (sample, uniform) = match &frame.materials[prim.material as usize].uniform {
+        Some(sample) if prim.colors.is_empty() => (sample, true),
+        _ => {
+            let (uvs, color) = (prim.uvs_at(t, b1, b2), prim.color_at(t, b1, b2));
+            varying_sample = material.sample(&scene.textures, uvs, color);
+            (&varying_sample, false)
+        }
+    };
 
     // Interpolated shading normal; missing or degenerate normals fall back to the face. One
     // facing away from the front face is that normal written reversed (normals flipped
@@ -187,7 +198,8 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
         // A coat normal facing away from the viewer is the geometric fallback's case too.
         coat_normal: coat_normal.filter(|n| wo.dot(*n) > 0.0),
         front,
-        material: sample,
+        emission: sample.emission,
+        varying: (!uniform).then_some(sample.surface),
         single_sided: !material.double_sided,
         material_index: prim.material,
     }
@@ -435,7 +447,7 @@ fn trace_path(
 
         // Light emitted by the surface (glTF emission is one-sided for single-sided
         // materials, seen from the front only).
-        let le = sp.material.emission;
+        let le = sp.emission;
         if le != Vec3::ZERO && (sp.front || !sp.single_sided) {
             let w = if s.prev_delta {
                 1.0
@@ -450,14 +462,14 @@ fn trace_path(
         }
 
         // The material's own BSDF where textures and vertex colour leave it as it is.
-        let material_bsdf = &frame.material_bsdfs[sp.material_index as usize];
+        let material_bsdf = &frame.materials[sp.material_index as usize].bsdf;
         let textured;
-        let bsdf = if material_bsdf.params == sp.material.surface {
-            material_bsdf
-        } else {
-            textured =
-                Bsdf::new(sp.material.surface).with_albedo_curve(material_bsdf.albedo_curve());
-            &textured
+        let bsdf = match sp.varying {
+            Some(params) if params != material_bsdf.params => {
+                textured = Bsdf::new(params).with_albedo_curve(material_bsdf.albedo_curve());
+                &textured
+            }
+            _ => material_bsdf,
         };
         if !walk.albedo_done && !bsdf.is_delta() {
             out.albedo = bsdf.albedo();
@@ -551,7 +563,7 @@ fn trace_path(
             // so `wo_local.z > 0` is arriving from outside; one that passes light only
             // diffusely is shaded from the side the ray came from, which its front face
             // tells, and its Lambertian crossing changes no radiance scale.
-            let refracts = sp.material.surface.transmission > 0.0;
+            let refracts = bsdf.params.transmission > 0.0;
             let entering = if refracts { wo_local.z > 0.0 } else { sp.front };
             if refracts {
                 let eta_rel = if entering {

@@ -10,14 +10,14 @@
 
 use std::sync::Arc;
 
-use glam::{Affine3A, DMat3, DMat4, DQuat, DVec3, Vec3};
+use glam::{Affine3A, DMat3, DMat4, DQuat, DVec3, Vec2, Vec3, Vec4};
 
 use crate::animation::{self, Pose};
 use crate::bsdf::Bsdf;
 use crate::bvh::{Instance, SceneBvh};
 use crate::camera::{Camera, Projection, RigidStep};
 use crate::deform::{self, Deformed};
-use crate::frame::PreparedFrame;
+use crate::frame::{PreparedFrame, PreparedMaterial};
 use crate::geometry::Aabb;
 use crate::light::{EmissiveTriangle, Environment, LightSet};
 use crate::loader::{framing_camera, mesh_bounds, scene_bounds};
@@ -379,7 +379,7 @@ pub fn prepare_frame(
         scene.features.sheen,
         scene.features.anisotropy,
     );
-    let material_bsdfs = material_bsdfs(&scene);
+    let materials = prepared_materials(&scene);
     let mut features = scene.features;
     let environment = frame_environment(options, &scene, punctual.is_empty(), &mut warnings);
     features.environment = !matches!(environment, Environment::Black);
@@ -405,7 +405,7 @@ pub fn prepare_frame(
         hit_filter,
         filtered_instances,
         any_hit_filter,
-        material_bsdfs,
+        materials,
         features,
         warnings,
     })
@@ -620,11 +620,10 @@ fn emissive_triangles(
     triangles
 }
 
-/// Per scene material, its BSDF where every texture and the vertex colour are white, so
-/// that points that see it so (most, in most scenes) need not build it again. It carries
-/// the albedo curve of a rough refractive interface where the roughness is not textured
-/// (see `bsdf/curve.rs`); materials without one use the shared tables.
-fn material_bsdfs(scene: &Scene) -> Vec<Bsdf> {
+/// Per scene material, its BSDF of the factors alone and, without textures, its values.
+/// The BSDF carries the albedo curve of a rough refractive interface where the roughness
+/// is not textured (see `bsdf/curve.rs`); materials without one use the shared tables.
+fn prepared_materials(scene: &Scene) -> Vec<PreparedMaterial> {
     scene
         .materials
         .iter()
@@ -634,7 +633,11 @@ fn material_bsdfs(scene: &Scene) -> Vec<Bsdf> {
             } else {
                 Bsdf::albedo_curve_for(m.factors())
             };
-            Bsdf::new(m.factors()).with_albedo_curve(curve)
+            PreparedMaterial {
+                bsdf: Bsdf::new(m.factors()).with_albedo_curve(curve),
+                uniform: (!m.has_textures())
+                    .then(|| m.sample(&scene.textures, [Vec2::ZERO; 2], Vec4::ONE)),
+            }
         })
         .collect()
 }
