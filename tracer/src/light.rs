@@ -145,6 +145,13 @@ pub struct EmissiveTriangle {
     pub emission: Vec3,
     /// Whether both faces emit (glTF `doubleSided`); doubles the power estimate.
     pub double_sided: bool,
+    /// Whether `emission` is the radiance at every point (no texture or vertex colour
+    /// varies it): light samples then carry it, with the side it goes to checked, so the
+    /// integrator need not look the triangle up again.
+    pub uniform: bool,
+    /// Whether the instance mirrors (negative determinant): its front face is then the
+    /// one cross(p1 − p0, p2 − p0) points away from (glTF's winding rule).
+    pub mirrored: bool,
     /// Instance (as in [`crate::geometry::Hit::instance`]).
     pub instance: u32,
     /// Triangle index within the instance's mesh (as in [`crate::geometry::Hit::triangle`]).

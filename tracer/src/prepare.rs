@@ -611,6 +611,8 @@ fn emissive_triangles(
                     p: object.map(|x| inst.to_world.transform_point3(x)),
                     emission: material.emission_factor(),
                     double_sided: material.double_sided,
+                    uniform: material.uniform_emission(!prim.colors.is_empty()),
+                    mirrored: inst.to_world.matrix3.determinant() < 0.0,
                     instance: i as u32,
                     triangle: mesh.first_triangle[p] + t as u32,
                 });

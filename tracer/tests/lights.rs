@@ -66,6 +66,9 @@ fn tri(
         p,
         emission,
         double_sided,
+        // Emitter::Triangle samples, which the integrator evaluates.
+        uniform: false,
+        mirrored: false,
         instance,
         triangle,
     }
@@ -800,5 +803,129 @@ fn many_triangles_of_wild_emission_stay_finite() {
                 }
             }
         }
+    }
+}
+
+/// A triangle of uniform emission is sampled as the radiance it sends, or as nothing
+/// towards the back of a single-sided one; a mirroring instance turns its front face
+/// against the winding (glTF), which the sampler must know as the integrator did.
+#[test]
+fn uniform_triangles_carry_their_radiance_and_front_face() {
+    let emission = Vec3::new(3.0, 2.0, 1.0);
+    // Counter-clockwise seen from +Z: cross(p1 − p0, p2 − p0) points along +Z.
+    let p = [
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+    ];
+    let (above, below) = (Vec3::new(0.1, 0.0, 2.0), Vec3::new(0.1, 0.0, -2.0));
+    let seen = |double_sided: bool, mirrored: bool, from: Vec3| {
+        let t = EmissiveTriangle {
+            uniform: true,
+            mirrored,
+            ..tri(p, emission, double_sided, 0, 0)
+        };
+        let set = LightSet::new(vec![], vec![t], Environment::Black, Aabb::EMPTY);
+        let s = set.sample(from, None, 0.5, Vec2::new(0.3, 0.6));
+        s.map(|s| {
+            assert!(s.pdf > 0.0 && !s.delta);
+            s.emitter
+        })
+    };
+    let lit = Some(Emitter::Radiance(emission));
+    assert_eq!(seen(false, false, above), lit);
+    assert_eq!(seen(false, false, below), None);
+    assert_eq!(seen(false, true, above), None);
+    assert_eq!(seen(false, true, below), lit);
+    for (mirrored, from) in [(false, above), (false, below), (true, above), (true, below)] {
+        assert_eq!(seen(true, mirrored, from), lit);
+    }
+    // Textured or vertex-coloured emission is left to the integrator, from either side.
+    let varying = LightSet::new(
+        vec![],
+        vec![tri(p, emission, false, 0, 0)],
+        Environment::Black,
+        Aabb::EMPTY,
+    );
+    let s = varying
+        .sample(below, None, 0.5, Vec2::new(0.3, 0.6))
+        .unwrap();
+    assert!(matches!(s.emitter, Emitter::Triangle { .. }));
+}
+
+/// A single-sided emitter lights only what its front face looks at, also placed by a
+/// mirroring transform, whose front face glTF turns against the winding.
+#[test]
+fn a_single_sided_emitter_lights_its_front_also_when_mirrored() {
+    use glam::{DMat4, Vec4};
+    use tracer::camera::Projection;
+    use tracer::material::Material;
+    use tracer::scene::{CameraDef, SceneBuilder};
+    use tracer::shapes::quad;
+
+    // `facing` is the emitter's normal in its mesh; `mirror` scales the mesh by −1 in x,
+    // which leaves the (symmetric) quad where it was.
+    let wall = |facing: f32, mirror: bool| {
+        let mut b = SceneBuilder::default();
+        let white = b.material(Material {
+            base_color: Vec4::new(0.8, 0.8, 0.8, 1.0),
+            metallic: 0.0,
+            specular: 0.0,
+            ..Material::default()
+        });
+        let light = b.material(Material {
+            emissive: Vec3::splat(4.0),
+            double_sided: false,
+            ..Material::default()
+        });
+        let s = 3.0;
+        let wall = [[-s, -s], [s, -s], [s, s], [-s, s]].map(|[x, y]| Vec3::new(x, y, 0.0));
+        b.mesh("wall", vec![quad(wall, white)], DMat4::IDENTITY);
+        let e = 0.5;
+        let mut corners = [[-e, -e], [e, -e], [e, e], [-e, e]].map(|[x, y]| Vec3::new(x, y, 1.0));
+        if facing < 0.0 {
+            corners.reverse();
+        }
+        let place = if mirror {
+            DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0))
+        } else {
+            DMat4::IDENTITY
+        };
+        b.mesh("emitter", vec![quad(corners, light)], place);
+        b.camera(
+            CameraDef {
+                name: None,
+                projection: Projection::Perspective {
+                    yfov: 0.6,
+                    aspect_ratio: None,
+                    znear: 0.01,
+                },
+            },
+            DMat4::from_translation(DVec3::new(0.0, 0.0, 4.0)),
+        );
+        b.environment(Environment::Black);
+        // The wall's pixels alone (depth 4; the emitter's at 3, and its silhouette between).
+        let layers = common::render_square(b.finish(), 16, 16, 4);
+        let on_wall: Vec<Vec3> = (layers.beauty.iter().zip(&layers.depth))
+            .filter(|(_, d)| **d > 3.999)
+            .map(|(p, _)| p.truncate())
+            .collect();
+        assert!(on_wall.len() > 100);
+        on_wall.iter().sum::<Vec3>() / on_wall.len() as f32
+    };
+    let lit = wall(-1.0, false);
+    assert!(lit.x > 0.05, "the emitter faces the wall: {lit}");
+    let mirrored = wall(-1.0, true);
+    assert!(
+        ((mirrored - lit) / lit).abs().max_element() < 0.03,
+        "mirrored {mirrored} vs {lit}"
+    );
+    for mirror in [false, true] {
+        let away = wall(1.0, mirror);
+        assert_eq!(
+            away,
+            Vec3::ZERO,
+            "the emitter faces away, mirrored: {mirror}"
+        );
     }
 }

@@ -20,7 +20,10 @@
 //! * `delta` samples (punctual lights): contribution = f · |cos θ| · L / pdf, with
 //!   `L` = [`Emitter::Radiance`] (already I·attenuation/d² or E). No MIS: a BSDF-sampled
 //!   ray never hits them.
-//! * Triangle samples: evaluate the emission at (b1, b2) of that instance's triangle and
+//! * Triangle samples of uniform emission (no texture, no vertex colours): the sampler
+//!   knows the radiance and the front face (static instances only are in the set), so it
+//!   returns [`Emitter::Radiance`], or `None` towards a single-sided triangle's back.
+//! * Other triangle samples: evaluate the emission at (b1, b2) of that instance's triangle and
 //!   keep it only if the triangle emits towards the reference point: for a one-sided
 //!   material the reference point must be on the front side, i.e.
 //!   `dot(front_normal, -wi) > 0`, where `front_normal` is the `normal` of [`Emitter::Triangle`]
@@ -65,7 +68,8 @@ pub struct LightSample {
 pub enum Emitter {
     /// Known incident light: for punctual lights the value to use in place of radiance
     /// (I · spot attenuation / d², or the directional E), so that the contribution is
-    /// f · |cos θ| · L / pdf; for the environment its radiance from `wi`.
+    /// f · |cos θ| · L / pdf; for the environment and a uniformly emitting triangle, the
+    /// radiance from `wi`.
     Radiance(Vec3),
     /// A point on an emissive triangle; the integrator evaluates the (possibly textured)
     /// emission there and checks the side (see the [module docs](crate::light::sampler)).
@@ -267,18 +271,26 @@ impl LightSet {
             Light::Triangle(t) => {
                 let s = t.sample(p, u)?;
                 let pdf = s.pdf * selection;
-                (pdf > 0.0 && pdf.is_finite()).then_some(LightSample {
-                    wi: s.wi,
-                    distance: s.distance,
-                    pdf,
-                    delta: false,
-                    emitter: Emitter::Triangle {
+                if !(pdf > 0.0 && pdf.is_finite()) {
+                    return None;
+                }
+                let emitter = match t.radiance {
+                    Some(l) if t.emits_toward(s.wi) => Emitter::Radiance(l),
+                    Some(_) => return None,
+                    None => Emitter::Triangle {
                         instance: t.instance,
                         triangle: t.triangle,
                         b1: s.b1,
                         b2: s.b2,
                         normal: t.normal,
                     },
+                };
+                Some(LightSample {
+                    wi: s.wi,
+                    distance: s.distance,
+                    pdf,
+                    delta: false,
+                    emitter,
                 })
             }
             Light::Environment => {

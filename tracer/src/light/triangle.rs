@@ -48,6 +48,11 @@ pub(crate) struct TriangleLight {
     /// triangle may be sampled on the sphere (see [`AREA_SAMPLING_RADII`]).
     centroid: Vec3,
     spherical_within2: f32,
+    /// The radiance at every point, where it is the same everywhere.
+    pub(crate) radiance: Option<Vec3>,
+    /// The front face's normal, and whether the back face emits too.
+    front: Vec3,
+    double_sided: bool,
     pub(crate) instance: u32,
     pub(crate) triangle: u32,
 }
@@ -85,9 +90,17 @@ impl TriangleLight {
             area,
             centroid,
             spherical_within2: AREA_SAMPLING_RADII * AREA_SAMPLING_RADII * r2,
+            radiance: t.uniform.then_some(t.emission),
+            front: if t.mirrored { -c / len } else { c / len },
+            double_sided: t.double_sided,
             instance: t.instance,
             triangle: t.triangle,
         })
+    }
+
+    /// Whether the triangle emits towards a point that sees it in direction `wi`.
+    pub(crate) fn emits_toward(&self, wi: Vec3) -> bool {
+        self.double_sided || self.front.dot(wi) < 0.0
     }
 
     /// Unit directions from `p` to the vertices (zero where `p` is a vertex).
@@ -342,6 +355,8 @@ mod tests {
             p,
             emission: Vec3::ONE,
             double_sided: false,
+            uniform: true,
+            mirrored: false,
             instance: 0,
             triangle: 0,
         })
