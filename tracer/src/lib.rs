@@ -65,6 +65,7 @@ pub mod sampler;
 pub mod scene;
 pub mod settings;
 pub mod shapes;
+pub mod spectrum;
 #[cfg(test)]
 mod test_rng;
 pub mod texture;

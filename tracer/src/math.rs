@@ -72,6 +72,18 @@ pub fn ln(x: f32) -> f32 {
     libm::logf(x)
 }
 
+/// The hyperbolic cosine.
+#[inline]
+pub fn cosh(x: f32) -> f32 {
+    libm::coshf(x)
+}
+
+/// The inverse hyperbolic tangent.
+#[inline]
+pub fn atanh(x: f32) -> f32 {
+    libm::atanhf(x)
+}
+
 /// Double-precision `(sin x, cos x)`.
 #[inline]
 pub fn sin_cos_f64(x: f64) -> (f64, f64) {

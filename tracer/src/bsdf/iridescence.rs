@@ -15,9 +15,10 @@
 //! its code `cos θ2`). A film of thickness 0 is no film, as in the Khronos sample
 //! renderer, so a texture that thins the film to nothing leaves the base exactly as it is.
 
-use glam::{Mat3, Vec3};
+use glam::Vec3;
 
 use crate::math;
+use crate::spectrum::XYZ_TO_REC709;
 
 /// IOR of a clear coat over the film: the film's outside (the extension: "the IOR of the
 /// clearcoat has to be used for the outside IOR").
@@ -134,19 +135,6 @@ impl Polarisation {
         }
     }
 }
-
-/// XYZ to linear Rec. 709 (D65).
-const XYZ_TO_REC709: Mat3 = Mat3::from_cols_array(&[
-    3.240_454_2,
-    -0.969_266,
-    0.055_643_4,
-    -1.537_138_5,
-    1.876_010_8,
-    -0.204_025_9,
-    -0.498_531_4,
-    0.041_556,
-    1.057_225_2,
-]);
 
 /// The colour-matching functions' response to `cos(2π·opd/λ + shift)`, in Rec. 709:
 /// Belcour & Barla's Fourier-space Gaussians, normalised so that a flat spectrum of 1
