@@ -1,8 +1,8 @@
 //! Light carried per wavelength, for the spectral path: the CIE 1931 observer and
-//! illuminant D65 ([`cie_tables`]), hero-wavelength sampling (Wilkie et al. 2014: four
-//! wavelengths per path, one drawn and the others at equal steps of the same
-//! distribution), and the samples' estimate of CIE XYZ and of linear Rec. 709, the colour
-//! space the RGB path writes.
+//! illuminant D65 ([`cie_tables`]), RGB colours lifted to smooth spectra ([`upsample`]),
+//! hero-wavelength sampling (Wilkie et al. 2014: four wavelengths per path, one drawn and
+//! the others at equal steps of the same distribution), and the samples' estimate of CIE
+//! XYZ and of linear Rec. 709, the colour space the RGB path writes.
 
 use std::sync::LazyLock;
 
@@ -11,9 +11,11 @@ use glam::{Mat3, Vec3, Vec4};
 use crate::math;
 
 mod cie_tables;
+mod upsample;
 
 use cie_tables::{D65, SAMPLES, STEP, X_BAR, Y_BAR, Z_BAR};
 pub use cie_tables::{LAMBDA_MAX, LAMBDA_MIN};
+pub use upsample::{IlluminantSpectrum, SigmoidPolynomial, UnboundedSpectrum};
 
 /// Wavelengths one path carries.
 pub const WAVELENGTHS: usize = 4;

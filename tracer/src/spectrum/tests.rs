@@ -142,3 +142,80 @@ fn the_four_wavelengths_stratify_the_distribution_and_the_hero_can_go_alone() {
     assert_eq!(w.lambda[0], hero.0);
     assert_eq!(w.pdf, [hero.1 / 4.0, 0.0, 0.0, 0.0]);
 }
+
+/// Linear Rec. 709 of light with spectrum `s`, by the midpoint rule at 0.5 nm.
+fn rec709_of(s: impl Fn(f32) -> f32) -> Vec3 {
+    let mut xyz = glam::DVec3::ZERO;
+    let h = 0.5;
+    let mut nm = LAMBDA_MIN + 0.5 * h;
+    while nm < LAMBDA_MAX {
+        xyz += cmf(nm).as_dvec3() * f64::from(s(nm)) * f64::from(h);
+        nm += h;
+    }
+    XYZ_TO_REC709 * (xyz / f64::from(*Y_INTEGRAL)).as_vec3()
+}
+
+#[test]
+fn reflectance_spectra_under_d65_give_their_colour_back() {
+    let mut rng = crate::test_rng::Rng(17);
+    let (mut worst, mut total) = (0.0f32, 0.0f32);
+    let n = 500;
+    for _ in 0..n {
+        let rgb = rng.vec3();
+        let s = SigmoidPolynomial::reflectance(rgb);
+        let back = rec709_of(|nm| s.eval(nm) * d65(nm));
+        let err = (back - rgb).abs().max_element();
+        worst = worst.max(err);
+        total += err;
+    }
+    // The table's resolution (64) bounds this: 0.003 at worst, 1e-4 on average.
+    assert!(worst < 0.005, "worst {worst}");
+    assert!(total / (n as f32) < 5e-4, "mean {}", total / n as f32);
+}
+
+#[test]
+fn greys_are_flat_and_every_reflectance_stays_in_zero_one() {
+    for r in [0.0, 0.25, 0.5, 0.73, 1.0] {
+        let s = SigmoidPolynomial::reflectance(Vec3::splat(r));
+        for nm in (360..=830).step_by(10) {
+            assert!(
+                (s.eval(nm as f32) - r).abs() < 1e-6,
+                "{r} at {nm}: {}",
+                s.eval(nm as f32)
+            );
+        }
+    }
+    let mut rng = crate::test_rng::Rng(3);
+    for _ in 0..200 {
+        // Saturated and out-of-range colours too: channels are clamped.
+        let rgb = rng.vec3() * 1.5 - 0.2;
+        let s = SigmoidPolynomial::reflectance(rgb);
+        for nm in (360..=830).step_by(10) {
+            let v = s.eval(nm as f32);
+            assert!((0.0..=1.0).contains(&v), "{rgb} at {nm}: {v}");
+        }
+    }
+}
+
+#[test]
+fn light_of_any_strength_gives_its_colour_back() {
+    for rgb in [
+        Vec3::ONE,
+        Vec3::new(17.0, 12.0, 4.0),
+        Vec3::new(0.02, 0.5, 3.0),
+        Vec3::new(1e4, 0.0, 0.0),
+    ] {
+        let l = IlluminantSpectrum::new(rgb);
+        let back = rec709_of(|nm| l.eval(nm));
+        let err = ((back - rgb).abs() / rgb.max_element()).max_element();
+        assert!(err < 0.005, "{rgb} came back {back}");
+    }
+    // Exactly D65 for white, so that a white surface under white light is the same in the
+    // spectral path as in the RGB one.
+    let white = IlluminantSpectrum::new(Vec3::ONE);
+    for nm in (360..=830).step_by(10) {
+        let nm = nm as f32;
+        assert!((white.eval(nm) - d65(nm)).abs() <= 1e-6 * d65(nm));
+    }
+    assert_eq!(IlluminantSpectrum::new(Vec3::ZERO).eval(550.0), 0.0);
+}
