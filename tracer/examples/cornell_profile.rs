@@ -2,8 +2,9 @@
 //! `render_tile` on all threads: camera paths per second, rays, and a hash of the image,
 //! so that a change meant to leave every pixel alone can show it did.
 //!
-//! `cargo run --release -p tracer --example cornell_profile -- [SPP]` (default 1). Under
-//! `valgrind --tool=callgrind` it gives the instruction counts in BENCHMARKS.md.
+//! `cargo run --release -p tracer --example cornell_profile -- [SPP] [spectral]` (default
+//! 1, RGB). Under `valgrind --tool=callgrind` it gives the instruction counts in
+//! BENCHMARKS.md.
 use std::sync::Arc;
 use std::time::Instant;
 use tracer::film::{SampleRange, TileRect};
@@ -23,6 +24,7 @@ fn main() {
     let settings = RenderSettings {
         max_depth: 8,
         seed: 7,
+        spectral: std::env::args().nth(2).as_deref() == Some("spectral"),
         ..RenderSettings::DEFAULT
     };
     let start = Instant::now();

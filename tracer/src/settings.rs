@@ -101,6 +101,10 @@ pub struct RenderSettings {
     /// plays it, so paths end at `max_depth` only. The image converges to the same result
     /// either way; the setting trades noise for time (`tessera bench` measures it).
     pub russian_roulette: Option<u32>,
+    /// Carry light at four sampled wavelengths rather than in RGB (the spectral path). A
+    /// scene with a wavelength-dependent feature needs it; for any other it converges to
+    /// the same image with more colour noise, which lets the two paths be compared.
+    pub spectral: bool,
 }
 
 impl RenderSettings {
@@ -111,6 +115,7 @@ impl RenderSettings {
         seed: 0,
         noise: None,
         russian_roulette: Some(3),
+        spectral: false,
     };
 }
 
