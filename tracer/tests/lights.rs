@@ -858,9 +858,8 @@ fn uniform_triangles_carry_their_radiance_and_front_face() {
 #[test]
 fn a_single_sided_emitter_lights_its_front_also_when_mirrored() {
     use glam::{DMat4, Vec4};
-    use tracer::camera::Projection;
     use tracer::material::Material;
-    use tracer::scene::{CameraDef, SceneBuilder};
+    use tracer::scene::SceneBuilder;
     use tracer::shapes::quad;
 
     // `facing` is the emitter's normal in its mesh; `mirror` scales the mesh by −1 in x,
@@ -892,17 +891,7 @@ fn a_single_sided_emitter_lights_its_front_also_when_mirrored() {
             DMat4::IDENTITY
         };
         b.mesh("emitter", vec![quad(corners, light)], place);
-        b.camera(
-            CameraDef {
-                name: None,
-                projection: Projection::Perspective {
-                    yfov: 0.6,
-                    aspect_ratio: None,
-                    znear: 0.01,
-                },
-            },
-            DMat4::from_translation(DVec3::new(0.0, 0.0, 4.0)),
-        );
+        common::camera_on_z(&mut b, 4.0, 0.6);
         b.environment(Environment::Black);
         // The wall's pixels alone (depth 4; the emitter's at 3, and its silhouette between).
         let layers = common::render_square(b.finish(), 16, 16, 4);

@@ -20,6 +20,9 @@ use tracer::render::{
 use tracer::scene::{CameraDef, Scene, SceneBuilder};
 use tracer::shapes::{quad, uv_sphere};
 
+mod common;
+use common::furnace;
+
 fn frame(scene: Scene, width: u32, height: u32) -> PreparedFrame {
     let options = FrameOptions {
         width,
@@ -32,24 +35,6 @@ fn frame(scene: Scene, width: u32, height: u32) -> PreparedFrame {
 fn render(frame: &PreparedFrame, settings: &RenderSettings, spp: u32) -> TileBuffer {
     let rect = TileRect::new(0, 0, frame.width, frame.height);
     render_region(frame, settings, rect, SampleRange::new(0, spp), 16, &|_| {})
-}
-
-/// A unit sphere in a uniform environment of radiance 1, seen by a camera at z = 4.
-fn furnace(material: Material) -> Scene {
-    let mut b = SceneBuilder::default();
-    let m = b.material(material);
-    b.mesh("sphere", vec![uv_sphere(m, 64, 128)], DMat4::IDENTITY);
-    let camera = CameraDef {
-        name: None,
-        projection: Projection::Perspective {
-            yfov: 0.6,
-            aspect_ratio: None,
-            znear: 0.01,
-        },
-    };
-    b.camera(camera, DMat4::from_translation(DVec3::new(0.0, 0.0, 4.0)));
-    b.environment(Environment::Constant(Vec3::ONE));
-    b.finish()
 }
 
 /// Mean radiance over the pixels fully covered by geometry, and over the background.

@@ -3,15 +3,14 @@
 
 use std::sync::Arc;
 
-use glam::{DMat4, DVec3, Vec3, Vec4};
+use glam::{Vec3, Vec4};
 
-use tracer::camera::Projection;
-use tracer::film::{Layers, SampleRange, TileRect};
-use tracer::light::Environment;
+use tracer::film::{Layers, TileRect};
 use tracer::material::Material;
-use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
-use tracer::scene::{CameraDef, Scene, SceneBuilder};
-use tracer::shapes::uv_sphere;
+use tracer::render::{prepare_frame, FrameOptions, PreparedFrame, RenderSettings};
+use tracer::scene::Scene;
+
+mod common;
 
 fn frame(scene: Scene, size: u32) -> PreparedFrame {
     let options = FrameOptions {
@@ -27,15 +26,7 @@ fn render(frame: &PreparedFrame, spectral: bool, rect: TileRect, spp: u32) -> La
         spectral,
         ..RenderSettings::DEFAULT
     };
-    render_region(
-        frame,
-        &settings,
-        rect,
-        SampleRange::new(0, spp),
-        16,
-        &|_| {},
-    )
-    .resolve()
+    common::render_rect(frame, &settings, rect, spp)
 }
 
 fn whole(frame: &PreparedFrame) -> TileRect {
@@ -55,25 +46,13 @@ fn mean(layers: &Layers, keep: impl Fn(f32) -> bool) -> Vec3 {
 
 /// A diffuse sphere of albedo `albedo` in a white environment, 32x32 pixels.
 fn furnace(albedo: Vec3) -> PreparedFrame {
-    let mut b = SceneBuilder::default();
-    let m = b.material(Material {
+    let material = Material {
         base_color: albedo.extend(1.0),
         metallic: 0.0,
         specular: 0.0,
         ..Material::default()
-    });
-    b.mesh("sphere", vec![uv_sphere(m, 32, 64)], DMat4::IDENTITY);
-    let camera = CameraDef {
-        name: None,
-        projection: Projection::Perspective {
-            yfov: 0.6,
-            aspect_ratio: None,
-            znear: 0.01,
-        },
     };
-    b.camera(camera, DMat4::from_translation(DVec3::new(0.0, 0.0, 4.0)));
-    b.environment(Environment::Constant(Vec3::ONE));
-    frame(b.finish(), 32)
+    frame(common::furnace(material), 32)
 }
 
 /// A white diffuse sphere in a white environment reflects exactly the environment: the

@@ -5,10 +5,39 @@ pub mod gltf_doc;
 
 use std::sync::Arc;
 
-use glam::{Vec2, Vec3};
+use glam::{DMat4, DVec3, Vec2, Vec3};
+use tracer::camera::Projection;
 use tracer::film::{Layers, SampleRange, TileRect};
-use tracer::render::{prepare_frame, render_region, FrameOptions, RenderSettings};
-use tracer::scene::Scene;
+use tracer::light::Environment;
+use tracer::material::Material;
+use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
+use tracer::scene::{CameraDef, Scene, SceneBuilder};
+use tracer::shapes::uv_sphere;
+
+/// A perspective camera (vertical field of view `yfov`) at `z` on the Z axis, looking
+/// down −Z at the origin.
+pub fn camera_on_z(b: &mut SceneBuilder, z: f64, yfov: f32) {
+    let camera = CameraDef {
+        name: None,
+        projection: Projection::Perspective {
+            yfov,
+            aspect_ratio: None,
+            znear: 0.01,
+        },
+    };
+    b.camera(camera, DMat4::from_translation(DVec3::new(0.0, 0.0, z)));
+}
+
+/// A unit sphere of `material` in a uniform environment of radiance 1, seen by a camera
+/// at z = 4: a white furnace for a white material.
+pub fn furnace(material: Material) -> Scene {
+    let mut b = SceneBuilder::default();
+    let m = b.material(material);
+    b.mesh("sphere", vec![uv_sphere(m, 64, 128)], DMat4::IDENTITY);
+    camera_on_z(&mut b, 4.0, 0.6);
+    b.environment(Environment::Constant(Vec3::ONE));
+    b.finish()
+}
 
 /// Renders frame 0 of `scene` at `size` × `size` pixels and `spp` samples per pixel,
 /// paths up to `max_depth` bounces, on 16 threads' worth of work.
@@ -19,18 +48,21 @@ pub fn render_square(scene: Scene, size: u32, spp: u32, max_depth: u32) -> Layer
         ..Default::default()
     };
     let frame = prepare_frame(Arc::new(scene), &options).expect("scene prepares");
-    render_region(
-        &frame,
-        &RenderSettings {
-            max_depth,
-            ..RenderSettings::default()
-        },
-        TileRect::new(0, 0, size, size),
-        SampleRange::new(0, spp),
-        16,
-        &|_| {},
-    )
-    .resolve()
+    let settings = RenderSettings {
+        max_depth,
+        ..RenderSettings::default()
+    };
+    render_rect(&frame, &settings, TileRect::new(0, 0, size, size), spp)
+}
+
+/// Renders `rect` of `frame` at samples 0..`spp`, on 16 threads' worth of work.
+pub fn render_rect(
+    frame: &PreparedFrame,
+    settings: &RenderSettings,
+    rect: TileRect,
+    spp: u32,
+) -> Layers {
+    render_region(frame, settings, rect, SampleRange::new(0, spp), 16, &|_| {}).resolve()
 }
 
 /// SplitMix64: small, deterministic, good enough for Monte Carlo tests and test geometry.
