@@ -494,7 +494,9 @@ fn transmittance(sigma: Vec3, distance: f32) -> Vec3 {
 }
 
 /// Radiance leaving emissive triangle `triangle` of `instance` at barycentrics (b1, b2)
-/// towards a point in direction `-wi` from it, honouring one-sided emission.
+/// towards a point in direction `-wi` from it, honouring one-sided emission. Only
+/// textured or vertex-coloured emission comes here: the light sampler answers for
+/// uniform emitters itself ([`Emitter::Radiance`]).
 fn emitted_toward(
     frame: &PreparedFrame,
     instance: u32,
@@ -509,9 +511,6 @@ fn emitted_toward(
     let material = &scene.materials[tri.prim.material as usize];
     if !material.double_sided && tri.front_normal().dot(wi) >= 0.0 {
         return Vec3::ZERO;
-    }
-    if material.uniform_emission(!tri.prim.colors.is_empty()) {
-        return material.emission_factor();
     }
     let uvs = tri.prim.uvs_at(tri.t, b1, b2);
     let color = tri.prim.color_at(tri.t, b1, b2);

@@ -141,7 +141,8 @@ pub struct EmissiveTriangle {
     /// `p[1]` and `p[2]`: the point is `p[0]·(1 − b1 − b2) + p[1]·b1 + p[2]·b2`, as in
     /// [`crate::geometry::barycentric`].
     pub p: [Vec3; 3],
-    /// Average emitted radiance over the triangle (nits), used only to estimate its power.
+    /// Emitted radiance (nits): exact where `uniform`, else the factor, which only
+    /// estimates the triangle's power.
     pub emission: Vec3,
     /// Whether both faces emit (glTF `doubleSided`); doubles the power estimate.
     pub double_sided: bool,

@@ -84,14 +84,15 @@ impl TriangleLight {
             t.p.map(|v| v.distance_squared(centroid))
                 .into_iter()
                 .fold(0.0, f32::max);
+        let normal = c / len;
         (area > 0.0 && area.is_finite() && emits).then(|| Self {
             p: t.p,
-            normal: c / len,
+            normal,
             area,
             centroid,
             spherical_within2: AREA_SAMPLING_RADII * AREA_SAMPLING_RADII * r2,
             radiance: t.uniform.then_some(t.emission),
-            front: if t.mirrored { -c / len } else { c / len },
+            front: if t.mirrored { -normal } else { normal },
             double_sided: t.double_sided,
             instance: t.instance,
             triangle: t.triangle,
