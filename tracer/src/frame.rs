@@ -66,6 +66,9 @@ pub(crate) struct PreparedMaterial {
     /// For a material without textures, its values at every point of a primitive
     /// without vertex colours: [`crate::material::Material::sample`] there, once.
     pub uniform: Option<crate::material::MaterialSample>,
+    /// Its KHR_materials_dispersion where it refracts into a volume, else 0: the spectral
+    /// path refracts each path at its hero wavelength's IOR.
+    pub dispersion: f32,
 }
 
 /// One triangle of an instance at a ray's time: where its data lives, its vertex

@@ -10,11 +10,12 @@ mod surface;
 use carrier::{Carrier, Colour, Rgb};
 use surface::{surface_point, SurfacePoint};
 
-use crate::bsdf::{Bsdf, BsdfAt};
+use crate::bsdf::{Bsdf, BsdfAt, SurfaceParams};
 use crate::film::SampleValue;
 use crate::frame::PreparedFrame;
 use crate::geometry::{offset_ray_origin_bounded, Ray};
 use crate::light::Emitter;
+use crate::material::dispersive_ior;
 use crate::sampler::PixelSampler;
 use crate::settings::RenderSettings;
 use crate::spectrum::SampledWavelengths;
@@ -179,7 +180,7 @@ struct SampleWalk<W: Carrier> {
 }
 
 /// Traces camera sample `index` of pixel (`x`, `y`): in RGB, or at four wavelengths where
-/// the settings ask for the spectral path.
+/// the settings ask for the spectral path or the scene needs it.
 pub fn trace_sample(
     frame: &PreparedFrame,
     settings: &RenderSettings,
@@ -187,7 +188,7 @@ pub fn trace_sample(
     y: u32,
     index: u32,
 ) -> SampleValue {
-    if settings.spectral {
+    if settings.spectral || frame.features.needs_spectral() {
         trace_sample_with(
             frame,
             settings,
@@ -270,7 +271,7 @@ fn trace_path<W: Carrier>(
     mut s: PathState<W::Colour>,
     walk: &mut SampleWalk<W>,
 ) {
-    let wl = walk.carrier;
+    let wl = &mut walk.carrier;
     let out = &mut walk.out;
     let radiance = &mut walk.radiance;
     while s.depth <= settings.max_depth {
@@ -328,15 +329,26 @@ fn trace_path<W: Carrier>(
         }
 
         // The material's own BSDF where textures and vertex colour leave it as it is.
-        let material_bsdf = &frame.materials[sp.material_index as usize].bsdf;
+        let material = &frame.materials[sp.material_index as usize];
+        let material_bsdf = &material.bsdf;
         let textured;
-        let bsdf = match sp.varying {
+        let mut bsdf = match sp.varying {
             Some(params) if params != material_bsdf.params => {
                 textured = Bsdf::new(params).with_albedo_curve(material_bsdf.albedo_curve());
                 &textured
             }
             _ => material_bsdf,
         };
+        // A dispersive interface refracts each wavelength its own way: the path follows
+        // its hero wavelength alone, at that wavelength's IOR (as pbrt-v4 does).
+        let dispersed;
+        if W::SPECTRAL && material.dispersion > 0.0 {
+            if let Some(nm) = wl.keep_hero(&mut s.throughput) {
+                let ior = dispersive_ior(bsdf.params.ior, material.dispersion, nm);
+                dispersed = Bsdf::new(SurfaceParams { ior, ..bsdf.params });
+                bsdf = &dispersed;
+            }
+        }
         if !walk.albedo_done && !bsdf.is_delta() {
             out.albedo = bsdf.albedo();
             walk.albedo_done = true;

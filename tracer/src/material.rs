@@ -31,6 +31,18 @@ pub struct Metamaterial {
     pub impedance: f32,
 }
 
+/// The IOR at wavelength `nm` of a material of IOR `ior` and KHR_materials_dispersion
+/// `dispersion` (20 / Abbe number): the extension's two-term Cauchy fit, `ior` at the
+/// Fraunhofer d line (587.6 nm) and `n_F − n_C = (ior − 1) / V` between the F (486.1 nm)
+/// and C (656.3 nm) lines, never below 1. `ior` itself without dispersion.
+pub fn dispersive_ior(ior: f32, dispersion: f32, nm: f32) -> f32 {
+    if !(dispersion > 0.0) {
+        return ior;
+    }
+    let abbe = 20.0 / dispersion;
+    (ior + (ior - 1.0) / abbe * (523_655.0 / (nm * nm) - 1.5168)).max(1.0)
+}
+
 /// A glTF material. Factors multiply their textures, as the spec says.
 #[derive(Clone, Debug)]
 pub struct Material {
@@ -137,6 +149,11 @@ pub struct Material {
     /// `anisotropyTexture`: direction in RG (mapped from [0, 1] to [−1, 1]), strength
     /// in B (times the factor).
     pub anisotropy_texture: Option<TextureRef>,
+    /// KHR_materials_dispersion `dispersion`, default 0 (none): 20 / the Abbe number, so
+    /// 1 is a flint glass of Abbe number 20 and 0.33 a crown glass. It spreads the IOR of
+    /// a refracting volume over wavelength ([`dispersive_ior`]), which the spectral path
+    /// follows.
+    pub dispersion: f32,
     /// TESSERA_materials_metamaterial, where the material has it: its transmitting part
     /// refracts negatively, as the boundary of a solid.
     pub metamaterial: Option<Metamaterial>,
@@ -196,6 +213,7 @@ impl Default for Material {
             anisotropy_strength: 0.0,
             anisotropy_rotation: 0.0,
             anisotropy_texture: None,
+            dispersion: 0.0,
             metamaterial: None,
             unlit: false,
         }
@@ -275,6 +293,16 @@ impl Material {
         // A black channel absorbs everything: e^-69 is below any radiance that counts.
         let c = self.attenuation_color.clamp(Vec3::splat(1e-30), Vec3::ONE);
         -Vec3::new(math::ln(c.x), math::ln(c.y), math::ln(c.z)) / self.attenuation_distance
+    }
+
+    /// Whether light refracting into the material bends by wavelength: KHR_materials_dispersion
+    /// on a refracting volume (the extension builds on KHR_materials_volume; a thin wall
+    /// bends no wavelength, and a metamaterial has its own index).
+    pub fn is_dispersive(&self) -> bool {
+        self.dispersion > 0.0
+            && self.transmission > 0.0
+            && !self.is_thin_walled()
+            && self.metamaterial.is_none()
     }
 
     /// Whether the material has a sheen layer.

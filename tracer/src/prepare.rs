@@ -637,6 +637,7 @@ fn prepared_materials(scene: &Scene) -> Vec<PreparedMaterial> {
             };
             PreparedMaterial {
                 bsdf: Bsdf::new(m.factors()).with_albedo_curve(curve),
+                dispersion: if m.is_dispersive() { m.dispersion } else { 0.0 },
                 uniform: (!m.has_textures())
                     .then(|| m.sample(&scene.textures, [Vec2::ZERO; 2], Vec4::ONE)),
             }

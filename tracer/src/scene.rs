@@ -408,6 +408,8 @@ pub struct Features {
     pub diffuse_transmission: bool,
     /// Any material is anisotropic (KHR_materials_anisotropy).
     pub anisotropy: bool,
+    /// Any refracting volume bends light by wavelength (KHR_materials_dispersion).
+    pub dispersion: bool,
 }
 
 impl Features {
@@ -425,6 +427,13 @@ impl Features {
         self.metamaterial |= m.metamaterial.is_some();
         self.diffuse_transmission |= m.diffuse_transmission > 0.0;
         self.anisotropy |= m.is_anisotropic();
+        self.dispersion |= m.is_dispersive();
+    }
+
+    /// Whether a feature depends on wavelength, so that the scene renders on the spectral
+    /// path whatever the settings ask.
+    pub fn needs_spectral(&self) -> bool {
+        self.dispersion
     }
 
     /// Names of the features in use, for summaries and EXR metadata.
@@ -447,6 +456,7 @@ impl Features {
             (self.metamaterial, "metamaterial"),
             (self.diffuse_transmission, "diffuse-transmission"),
             (self.anisotropy, "anisotropy"),
+            (self.dispersion, "dispersion"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }

@@ -102,8 +102,9 @@ pub struct RenderSettings {
     /// either way; the setting trades noise for time (`tessera bench` measures it).
     pub russian_roulette: Option<u32>,
     /// Carry light at four sampled wavelengths rather than in RGB (the spectral path). A
-    /// scene with a wavelength-dependent feature needs it; for any other it converges to
-    /// the same image with more colour noise, which lets the two paths be compared.
+    /// scene with a wavelength-dependent feature ([`crate::scene::Features::needs_spectral`])
+    /// takes it whatever this says; any other converges to the same image with more
+    /// colour noise, which lets the two paths be compared.
     pub spectral: bool,
 }
 

@@ -49,6 +49,50 @@ pub fn cube(material: u32) -> Primitive {
     prim
 }
 
+/// A triangular prism with flat normals: its cross-section in the xy plane is an
+/// isosceles triangle of apex angle `apex` (radians) at (0, `height`) over a base on the
+/// x axis, extruded from z = −`depth`/2 to `depth`/2. Light along +x enters the left face
+/// and leaves the right one, bent towards the base.
+pub fn prism(material: u32, apex: f32, height: f32, depth: f32) -> Primitive {
+    let half_base = height * math::tan(apex / 2.0);
+    let z = depth / 2.0;
+    let [l, r, a] = [
+        Vec3::new(-half_base, 0.0, 0.0),
+        Vec3::new(half_base, 0.0, 0.0),
+        Vec3::new(0.0, height, 0.0),
+    ];
+    let back = Vec3::new(0.0, 0.0, -z);
+    let front = Vec3::new(0.0, 0.0, z);
+    let faces: [&[Vec3]; 5] = [
+        &[l + front, l + back, a + back, a + front],
+        &[a + front, a + back, r + back, r + front],
+        &[r + front, r + back, l + back, l + front],
+        &[l + front, r + front, a + front],
+        &[l + back, r + back, a + back],
+    ];
+    let centre = (l + r + a) / 3.0;
+    let mut prim = Primitive {
+        material,
+        ..Default::default()
+    };
+    for face in faces {
+        // Counter-clockwise seen from outside, as glTF's front faces are.
+        let mut face = face.to_vec();
+        let mut n = (face[1] - face[0]).cross(face[2] - face[0]).normalize();
+        if n.dot(face[0] - centre) < 0.0 {
+            face.reverse();
+            n = -n;
+        }
+        let first = prim.positions.len() as u32;
+        prim.positions.extend_from_slice(&face);
+        prim.normals.extend(std::iter::repeat_n(n, face.len()));
+        for i in 1..face.len() as u32 - 1 {
+            prim.indices.push([first, first + i, first + i + 1]);
+        }
+    }
+    prim
+}
+
 /// A UV sphere of radius 1 with smooth normals.
 pub fn uv_sphere(material: u32, rings: u32, segments: u32) -> Primitive {
     let mut prim = Primitive {

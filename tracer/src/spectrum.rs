@@ -21,7 +21,7 @@ pub use upsample::{IlluminantSpectrum, SigmoidPolynomial, UnboundedSpectrum};
 pub const WAVELENGTHS: usize = 4;
 
 /// XYZ to linear Rec. 709 (D65 white), as the sRGB standard gives it.
-pub(crate) const XYZ_TO_REC709: Mat3 = Mat3::from_cols_array(&[
+pub const XYZ_TO_REC709: Mat3 = Mat3::from_cols_array(&[
     3.240_454_2,
     -0.969_266,
     0.055_643_4,

@@ -271,6 +271,7 @@ fn everything_else() -> Scene {
         sheen_roughness: 0.75,
         diffuse_transmission: 0.4,
         diffuse_transmission_color: Vec3::new(1.0, 0.75, 0.5),
+        dispersion: 0.5,
         metamaterial: Some(Metamaterial {
             refractive_index: -1.25,
             impedance: 0.5,

@@ -71,6 +71,7 @@ pub(super) struct Extensions {
     pub(super) clearcoat: bool,
     pub(super) sheen: bool,
     pub(super) volume: bool,
+    pub(super) dispersion: bool,
     pub(super) iridescence: bool,
     pub(super) metamaterial: bool,
     pub(super) diffuse_transmission: bool,
@@ -90,6 +91,7 @@ impl Extensions {
             (self.clearcoat, "KHR_materials_clearcoat"),
             (self.sheen, "KHR_materials_sheen"),
             (self.volume, "KHR_materials_volume"),
+            (self.dispersion, "KHR_materials_dispersion"),
             (self.iridescence, "KHR_materials_iridescence"),
             (self.metamaterial, crate::loader::METAMATERIAL),
             (

@@ -97,7 +97,7 @@ pub(super) fn material(
         AlphaMode::Mask { cutoff } => cutoff,
         _ => 0.5,
     };
-    let factors: [(&str, &[f32]); 16] = [
+    let factors: [(&str, &[f32]); 17] = [
         ("baseColorFactor", &m.base_color.to_array()),
         ("metallicFactor", &[m.metallic]),
         ("roughnessFactor", &[m.roughness]),
@@ -120,6 +120,7 @@ pub(super) fn material(
         ),
         ("anisotropyStrength", &[m.anisotropy_strength]),
         ("anisotropyRotation", &[m.anisotropy_rotation]),
+        ("dispersion", &[m.dispersion]),
     ];
     for (name, values) in factors {
         finite(&el, name, values)?;
@@ -148,8 +149,9 @@ pub(super) fn material(
             return Err(invalid(&el, format!("{name} {values:?} is outside [0, 1]")));
         }
     }
-    let non_negative: [(&str, &[f32]); 7] = [
+    let non_negative: [(&str, &[f32]); 8] = [
         ("emissive", &m.emissive.to_array()),
+        ("dispersion", &[m.dispersion]),
         ("specularFactor", &[m.specular]),
         ("specularColorFactor", &m.specular_color.to_array()),
         ("alphaCutoff", &[cutoff]),
@@ -280,6 +282,13 @@ pub(super) fn material(
             volume = volume.with("attenuationDistance", num(m.attenuation_distance));
         }
         ext = ext.with("KHR_materials_volume", volume.build());
+    }
+    if m.dispersion != 0.0 {
+        used.dispersion = true;
+        ext = ext.with(
+            "KHR_materials_dispersion",
+            Obj::default().with("dispersion", num(m.dispersion)).build(),
+        );
     }
     let film_defaults = Material::default();
     if m.iridescence != 0.0

@@ -62,12 +62,19 @@ impl Colour for Vec4 {
 /// How a path turns RGB quantities into what it carries, and back for the film.
 pub(crate) trait Carrier: Copy {
     type Colour: Colour;
+    /// Whether it carries wavelengths (so that the RGB path compiles out what only the
+    /// spectral path does).
+    const SPECTRAL: bool;
     /// A BSDF value, sample weight or transmittance of RGB colour `rgb` (any size).
     fn weight(&self, rgb: Vec3) -> Self::Colour;
     /// Radiance of light of RGB colour `rgb`.
     fn light(&self, rgb: Vec3) -> Self::Colour;
     /// Linear Rec. 709 of what a path gathered.
     fn to_rgb(&self, c: Self::Colour) -> Vec3;
+    /// From here on carries the hero wavelength alone, `c` at it, and gives it (in nm):
+    /// where a dispersive refraction sends each wavelength its own way. `None` for a
+    /// carrier without wavelengths.
+    fn keep_hero(&mut self, c: &mut Self::Colour) -> Option<f32>;
 }
 
 /// The RGB path: everything is already RGB.
@@ -76,6 +83,7 @@ pub(crate) struct Rgb;
 
 impl Carrier for Rgb {
     type Colour = Vec3;
+    const SPECTRAL: bool = false;
     #[inline(always)]
     fn weight(&self, rgb: Vec3) -> Vec3 {
         rgb
@@ -88,10 +96,14 @@ impl Carrier for Rgb {
     fn to_rgb(&self, c: Vec3) -> Vec3 {
         c
     }
+    fn keep_hero(&mut self, _: &mut Vec3) -> Option<f32> {
+        None
+    }
 }
 
 impl Carrier for SampledWavelengths {
     type Colour = Vec4;
+    const SPECTRAL: bool = true;
     fn weight(&self, rgb: Vec3) -> Vec4 {
         if rgb == Vec3::ZERO {
             return Vec4::ZERO;
@@ -108,5 +120,10 @@ impl Carrier for SampledWavelengths {
     }
     fn to_rgb(&self, c: Vec4) -> Vec3 {
         spectrum::to_rec709(c, self)
+    }
+    fn keep_hero(&mut self, c: &mut Vec4) -> Option<f32> {
+        self.terminate_secondary();
+        *c = Vec4::new(c.x, 0.0, 0.0, 0.0);
+        Some(self.lambda[0])
     }
 }

@@ -379,6 +379,20 @@ fn read_raw_extensions(
             impedance: z,
         });
     }
+    let dispersion = &raw.json["extensions"]["KHR_materials_dispersion"];
+    if dispersion.is_object() {
+        out.dispersion = raw.number(dispersion, "dispersion", 0.0)?;
+        if !(out.dispersion >= 0.0) || !out.dispersion.is_finite() {
+            return Err(SceneError::at(
+                raw.element,
+                format!(
+                    "dispersion {} is not a finite number of at least 0 \
+                     (KHR_materials_dispersion: 20 / the Abbe number)",
+                    out.dispersion
+                ),
+            ));
+        }
+    }
     let volume = &raw.json["extensions"]["KHR_materials_volume"];
     if volume.is_object() {
         out.thickness = raw.number(volume, "thicknessFactor", 0.0)?;
