@@ -10,6 +10,7 @@ use tracer::camera::Projection;
 use tracer::film::{Layers, TileRect};
 use tracer::light::Environment;
 use tracer::material::{dispersive_ior, Material};
+use tracer::math;
 use tracer::render::{prepare_frame, FrameOptions, PreparedFrame, RenderSettings};
 use tracer::scene::{CameraDef, SceneBuilder};
 use tracer::shapes::{prism, quad};
@@ -78,9 +79,10 @@ fn faces() -> [Plane; 2] {
     let m = prism_to_world();
     let half = APEX / 2.0;
     let apex = m.transform_point3(DVec3::new(0.0, PRISM_HEIGHT, 0.0));
+    let (sin, cos) = math::sin_cos_f64(half);
     [-1.0, 1.0].map(|side| Plane {
         point: apex,
-        normal: m.transform_vector3(DVec3::new(side * half.cos(), half.sin(), 0.0)),
+        normal: m.transform_vector3(DVec3::new(side * cos, sin, 0.0)),
     })
 }
 
@@ -164,7 +166,7 @@ fn scene_and_frame(dispersion: f32) -> PreparedFrame {
     let camera = CameraDef {
         name: None,
         projection: Projection::Perspective {
-            yfov: (2.0 * ((xfov / 2.0).tan() / aspect).atan()) as f32,
+            yfov: (2.0 * math::atan_f64(math::tan_f64(xfov / 2.0) / aspect)) as f32,
             aspect_ratio: None,
             znear: 0.01,
         },
