@@ -134,7 +134,7 @@ pub fn scene_to_glb(scene: &Scene) -> Result<Vec<u8>, ExportError> {
         .lights
         .iter()
         .enumerate()
-        .map(|(i, l)| light(i, l))
+        .map(|(i, l)| light(i, l, scene.light_spectra.get(&(i as u32)), &mut used))
         .collect::<Result<Vec<_>, _>>()?;
     let animations = scene
         .animations

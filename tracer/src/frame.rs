@@ -14,6 +14,7 @@ use crate::material::AlphaMode;
 use crate::motion::DeformedMesh;
 use crate::sampler::hash_combine;
 use crate::scene::{Features, Mesh, Primitive, Scene};
+use crate::spectrum::DenseSpectrum;
 
 /// A scene flattened for one frame: instances in camera-relative world space, their BVH,
 /// the camera and the lights.
@@ -51,6 +52,9 @@ pub struct PreparedFrame {
     pub(crate) any_hit_filter: bool,
     /// Per scene material, what the integrator reuses at every point that sees it.
     pub(crate) materials: Vec<PreparedMaterial>,
+    /// The spectra of lights and emissive materials that have their own
+    /// (TESSERA_lights_spectrum), scaled as [`DenseSpectrum::light`] says.
+    pub(crate) light_spectra: Vec<DenseSpectrum>,
     /// What the frame uses.
     pub features: Features,
     /// Remarks for the user (for example, the default environment was used).
@@ -69,6 +73,9 @@ pub(crate) struct PreparedMaterial {
     /// Its KHR_materials_dispersion where it refracts into a volume, else 0: the spectral
     /// path refracts each path at its hero wavelength's IOR.
     pub dispersion: f32,
+    /// Its emission's spectrum (TESSERA_lights_spectrum), an index in
+    /// [`PreparedFrame::light_spectra`].
+    pub emission_spectrum: Option<u32>,
 }
 
 /// One triangle of an instance at a ray's time: where its data lives, its vertex

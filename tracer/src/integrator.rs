@@ -18,7 +18,7 @@ use crate::light::Emitter;
 use crate::material::dispersive_ior;
 use crate::sampler::PixelSampler;
 use crate::settings::RenderSettings;
-use crate::spectrum::SampledWavelengths;
+use crate::spectrum::{DenseSpectrum, SampledWavelengths};
 
 /// Sampler dimensions used by the camera before the first bounce: pixel position, then
 /// the shutter time (drawn only when something moves, so a still frame skips it).
@@ -292,7 +292,7 @@ fn trace_path<W: Carrier>(
                 } else {
                     power_heuristic(s.prev_pdf, frame.lights.pdf_environment(ray.dir))
                 };
-                *radiance += s.throughput * wl.light(le) * w;
+                *radiance += s.throughput * wl.light(le, None) * w;
             }
             if !walk.albedo_done {
                 out.albedo = le;
@@ -312,6 +312,7 @@ fn trace_path<W: Carrier>(
             out.depth = Some((sp.p - ray.origin).dot(view_axis).abs());
         }
 
+        let material = &frame.materials[sp.material_index as usize];
         // Light emitted by the surface (glTF emission is one-sided for single-sided
         // materials, seen from the front only).
         let le = sp.emission;
@@ -325,11 +326,11 @@ fn trace_path<W: Carrier>(
                         .pdf_triangle(hit.instance, hit.triangle, s.prev_p, sp.p, sp.ng);
                 power_heuristic(s.prev_pdf, light_pdf)
             };
-            *radiance += s.throughput * wl.light(le) * w;
+            let spectrum = light_spectrum(frame, material.emission_spectrum);
+            *radiance += s.throughput * wl.light(le, spectrum) * w;
         }
 
         // The material's own BSDF where textures and vertex colour leave it as it is.
-        let material = &frame.materials[sp.material_index as usize];
         let material_bsdf = &material.bsdf;
         let textured;
         let mut bsdf = match sp.varying {
@@ -385,7 +386,7 @@ fn trace_path<W: Carrier>(
                             ..
                         } => emitted_toward(frame, instance, triangle, b1, b2, ls.wi, ray.time),
                     };
-                    let mut le = wl.light(le);
+                    let mut le = wl.light(le, light_spectrum(frame, ls.spectrum));
                     if s.absorption != Vec3::ZERO {
                         le *= wl.weight(transmittance(s.absorption, ls.distance));
                     }
@@ -491,6 +492,13 @@ fn trace_path<W: Carrier>(
             }
         }
     }
+}
+
+/// The spectrum `id` names among the frame's light spectra (`get`, not an index: the RGB
+/// path drops the lookup it never reads).
+#[inline(always)]
+fn light_spectrum(frame: &PreparedFrame, id: Option<u32>) -> Option<&DenseSpectrum> {
+    frame.light_spectra.get(id? as usize)
 }
 
 /// Beer–Lambert transmittance over `distance` through a medium of absorption `sigma`; a

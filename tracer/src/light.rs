@@ -157,6 +157,9 @@ pub struct EmissiveTriangle {
     pub instance: u32,
     /// Triangle index within the instance's mesh (as in [`crate::geometry::Hit::triangle`]).
     pub triangle: u32,
+    /// The spectrum of its emission, if its material has one of its own (an index the
+    /// light samples carry, see [`LightSample::spectrum`]).
+    pub spectrum: Option<u32>,
 }
 
 /// Errors from loading lights.

@@ -59,6 +59,7 @@ mod images;
 mod instancing;
 mod materials;
 mod meshes;
+mod spectra;
 mod tangents;
 
 pub use container::write_glb;
@@ -88,12 +89,17 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_materials_volume",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
+    LIGHTS_SPECTRUM,
     METAMATERIAL,
 ];
 
 /// Our own extension for negative-index media, documented in
 /// `docs/TESSERA_materials_metamaterial.md`.
 pub const METAMATERIAL: &str = "TESSERA_materials_metamaterial";
+
+/// Our own extension for the spectrum of a light or of a material's emission, documented
+/// in `docs/TESSERA_lights_spectrum.md`.
+pub const LIGHTS_SPECTRUM: &str = "TESSERA_lights_spectrum";
 
 /// Most mesh draws a scene may ask for: each is an instance of the frame's top-level BVH
 /// (about 200 bytes with its share of the tree), so this bounds that tree near 1 GB

@@ -5,6 +5,7 @@ use glam::{Vec2, Vec3, Vec4};
 
 use crate::bsdf::{ExtensionParams, SurfaceParams};
 use crate::math;
+use crate::spectrum::SpectrumShape;
 use crate::texture::{Texture, TextureRef};
 
 /// How a material's alpha is used (glTF `alphaMode`).
@@ -154,6 +155,9 @@ pub struct Material {
     /// a refracting volume over wavelength ([`dispersive_ior`]), which the spectral path
     /// follows.
     pub dispersion: f32,
+    /// TESSERA_lights_spectrum on the material: the spectrum its emission has (the
+    /// emissive colour filtering it), in place of the white that an RGB colour lifts to.
+    pub emission_spectrum: Option<SpectrumShape>,
     /// TESSERA_materials_metamaterial, where the material has it: its transmitting part
     /// refracts negatively, as the boundary of a solid.
     pub metamaterial: Option<Metamaterial>,
@@ -214,6 +218,7 @@ impl Default for Material {
             anisotropy_rotation: 0.0,
             anisotropy_texture: None,
             dispersion: 0.0,
+            emission_spectrum: None,
             metamaterial: None,
             unlit: false,
         }

@@ -126,6 +126,12 @@ pub fn acos_f64(x: f64) -> f64 {
     libm::acos(x)
 }
 
+/// Double-precision `e^x − 1`, exact near 0.
+#[inline]
+pub fn exp_m1_f64(x: f64) -> f64 {
+    libm::expm1(x)
+}
+
 /// `a` to `b` along the great arc (constant angular speed) for unit quaternions on the same
 /// hemisphere. The angle comes from `atan2(|a - b|, |a + b|)`, accurate for tiny angles
 /// where `acos(a·b)` is not.

@@ -8,6 +8,7 @@
 //! per-step placements. A still scene, or a closed shutter, gets one pose and the static
 //! path, which pays nothing per ray for motion blur.
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use glam::{Affine3A, DMat3, DMat4, DQuat, DVec3, Vec2, Vec3, Vec4};
@@ -25,6 +26,7 @@ use crate::material::AlphaMode;
 use crate::motion::{auto_steps, place, step_positions, DeformedMesh, PixelFootprint, PROBES};
 use crate::scene::{Node, Scene};
 use crate::settings::{CameraChoice, FrameOptions, RenderError};
+use crate::spectrum::{DenseSpectrum, SpectrumShape};
 
 /// The node graph at one time: every node instance and every mesh draw with its world
 /// transform, and the first world transform of each node (the one joints of a skin use).
@@ -349,6 +351,7 @@ pub fn prepare_frame(
 
     // Punctual lights sit where the middle step puts them: they light the frame but do not
     // blur inside the shutter.
+    let spectra = FrameSpectra::new(&scene);
     let punctual: Vec<_> = mid
         .instances
         .iter()
@@ -357,6 +360,7 @@ pub fn prepare_frame(
             Some((
                 scene.lights[light as usize],
                 to_f32_affine(&(relative * *world)),
+                spectra.of_light.get(&light).copied(),
             ))
         })
         .collect();
@@ -370,7 +374,7 @@ pub fn prepare_frame(
             &deformed[m - n_scene_meshes].bvh
         }
     });
-    let triangles = emissive_triangles(&scene, &bvh, &deformed);
+    let triangles = emissive_triangles(&scene, &bvh, &deformed, &spectra.of_material);
 
     // Build the BSDF's energy tables and curves now rather than inside the first tile's
     // threads.
@@ -379,7 +383,7 @@ pub fn prepare_frame(
         scene.features.sheen,
         scene.features.anisotropy,
     );
-    let materials = prepared_materials(&scene);
+    let materials = prepared_materials(&scene, &spectra.of_material);
     let mut features = scene.features;
     let environment = frame_environment(options, &scene, punctual.is_empty(), &mut warnings);
     features.environment = !matches!(environment, Environment::Black);
@@ -406,9 +410,48 @@ pub fn prepare_frame(
         filtered_instances,
         any_hit_filter,
         materials,
+        light_spectra: spectra.dense,
         features,
         warnings,
     })
+}
+
+/// The spectra of a frame's lights and emissive materials (TESSERA_lights_spectrum),
+/// tabulated once, and which light and material has which.
+struct FrameSpectra {
+    dense: Vec<DenseSpectrum>,
+    /// Scene light → index in `dense`.
+    of_light: BTreeMap<u32, u32>,
+    /// Per scene material, the index in `dense` of its emission's spectrum.
+    of_material: Vec<Option<u32>>,
+}
+
+impl FrameSpectra {
+    fn new(scene: &Scene) -> Self {
+        let mut dense = Vec::new();
+        // A shape with no power in the visible band (the loader refuses those) emits
+        // white rather than nothing.
+        let mut add = |shape: &SpectrumShape| {
+            let spectrum = DenseSpectrum::light(shape)?;
+            dense.push(spectrum);
+            Some(dense.len() as u32 - 1)
+        };
+        let of_light = scene
+            .light_spectra
+            .iter()
+            .filter_map(|(&light, shape)| Some((light, add(shape)?)))
+            .collect();
+        let of_material = scene
+            .materials
+            .iter()
+            .map(|m| m.emission_spectrum.as_ref().and_then(&mut add))
+            .collect();
+        Self {
+            dense,
+            of_light,
+            of_material,
+        }
+    }
 }
 
 /// The frame's instances, one per mesh draw: rigid ones with one transform per step
@@ -583,6 +626,7 @@ fn emissive_triangles(
     scene: &Scene,
     bvh: &SceneBvh,
     deformed: &[DeformedMesh],
+    spectra: &[Option<u32>],
 ) -> Vec<EmissiveTriangle> {
     let mut triangles = Vec::new();
     for (i, inst) in bvh.instances().iter().enumerate() {
@@ -615,6 +659,7 @@ fn emissive_triangles(
                     mirrored: inst.to_world.matrix3.determinant() < 0.0,
                     instance: i as u32,
                     triangle: mesh.first_triangle[p] + t as u32,
+                    spectrum: spectra[prim.material as usize],
                 });
             }
         }
@@ -625,11 +670,12 @@ fn emissive_triangles(
 /// Per scene material, its BSDF of the factors alone and, without textures, its values.
 /// The BSDF carries the albedo curve of a rough refractive interface where the roughness
 /// is not textured (see `bsdf/curve.rs`); materials without one use the shared tables.
-fn prepared_materials(scene: &Scene) -> Vec<PreparedMaterial> {
+fn prepared_materials(scene: &Scene, spectra: &[Option<u32>]) -> Vec<PreparedMaterial> {
     scene
         .materials
         .iter()
-        .map(|m| {
+        .zip(spectra)
+        .map(|(m, &emission_spectrum)| {
             let curve = if m.metallic_roughness_texture.is_some() {
                 None
             } else {
@@ -638,6 +684,7 @@ fn prepared_materials(scene: &Scene) -> Vec<PreparedMaterial> {
             PreparedMaterial {
                 bsdf: Bsdf::new(m.factors()).with_albedo_curve(curve),
                 dispersion: if m.is_dispersive() { m.dispersion } else { 0.0 },
+                emission_spectrum,
                 uniform: (!m.has_textures())
                     .then(|| m.sample(&scene.textures, [Vec2::ZERO; 2], Vec4::ONE)),
             }

@@ -2,6 +2,8 @@
 //! converted once into the tracer's own types. A [`Scene`] is independent of time and
 //! camera; [`crate::frame::PreparedFrame`] flattens it for one frame.
 
+use std::collections::BTreeMap;
+
 use glam::{DMat4, DQuat, DVec3, Vec2, Vec3, Vec4};
 
 use crate::animation::Animation;
@@ -11,6 +13,7 @@ use crate::camera::Projection;
 use crate::geometry::barycentric;
 use crate::light::{Environment, PunctualLight};
 use crate::material::Material;
+use crate::spectrum::SpectrumShape;
 use crate::texture::Texture;
 
 /// A whole scene, ready to be prepared for any frame.
@@ -31,6 +34,9 @@ pub struct Scene {
     pub cameras: Vec<CameraDef>,
     /// Punctual lights in their node's space; a node places them.
     pub lights: Vec<PunctualLight>,
+    /// TESSERA_lights_spectrum: the spectrum of each light (by index in `lights`) that
+    /// has one; the others' colours are lifted to spectra like any RGB colour.
+    pub light_spectra: BTreeMap<u32, SpectrumShape>,
     /// Light arriving from infinitely far away, when the scene defines it. glTF has no
     /// environment, so loaded scenes leave this `None` and the renderer picks a default
     /// (see [`crate::settings::FrameOptions::environment`]); built-in scenes set it.
@@ -410,6 +416,8 @@ pub struct Features {
     pub anisotropy: bool,
     /// Any refracting volume bends light by wavelength (KHR_materials_dispersion).
     pub dispersion: bool,
+    /// A light or an emissive material has its own spectrum (TESSERA_lights_spectrum).
+    pub light_spectra: bool,
 }
 
 impl Features {
@@ -428,12 +436,13 @@ impl Features {
         self.diffuse_transmission |= m.diffuse_transmission > 0.0;
         self.anisotropy |= m.is_anisotropic();
         self.dispersion |= m.is_dispersive();
+        self.light_spectra |= m.emission_spectrum.is_some() && m.is_emissive();
     }
 
     /// Whether a feature depends on wavelength, so that the scene renders on the spectral
     /// path whatever the settings ask.
     pub fn needs_spectral(&self) -> bool {
-        self.dispersion
+        self.dispersion || self.light_spectra
     }
 
     /// Names of the features in use, for summaries and EXR metadata.
@@ -457,6 +466,7 @@ impl Features {
             (self.diffuse_transmission, "diffuse-transmission"),
             (self.anisotropy, "anisotropy"),
             (self.dispersion, "dispersion"),
+            (self.light_spectra, "light-spectra"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }
@@ -565,6 +575,20 @@ impl SceneBuilder {
         })
     }
 
+    /// Adds a punctual light of its own spectrum (TESSERA_lights_spectrum), its colour
+    /// filtering that spectrum, placed by a root node with transform `local`.
+    pub fn light_with_spectrum(
+        &mut self,
+        light: PunctualLight,
+        spectrum: SpectrumShape,
+        local: DMat4,
+    ) -> u32 {
+        let node = self.light(light, local);
+        let index = self.scene.lights.len() as u32 - 1;
+        self.scene.light_spectra.insert(index, spectrum);
+        node
+    }
+
     /// Sets the environment.
     pub fn environment(&mut self, environment: Environment) {
         self.scene.environment = Some(environment);
@@ -576,6 +600,7 @@ impl SceneBuilder {
         let mats = &s.materials;
         let mut features = Features {
             punctual_lights: !s.lights.is_empty(),
+            light_spectra: !s.light_spectra.is_empty(),
             environment: s.environment.as_ref().is_some_and(|e| !e.is_black()),
             normal_maps: mats.iter().any(|m| m.normal_texture.is_some()),
             animation: !s.animations.is_empty(),

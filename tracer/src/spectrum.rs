@@ -11,10 +11,14 @@ use glam::{Mat3, Vec3, Vec4};
 use crate::math;
 
 mod cie_tables;
+mod described;
 mod upsample;
 
 use cie_tables::{D65, SAMPLES, STEP, X_BAR, Y_BAR, Z_BAR};
 pub use cie_tables::{LAMBDA_MAX, LAMBDA_MIN};
+pub use described::{
+    DenseSpectrum, SpectrumShape, BLACKBODY_KELVIN, MAX_TABLE_ENTRIES, WAVELENGTH_RANGE,
+};
 pub use upsample::{IlluminantSpectrum, SigmoidPolynomial, UnboundedSpectrum};
 
 /// Wavelengths one path carries.

@@ -22,6 +22,7 @@ use tracer::motion::Shutter;
 use tracer::render::{prepare_frame, render_tile, FrameOptions, RenderSettings};
 use tracer::scene::{CameraDef, MorphTarget, Node, Scene, SceneBuilder, Skin, Trs};
 use tracer::shapes::{cube, quad};
+use tracer::spectrum::SpectrumShape;
 use tracer::texture::TextureRef;
 
 const WIDTH: u32 = 24;
@@ -85,6 +86,11 @@ fn assert_same_data(original: &Scene, loaded: &Scene) {
     );
     assert_eq!(dbg(&original.cameras), dbg(&loaded.cameras), "cameras");
     assert_eq!(dbg(&original.lights), dbg(&loaded.lights), "lights");
+    assert_eq!(
+        dbg(&original.light_spectra),
+        dbg(&loaded.light_spectra),
+        "light spectra"
+    );
     assert_eq!(
         dbg(&original.animations),
         dbg(&loaded.animations),
@@ -239,8 +245,8 @@ fn animated_demo_round_trips_with_motion_blur() {
 
 /// What the demos do not use: a hierarchy with a matrix node, orthographic and perspective
 /// cameras, every kind of light, alpha modes, emission above 1, morph targets with a
-/// weights channel, STEP and scale channels, TEXCOORD_0, TANGENT (with anisotropy) and
-/// COLOR_0.
+/// weights channel, STEP and scale channels, TEXCOORD_0, TANGENT (with anisotropy),
+/// COLOR_0, and light spectra (TESSERA_lights_spectrum) on a light and an emission.
 fn everything_else() -> Scene {
     let mut b = SceneBuilder::default();
     let masked = b.material(Material {
@@ -251,6 +257,11 @@ fn everything_else() -> Scene {
         specular_color: Vec3::new(0.5, 0.6, 0.7),
         anisotropy_strength: 0.75,
         anisotropy_rotation: 0.5,
+        emission_spectrum: Some(SpectrumShape::Table(vec![
+            (400.0, 0.5),
+            (500.25, 1.0),
+            (700.0, 0.0),
+        ])),
         ..Default::default()
     });
     let blend = b.material(Material {
@@ -337,12 +348,16 @@ fn everything_else() -> Scene {
         },
         DMat4::from_translation(DVec3::Y * 3.0),
     );
-    b.light(
+    b.light_with_spectrum(
         PunctualLight::Spot {
             intensity: Vec3::splat(0.5),
             range: None,
             inner_cone: 0.2,
             outer_cone: 0.6,
+        },
+        SpectrumShape::Gaussian {
+            peak: 450.0,
+            width: 25.0,
         },
         DMat4::IDENTITY,
     );

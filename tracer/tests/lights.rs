@@ -71,6 +71,7 @@ fn tri(
         mirrored: false,
         instance,
         triangle,
+        spectrum: None,
     }
 }
 
@@ -165,6 +166,7 @@ fn mixed_scene() -> (LightSet, Vec<EmissiveTriangle>, Vec3) {
             range: None,
         },
         Affine3A::from_translation(Vec3::new(0.0, 3.0, 0.0)),
+        None,
     );
     let bounds = Aabb::from_points(Vec3::splat(-3.0), Vec3::splat(3.0));
     let set = LightSet::new(
@@ -564,6 +566,7 @@ fn point_light_gives_intensity_over_distance_squared() {
                 range: Some(0.1),
             },
             to_world,
+            None,
         )],
         vec![],
         Environment::Black,
@@ -593,7 +596,7 @@ fn directional_light_gives_its_illuminance() {
     let to_world = Affine3A::from_rotation_x(-std::f32::consts::FRAC_PI_2)
         * Affine3A::from_scale(Vec3::splat(0.01));
     let set = LightSet::new(
-        vec![(PunctualLight::Directional { illuminance }, to_world)],
+        vec![(PunctualLight::Directional { illuminance }, to_world, None)],
         vec![],
         Environment::Black,
         Aabb::from_points(Vec3::splat(-1.0), Vec3::ONE),
@@ -661,7 +664,7 @@ fn spot_light_in_the_set_applies_falloff_and_inverse_square() {
         outer_cone: 0.5,
     };
     let set = LightSet::new(
-        vec![(spot, to_world)],
+        vec![(spot, to_world, None)],
         vec![],
         Environment::Black,
         Aabb::EMPTY,
@@ -694,7 +697,7 @@ fn spot_light_in_the_set_applies_falloff_and_inverse_square() {
         outer_cone: 0.0,
     };
     let set = LightSet::new(
-        vec![(zero, to_world)],
+        vec![(zero, to_world, None)],
         vec![],
         Environment::Black,
         Aabb::EMPTY,
@@ -721,6 +724,7 @@ fn no_lights_means_no_samples() {
                 range: None,
             },
             Affine3A::IDENTITY,
+            None,
         )],
         vec![
             tri([Vec3::ZERO, Vec3::X, Vec3::X * 2.0], Vec3::ONE, true, 0, 0),

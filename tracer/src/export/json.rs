@@ -76,6 +76,7 @@ pub(super) struct Extensions {
     pub(super) metamaterial: bool,
     pub(super) diffuse_transmission: bool,
     pub(super) anisotropy: bool,
+    pub(super) light_spectra: bool,
 }
 
 impl Extensions {
@@ -99,6 +100,7 @@ impl Extensions {
                 "KHR_materials_diffuse_transmission",
             ),
             (self.anisotropy, "KHR_materials_anisotropy"),
+            (self.light_spectra, crate::loader::LIGHTS_SPECTRUM),
         ]
         .iter()
         .filter(|(on, _)| *on)

@@ -2,6 +2,8 @@
 //! cameras and lights it writes, each checked to read back as the same values.
 
 use super::*;
+use crate::loader::LIGHTS_SPECTRUM;
+use crate::spectrum::SpectrumShape;
 
 pub(super) const NO_TEXTURES: &str = "the exporter does not write images";
 pub(super) const NO_SKINS: &str = "the exporter does not write skins";
@@ -378,10 +380,39 @@ pub(super) fn material(
         used.unlit = true;
         ext = ext.with("KHR_materials_unlit", Obj::default().build());
     }
+    if let Some(shape) = &m.emission_spectrum {
+        used.light_spectra = true;
+        ext = ext.with(LIGHTS_SPECTRUM, spectrum(&el, shape)?);
+    }
     if !ext.0.is_empty() {
         out = out.with("extensions", ext.build());
     }
     Ok(out.build())
+}
+
+/// TESSERA_lights_spectrum's object for `shape`.
+fn spectrum(el: &str, shape: &SpectrumShape) -> Result<Value, ExportError> {
+    shape
+        .check()
+        .map_err(|why| invalid(el, format!("{LIGHTS_SPECTRUM}: {why}")))?;
+    Ok(match shape {
+        SpectrumShape::Blackbody(kelvin) => Obj::default().with("blackbody", num(*kelvin)),
+        SpectrumShape::Gaussian { peak, width } => Obj::default().with(
+            "gaussian",
+            Obj::default()
+                .with("peak", num(*peak))
+                .with("width", num(*width))
+                .build(),
+        ),
+        SpectrumShape::Table(entries) => Obj::default().with(
+            "table",
+            entries
+                .iter()
+                .map(|&(nm, v)| nums(&[nm, v]))
+                .collect::<Vec<_>>(),
+        ),
+    }
+    .build())
 }
 
 pub(super) fn camera(i: usize, c: &CameraDef) -> Result<Value, ExportError> {
@@ -438,7 +469,12 @@ pub(super) fn camera(i: usize, c: &CameraDef) -> Result<Value, ExportError> {
     Ok(out.build())
 }
 
-pub(super) fn light(i: usize, l: &PunctualLight) -> Result<Value, ExportError> {
+pub(super) fn light(
+    i: usize,
+    l: &PunctualLight,
+    shape: Option<&SpectrumShape>,
+    used: &mut Extensions,
+) -> Result<Value, ExportError> {
     let el = format!("light {i}");
     let (kind, value, range) = match *l {
         PunctualLight::Point { intensity, range } => ("point", intensity, range),
@@ -488,6 +524,15 @@ pub(super) fn light(i: usize, l: &PunctualLight) -> Result<Value, ExportError> {
             Obj::default()
                 .with("innerConeAngle", num(inner_cone))
                 .with("outerConeAngle", num(outer_cone))
+                .build(),
+        );
+    }
+    if let Some(shape) = shape {
+        used.light_spectra = true;
+        out = out.with(
+            "extensions",
+            Obj::default()
+                .with(LIGHTS_SPECTRUM, spectrum(&el, shape)?)
                 .build(),
         );
     }

@@ -5,7 +5,7 @@
 //! Materials, textures and lights are RGB. The spectral path lifts each RGB quantity a
 //! bounce produces to a smooth spectrum at the path's wavelengths (Jakob & Hanika 2019,
 //! `spectrum::upsample`): a BSDF value or sample weight as a spectrum of that colour, light
-//! as that colour times D65. For a diffuse surface the weight is its albedo, so this is
+//! as that colour times D65, or times the light's own spectrum where it has one. For a diffuse surface the weight is its albedo, so this is
 //! lifting the material's colour; greys (every colourless lobe) lift to exactly flat
 //! spectra, so a white surface under white light is the same in both paths.
 
@@ -13,7 +13,9 @@ use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign};
 
 use glam::{Vec3, Vec4};
 
-use crate::spectrum::{self, IlluminantSpectrum, SampledWavelengths, UnboundedSpectrum};
+use crate::spectrum::{
+    self, DenseSpectrum, IlluminantSpectrum, SampledWavelengths, UnboundedSpectrum,
+};
 
 /// Arithmetic a path does on what it carries.
 pub(crate) trait Colour:
@@ -67,8 +69,9 @@ pub(crate) trait Carrier: Copy {
     const SPECTRAL: bool;
     /// A BSDF value, sample weight or transmittance of RGB colour `rgb` (any size).
     fn weight(&self, rgb: Vec3) -> Self::Colour;
-    /// Radiance of light of RGB colour `rgb`.
-    fn light(&self, rgb: Vec3) -> Self::Colour;
+    /// Radiance of light of RGB colour `rgb`: white is D65, or `spectrum` where the light
+    /// has its own (TESSERA_lights_spectrum), which the colour then filters.
+    fn light(&self, rgb: Vec3, spectrum: Option<&DenseSpectrum>) -> Self::Colour;
     /// Linear Rec. 709 of what a path gathered.
     fn to_rgb(&self, c: Self::Colour) -> Vec3;
     /// From here on carries the hero wavelength alone, `c` at it, and gives it (in nm):
@@ -89,7 +92,7 @@ impl Carrier for Rgb {
         rgb
     }
     #[inline(always)]
-    fn light(&self, rgb: Vec3) -> Vec3 {
+    fn light(&self, rgb: Vec3, _: Option<&DenseSpectrum>) -> Vec3 {
         rgb
     }
     #[inline(always)]
@@ -111,12 +114,20 @@ impl Carrier for SampledWavelengths {
         let s = UnboundedSpectrum::new(rgb);
         Vec4::from_array(self.lambda.map(|nm| s.eval(nm)))
     }
-    fn light(&self, rgb: Vec3) -> Vec4 {
+    fn light(&self, rgb: Vec3, spectrum: Option<&DenseSpectrum>) -> Vec4 {
         if rgb == Vec3::ZERO {
             return Vec4::ZERO;
         }
-        let s = IlluminantSpectrum::new(rgb);
-        Vec4::from_array(self.lambda.map(|nm| s.eval(nm)))
+        match spectrum {
+            None => {
+                let s = IlluminantSpectrum::new(rgb);
+                Vec4::from_array(self.lambda.map(|nm| s.eval(nm)))
+            }
+            Some(white) => {
+                let s = UnboundedSpectrum::new(rgb);
+                Vec4::from_array(self.lambda.map(|nm| s.eval(nm) * white.eval(nm)))
+            }
+        }
     }
     fn to_rgb(&self, c: Vec4) -> Vec3 {
         spectrum::to_rec709(c, self)

@@ -61,6 +61,9 @@ pub struct LightSample {
     pub delta: bool,
     /// What the light sends.
     pub emitter: Emitter,
+    /// The spectrum the light's colour filters (TESSERA_lights_spectrum), as the light set
+    /// was given it; `None` for light whose colour lifts to a spectrum like any other.
+    pub spectrum: Option<u32>,
 }
 
 /// What a sampled light sends towards the reference point.
@@ -91,7 +94,8 @@ pub enum Emitter {
 /// One light of the set, in the order of the selection table.
 #[derive(Clone, Debug)]
 enum Light {
-    Punctual(WorldPunctual),
+    /// A punctual light, and its spectrum if it has its own.
+    Punctual(WorldPunctual, Option<u32>),
     Triangle(TriangleLight),
     Environment,
 }
@@ -146,7 +150,8 @@ impl Default for LightSet {
 impl LightSet {
     /// Builds the set in O(n).
     ///
-    /// * `punctual`: each light with its node → world transform.
+    /// * `punctual`: each light with its node → world transform, and the spectrum its
+    ///   light samples carry ([`LightSample::spectrum`]).
     /// * `triangles`: emissive triangles in world space. Degenerate ones (zero area,
     ///   non-finite vertices) and ones that emit nothing are skipped; a repeated
     ///   (instance, triangle) keeps its first entry.
@@ -154,7 +159,7 @@ impl LightSet {
     /// * `bounds`: the scene's world bounds, for the power of directional lights and the
     ///   environment (an empty box counts as radius 1).
     pub fn new(
-        punctual: Vec<(PunctualLight, Affine3A)>,
+        punctual: Vec<(PunctualLight, Affine3A, Option<u32>)>,
         triangles: Vec<EmissiveTriangle>,
         environment: Environment,
         bounds: Aabb,
@@ -173,11 +178,11 @@ impl LightSet {
 
         let mut lights = Vec::with_capacity(punctual.len() + triangles.len() + 1);
         let mut power = Vec::with_capacity(lights.capacity());
-        for (light, to_world) in &punctual {
+        for (light, to_world, spectrum) in &punctual {
             if let Some(l) = WorldPunctual::new(light, to_world) {
                 let p = l.power(radius);
                 if p > 0.0 && p.is_finite() {
-                    lights.push(Light::Punctual(l));
+                    lights.push(Light::Punctual(l, *spectrum));
                     power.push(p);
                 }
             }
@@ -258,7 +263,7 @@ impl LightSet {
             return None;
         }
         match &self.lights[index] {
-            Light::Punctual(l) => {
+            Light::Punctual(l, spectrum) => {
                 let s = l.sample(p)?;
                 Some(LightSample {
                     wi: s.wi,
@@ -266,6 +271,7 @@ impl LightSet {
                     pdf: selection,
                     delta: true,
                     emitter: Emitter::Radiance(s.value),
+                    spectrum: *spectrum,
                 })
             }
             Light::Triangle(t) => {
@@ -291,6 +297,7 @@ impl LightSet {
                     pdf,
                     delta: false,
                     emitter,
+                    spectrum: t.spectrum,
                 })
             }
             Light::Environment => {
@@ -302,6 +309,7 @@ impl LightSet {
                     pdf,
                     delta: false,
                     emitter: Emitter::Radiance(radiance),
+                    spectrum: None,
                 })
             }
         }

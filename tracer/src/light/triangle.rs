@@ -55,6 +55,7 @@ pub(crate) struct TriangleLight {
     double_sided: bool,
     pub(crate) instance: u32,
     pub(crate) triangle: u32,
+    pub(crate) spectrum: Option<u32>,
 }
 
 /// A point sampled on a triangle light.
@@ -96,6 +97,7 @@ impl TriangleLight {
             double_sided: t.double_sided,
             instance: t.instance,
             triangle: t.triangle,
+            spectrum: t.spectrum,
         })
     }
 
@@ -360,6 +362,7 @@ mod tests {
             mirrored: false,
             instance: 0,
             triangle: 0,
+            spectrum: None,
         })
         .unwrap()
     }

@@ -3,6 +3,7 @@
 //! animations, cameras, punctual lights, and the features the scene needs.
 
 use std::borrow::Cow;
+use std::collections::BTreeMap;
 
 use glam::{DMat4, DQuat, DVec3, DVec4, Vec3};
 use gltf::json::Value;
@@ -97,9 +98,14 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         .map(|c| convert_camera(&c, doc))
         .collect::<Result<Vec<_>, _>>()?;
     let mut lights = Vec::new();
+    let mut light_spectra = BTreeMap::new();
     if let Some(ls) = doc.lights() {
         for l in ls {
             lights.push(convert_light(&l, &mut warnings)?);
+            let json = &input.raw["extensions"]["KHR_lights_punctual"]["lights"][l.index()];
+            if let Some(s) = super::spectra::extension(json, Element::Light(l.index()))? {
+                light_spectra.insert(l.index() as u32, s);
+            }
         }
     }
 
@@ -111,6 +117,7 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         textures,
         cameras,
         lights,
+        light_spectra,
         environment: tessera_environment(doc, &mut warnings),
         animations,
         skins,
@@ -568,8 +575,9 @@ fn features(scene: &Scene) -> Features {
     let mut seen_mesh = vec![false; scene.meshes.len()];
     scene.for_each_node_instance(|i, _| {
         let node = &scene.nodes[i as usize];
-        if node.light.is_some() {
+        if let Some(light) = node.light {
             f.punctual_lights = true;
+            f.light_spectra |= scene.light_spectra.contains_key(&light);
         }
         let Some(m) = node.mesh else { return };
         let mesh = &scene.meshes[m as usize];
