@@ -14,7 +14,7 @@ use crate::material::AlphaMode;
 use crate::motion::DeformedMesh;
 use crate::sampler::hash_combine;
 use crate::scene::{Features, Mesh, Primitive, Scene};
-use crate::spectrum::DenseSpectrum;
+use crate::spectrum::{DenseSpectrum, Fluorescence};
 
 /// A scene flattened for one frame: instances in camera-relative world space, their BVH,
 /// the camera and the lights.
@@ -55,6 +55,8 @@ pub struct PreparedFrame {
     /// The spectra of lights and emissive materials that have their own
     /// (TESSERA_lights_spectrum), scaled as [`DenseSpectrum::light`] says.
     pub(crate) light_spectra: Vec<DenseSpectrum>,
+    /// The fluorescent paints of the materials that have one.
+    pub(crate) fluorescence: Vec<Fluorescence>,
     /// What the frame uses.
     pub features: Features,
     /// Remarks for the user (for example, the default environment was used).
@@ -76,6 +78,9 @@ pub(crate) struct PreparedMaterial {
     /// Its emission's spectrum (TESSERA_lights_spectrum), an index in
     /// [`PreparedFrame::light_spectra`].
     pub emission_spectrum: Option<u32>,
+    /// Its fluorescent paint (TESSERA_materials_fluorescence), an index in
+    /// [`PreparedFrame::fluorescence`].
+    pub fluorescence: Option<u32>,
 }
 
 /// One triangle of an instance at a ray's time: where its data lives, its vertex

@@ -18,7 +18,7 @@ use crate::light::Emitter;
 use crate::material::dispersive_ior;
 use crate::sampler::PixelSampler;
 use crate::settings::RenderSettings;
-use crate::spectrum::{DenseSpectrum, SampledWavelengths};
+use crate::spectrum::{DenseSpectrum, SampledWavelengths, SigmoidPolynomial};
 
 /// Sampler dimensions used by the camera before the first bounce: pixel position, then
 /// the shutter time (drawn only when something moves, so a still frame skips it).
@@ -29,6 +29,37 @@ const BOUNCE_DIMENSIONS: u32 = 5;
 /// The sampler dimension of the spectral path's wavelengths, apart from the others so
 /// that the RGB path's are where they were.
 const WAVELENGTH_DIMENSION: u32 = 0xffff_0000;
+
+/// The first of the two sampler dimensions of a fluorescent bounce at each depth (the
+/// choice and the absorbed wavelength), apart from the others like the wavelengths'.
+const FLUORESCENCE_DIMENSION: u32 = 0xfffe_0000;
+
+/// What a fluorescent paint scatters as once its wavelengths are chosen: a white
+/// Lambertian surface (its colour is in the choice's weight).
+const WHITE_LAMBERTIAN: SurfaceParams = SurfaceParams {
+    base_color: Vec3::ONE,
+    metallic: 0.0,
+    roughness: 1.0,
+    ior: 1.5,
+    specular: 0.0,
+    specular_color: Vec3::ONE,
+    transmission: 0.0,
+    thin_walled: false,
+    extensions: None,
+};
+
+/// Keeps the hero wavelength alone from here on: in the path `carrier` (its `throughput`
+/// too) and in the sample's `sensor`, whose estimate then counts the hero alone. Gives
+/// the wavelength the path carries; `None` on the RGB path.
+fn hero_alone<W: Carrier>(
+    sensor: &mut W,
+    carrier: &mut W,
+    throughput: &mut W::Colour,
+) -> Option<f32> {
+    sensor.keep_hero();
+    *throughput = W::hero_only(*throughput);
+    carrier.keep_hero()
+}
 
 /// The power heuristic with exponent 2 (Veach 1997).
 fn power_heuristic(a: f32, b: f32) -> f32 {
@@ -123,11 +154,13 @@ fn pdf_folded(sp: &SurfacePoint, scatter: &BsdfAt<'_>, v: Vec3, folded: bool, sa
 /// A path between two bounces: everything needed to continue it, so that a path that
 /// splits (see [`SPLIT_AT`]) can leave its copies for later.
 #[derive(Clone)]
-struct PathState<C> {
+struct PathState<W: Carrier> {
     ray: Ray,
     /// Bounces so far (0: the camera ray).
     depth: u32,
-    throughput: C,
+    /// The wavelengths the path carries now (fluorescence changes its hero's), or RGB.
+    carrier: W,
+    throughput: W::Colour,
     /// Product of η² over the refractions so far: the BTDF scales radiance by 1/η² on the
     /// way into a denser medium, which is not energy lost; Russian roulette and splitting
     /// look at `throughput · eta_scale` so a path inside glass is not killed for that
@@ -167,14 +200,15 @@ const MAX_BRANCHES: u32 = 1 << 16;
 
 /// What one camera sample has gathered so far, over all of its paths.
 struct SampleWalk<W: Carrier> {
-    /// The path's wavelengths, or RGB.
+    /// The wavelengths the camera sample drew, as the film counts them (the secondary
+    /// ones dropped once any of its paths keeps the hero alone), or RGB.
     carrier: W,
     /// Radiance gathered (`out.radiance` once the sample is done).
     radiance: W::Colour,
     out: SampleValue,
     albedo_done: bool,
     /// Copies of split paths not yet traced.
-    pending: Vec<PathState<W::Colour>>,
+    pending: Vec<PathState<W>>,
     /// Copies made so far.
     branches: u32,
 }
@@ -244,6 +278,7 @@ fn trace_sample_with<W: Carrier>(
     let mut next = Some(PathState {
         ray,
         depth: 0,
+        carrier,
         throughput: W::Colour::ONE,
         eta_scale: 1.0,
         absorption: Vec3::ZERO,
@@ -268,10 +303,9 @@ fn trace_path<W: Carrier>(
     frame: &PreparedFrame,
     settings: &RenderSettings,
     view_axis: Vec3,
-    mut s: PathState<W::Colour>,
+    mut s: PathState<W>,
     walk: &mut SampleWalk<W>,
 ) {
-    let wl = &mut walk.carrier;
     let out = &mut walk.out;
     let radiance = &mut walk.radiance;
     while s.depth <= settings.max_depth {
@@ -283,7 +317,7 @@ fn trace_path<W: Carrier>(
         let Some(hit) = frame.intersect(&ray, f32::INFINITY) else {
             // The environment.
             if s.absorption != Vec3::ZERO {
-                s.throughput *= wl.weight(transmittance(s.absorption, f32::INFINITY));
+                s.throughput *= s.carrier.weight(transmittance(s.absorption, f32::INFINITY));
             }
             let le = frame.lights.environment().radiance(ray.dir);
             if le != Vec3::ZERO {
@@ -292,7 +326,7 @@ fn trace_path<W: Carrier>(
                 } else {
                     power_heuristic(s.prev_pdf, frame.lights.pdf_environment(ray.dir))
                 };
-                *radiance += s.throughput * wl.light(le, None) * w;
+                *radiance += s.throughput * s.carrier.light(le, None) * w;
             }
             if !walk.albedo_done {
                 out.albedo = le;
@@ -303,7 +337,9 @@ fn trace_path<W: Carrier>(
         if s.absorption != Vec3::ZERO {
             // Between the surface points, not from the ray's origin, which is offset past
             // the previous point's rounding error.
-            s.throughput *= wl.weight(transmittance(s.absorption, (sp.p - s.prev_p).length()));
+            s.throughput *= s
+                .carrier
+                .weight(transmittance(s.absorption, (sp.p - s.prev_p).length()));
         }
         let wo = -ray.dir.normalize();
         if depth == 0 {
@@ -327,7 +363,7 @@ fn trace_path<W: Carrier>(
                 power_heuristic(s.prev_pdf, light_pdf)
             };
             let spectrum = light_spectrum(frame, material.emission_spectrum);
-            *radiance += s.throughput * wl.light(le, spectrum) * w;
+            *radiance += s.throughput * s.carrier.light(le, spectrum) * w;
         }
 
         // The material's own BSDF where textures and vertex colour leave it as it is.
@@ -344,7 +380,7 @@ fn trace_path<W: Carrier>(
         // its hero wavelength alone, at that wavelength's IOR (as pbrt-v4 does).
         let dispersed;
         if W::SPECTRAL && material.dispersion > 0.0 {
-            if let Some(nm) = wl.keep_hero(&mut s.throughput) {
+            if let Some(nm) = hero_alone(&mut walk.carrier, &mut s.carrier, &mut s.throughput) {
                 let ior = dispersive_ior(bsdf.params.ior, material.dispersion, nm);
                 dispersed = Bsdf::new(SurfaceParams { ior, ..bsdf.params });
                 bsdf = &dispersed;
@@ -353,6 +389,29 @@ fn trace_path<W: Carrier>(
         if !walk.albedo_done && !bsdf.is_delta() {
             out.albedo = bsdf.albedo();
             walk.albedo_done = true;
+        }
+        // Fluorescent paint: the path reflects at its wavelength or takes the one the
+        // light was absorbed at, and the surface scatters as white Lambertian from there.
+        let paint_white;
+        if let Some(paint) = material
+            .fluorescence
+            .filter(|_| W::SPECTRAL)
+            .and_then(|i| frame.fluorescence.get(i as usize))
+        {
+            if let Some(nm) = hero_alone(&mut walk.carrier, &mut s.carrier, &mut s.throughput) {
+                let r = SigmoidPolynomial::reflectance(
+                    bsdf.params.base_color.clamp(Vec3::ZERO, Vec3::ONE),
+                )
+                .eval(nm);
+                sampler.start_dimension(FLUORESCENCE_DIMENSION + 2 * depth);
+                let (u_choice, u_nm) = (sampler.next_1d(), sampler.next_1d());
+                sampler.start_dimension(CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
+                let step = paint.sample(nm, r, u_choice, u_nm);
+                s.throughput = s.throughput * step.weight;
+                s.carrier.shift_hero(step.nm);
+                paint_white = Bsdf::new(WHITE_LAMBERTIAN);
+                bsdf = &paint_white;
+            }
         }
         if depth == settings.max_depth {
             return;
@@ -386,9 +445,9 @@ fn trace_path<W: Carrier>(
                             ..
                         } => emitted_toward(frame, instance, triangle, b1, b2, ls.wi, ray.time),
                     };
-                    let mut le = wl.light(le, light_spectrum(frame, ls.spectrum));
+                    let mut le = s.carrier.light(le, light_spectrum(frame, ls.spectrum));
                     if s.absorption != Vec3::ZERO {
-                        le *= wl.weight(transmittance(s.absorption, ls.distance));
+                        le *= s.carrier.weight(transmittance(s.absorption, ls.distance));
                     }
                     if le != W::Colour::ZERO {
                         let mut shadow = spawn(&sp, ls.wi, ray.time);
@@ -410,7 +469,7 @@ fn trace_path<W: Carrier>(
                             } else {
                                 power_heuristic(ls.pdf, bsdf_pdf)
                             };
-                            *radiance += s.throughput * wl.weight(f) * le * (w / ls.pdf);
+                            *radiance += s.throughput * s.carrier.weight(f) * le * (w / ls.pdf);
                         }
                     }
                 }
@@ -434,7 +493,7 @@ fn trace_path<W: Carrier>(
         if folded {
             wi = fold(&sp, wi);
         }
-        s.throughput *= wl.weight(bs.f * (bs.wi.z.abs() / bs.pdf));
+        s.throughput *= s.carrier.weight(bs.f * (bs.wi.z.abs() / bs.pdf));
         if !s.throughput.is_finite() || s.throughput == W::Colour::ZERO {
             return;
         }

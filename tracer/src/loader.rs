@@ -89,6 +89,7 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_materials_volume",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
+    FLUORESCENCE,
     LIGHTS_SPECTRUM,
     METAMATERIAL,
 ];
@@ -100,6 +101,10 @@ pub const METAMATERIAL: &str = "TESSERA_materials_metamaterial";
 /// Our own extension for the spectrum of a light or of a material's emission, documented
 /// in `docs/TESSERA_lights_spectrum.md`.
 pub const LIGHTS_SPECTRUM: &str = "TESSERA_lights_spectrum";
+
+/// Our own extension for fluorescent paint, documented in
+/// `docs/TESSERA_materials_fluorescence.md`.
+pub const FLUORESCENCE: &str = "TESSERA_materials_fluorescence";
 
 /// Most mesh draws a scene may ask for: each is an instance of the frame's top-level BVH
 /// (about 200 bytes with its share of the tree), so this bounds that tree near 1 GB

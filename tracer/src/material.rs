@@ -5,7 +5,7 @@ use glam::{Vec2, Vec3, Vec4};
 
 use crate::bsdf::{ExtensionParams, SurfaceParams};
 use crate::math;
-use crate::spectrum::SpectrumShape;
+use crate::spectrum::{FluorescenceDef, SpectrumShape};
 use crate::texture::{Texture, TextureRef};
 
 /// How a material's alpha is used (glTF `alphaMode`).
@@ -158,6 +158,10 @@ pub struct Material {
     /// TESSERA_lights_spectrum on the material: the spectrum its emission has (the
     /// emissive colour filtering it), in place of the white that an RGB colour lifts to.
     pub emission_spectrum: Option<SpectrumShape>,
+    /// TESSERA_materials_fluorescence, where the material has it: its diffuse base is the
+    /// fluorescent paint of Jung et al. 2018 (see [`crate::spectrum::Fluorescence`]), its
+    /// base colour the paint's reflectance.
+    pub fluorescence: Option<FluorescenceDef>,
     /// TESSERA_materials_metamaterial, where the material has it: its transmitting part
     /// refracts negatively, as the boundary of a solid.
     pub metamaterial: Option<Metamaterial>,
@@ -219,6 +223,7 @@ impl Default for Material {
             anisotropy_texture: None,
             dispersion: 0.0,
             emission_spectrum: None,
+            fluorescence: None,
             metamaterial: None,
             unlit: false,
         }
@@ -308,6 +313,14 @@ impl Material {
             && self.transmission > 0.0
             && !self.is_thin_walled()
             && self.metamaterial.is_none()
+    }
+
+    /// Whether the material fluoresces: TESSERA_materials_fluorescence with some paint
+    /// that re-emits some light.
+    pub fn is_fluorescent(&self) -> bool {
+        self.fluorescence
+            .as_ref()
+            .is_some_and(FluorescenceDef::is_active)
     }
 
     /// Whether the material has a sheen layer.

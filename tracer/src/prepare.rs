@@ -26,7 +26,7 @@ use crate::material::AlphaMode;
 use crate::motion::{auto_steps, place, step_positions, DeformedMesh, PixelFootprint, PROBES};
 use crate::scene::{Node, Scene};
 use crate::settings::{CameraChoice, FrameOptions, RenderError};
-use crate::spectrum::{DenseSpectrum, SpectrumShape};
+use crate::spectrum::{DenseSpectrum, Fluorescence, SpectrumShape};
 
 /// The node graph at one time: every node instance and every mesh draw with its world
 /// transform, and the first world transform of each node (the one joints of a skin use).
@@ -383,7 +383,7 @@ pub fn prepare_frame(
         scene.features.sheen,
         scene.features.anisotropy,
     );
-    let materials = prepared_materials(&scene, &spectra.of_material);
+    let materials = prepared_materials(&scene, &spectra);
     let mut features = scene.features;
     let environment = frame_environment(options, &scene, punctual.is_empty(), &mut warnings);
     features.environment = !matches!(environment, Environment::Black);
@@ -411,6 +411,7 @@ pub fn prepare_frame(
         any_hit_filter,
         materials,
         light_spectra: spectra.dense,
+        fluorescence: spectra.paints,
         features,
         warnings,
     })
@@ -424,6 +425,10 @@ struct FrameSpectra {
     of_light: BTreeMap<u32, u32>,
     /// Per scene material, the index in `dense` of its emission's spectrum.
     of_material: Vec<Option<u32>>,
+    /// The fluorescent paints (TESSERA_materials_fluorescence), and per scene material
+    /// the index of its own in `paints`.
+    paints: Vec<Fluorescence>,
+    paint_of_material: Vec<Option<u32>>,
 }
 
 impl FrameSpectra {
@@ -446,10 +451,23 @@ impl FrameSpectra {
             .iter()
             .map(|m| m.emission_spectrum.as_ref().and_then(&mut add))
             .collect();
+        let mut paints = Vec::new();
+        let paint_of_material = scene
+            .materials
+            .iter()
+            .map(|m| {
+                let paint =
+                    Fluorescence::new(m.fluorescence.as_ref().filter(|_| m.is_fluorescent())?)?;
+                paints.push(paint);
+                Some(paints.len() as u32 - 1)
+            })
+            .collect();
         Self {
             dense,
             of_light,
             of_material,
+            paints,
+            paint_of_material,
         }
     }
 }
@@ -670,12 +688,12 @@ fn emissive_triangles(
 /// Per scene material, its BSDF of the factors alone and, without textures, its values.
 /// The BSDF carries the albedo curve of a rough refractive interface where the roughness
 /// is not textured (see `bsdf/curve.rs`); materials without one use the shared tables.
-fn prepared_materials(scene: &Scene, spectra: &[Option<u32>]) -> Vec<PreparedMaterial> {
+fn prepared_materials(scene: &Scene, spectra: &FrameSpectra) -> Vec<PreparedMaterial> {
     scene
         .materials
         .iter()
-        .zip(spectra)
-        .map(|(m, &emission_spectrum)| {
+        .enumerate()
+        .map(|(i, m)| {
             let curve = if m.metallic_roughness_texture.is_some() {
                 None
             } else {
@@ -684,7 +702,8 @@ fn prepared_materials(scene: &Scene, spectra: &[Option<u32>]) -> Vec<PreparedMat
             PreparedMaterial {
                 bsdf: Bsdf::new(m.factors()).with_albedo_curve(curve),
                 dispersion: if m.is_dispersive() { m.dispersion } else { 0.0 },
-                emission_spectrum,
+                emission_spectrum: spectra.of_material[i],
+                fluorescence: spectra.paint_of_material[i],
                 uniform: (!m.has_textures())
                     .then(|| m.sample(&scene.textures, [Vec2::ZERO; 2], Vec4::ONE)),
             }

@@ -418,6 +418,8 @@ pub struct Features {
     pub dispersion: bool,
     /// A light or an emissive material has its own spectrum (TESSERA_lights_spectrum).
     pub light_spectra: bool,
+    /// Any material fluoresces (TESSERA_materials_fluorescence).
+    pub fluorescence: bool,
 }
 
 impl Features {
@@ -437,12 +439,13 @@ impl Features {
         self.anisotropy |= m.is_anisotropic();
         self.dispersion |= m.is_dispersive();
         self.light_spectra |= m.emission_spectrum.is_some() && m.is_emissive();
+        self.fluorescence |= m.is_fluorescent();
     }
 
     /// Whether a feature depends on wavelength, so that the scene renders on the spectral
     /// path whatever the settings ask.
     pub fn needs_spectral(&self) -> bool {
-        self.dispersion || self.light_spectra
+        self.dispersion || self.light_spectra || self.fluorescence
     }
 
     /// Names of the features in use, for summaries and EXR metadata.
@@ -467,6 +470,7 @@ impl Features {
             (self.anisotropy, "anisotropy"),
             (self.dispersion, "dispersion"),
             (self.light_spectra, "light-spectra"),
+            (self.fluorescence, "fluorescence"),
         ];
         all.iter().filter(|(on, _)| *on).map(|(_, n)| *n).collect()
     }

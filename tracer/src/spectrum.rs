@@ -12,6 +12,7 @@ use crate::math;
 
 mod cie_tables;
 mod described;
+mod fluorescence;
 mod upsample;
 
 use cie_tables::{D65, SAMPLES, STEP, X_BAR, Y_BAR, Z_BAR};
@@ -19,6 +20,7 @@ pub use cie_tables::{LAMBDA_MAX, LAMBDA_MIN};
 pub use described::{
     DenseSpectrum, SpectrumShape, BLACKBODY_KELVIN, MAX_TABLE_ENTRIES, WAVELENGTH_RANGE,
 };
+pub use fluorescence::{Fluorescence, FluorescenceDef, Reradiation};
 pub use upsample::{IlluminantSpectrum, SigmoidPolynomial, UnboundedSpectrum};
 
 /// Wavelengths one path carries.

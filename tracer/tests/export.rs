@@ -22,7 +22,7 @@ use tracer::motion::Shutter;
 use tracer::render::{prepare_frame, render_tile, FrameOptions, RenderSettings};
 use tracer::scene::{CameraDef, MorphTarget, Node, Scene, SceneBuilder, Skin, Trs};
 use tracer::shapes::{cube, quad};
-use tracer::spectrum::SpectrumShape;
+use tracer::spectrum::{FluorescenceDef, SpectrumShape};
 use tracer::texture::TextureRef;
 
 const WIDTH: u32 = 24;
@@ -246,7 +246,8 @@ fn animated_demo_round_trips_with_motion_blur() {
 /// What the demos do not use: a hierarchy with a matrix node, orthographic and perspective
 /// cameras, every kind of light, alpha modes, emission above 1, morph targets with a
 /// weights channel, STEP and scale channels, TEXCOORD_0, TANGENT (with anisotropy),
-/// COLOR_0, and light spectra (TESSERA_lights_spectrum) on a light and an emission.
+/// COLOR_0, light spectra (TESSERA_lights_spectrum) on a light and an emission, and a
+/// fluorescent paint.
 fn everything_else() -> Scene {
     let mut b = SceneBuilder::default();
     let masked = b.material(Material {
@@ -262,6 +263,15 @@ fn everything_else() -> Scene {
             (500.25, 1.0),
             (700.0, 0.0),
         ])),
+        fluorescence: Some(FluorescenceDef {
+            excitation: SpectrumShape::Gaussian {
+                peak: 380.0,
+                width: 30.0,
+            },
+            emission: SpectrumShape::Blackbody(5000.0),
+            concentration: 0.75,
+            quantum_yield: 0.5,
+        }),
         ..Default::default()
     });
     let blend = b.material(Material {

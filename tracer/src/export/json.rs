@@ -77,6 +77,7 @@ pub(super) struct Extensions {
     pub(super) diffuse_transmission: bool,
     pub(super) anisotropy: bool,
     pub(super) light_spectra: bool,
+    pub(super) fluorescence: bool,
 }
 
 impl Extensions {
@@ -101,6 +102,7 @@ impl Extensions {
             ),
             (self.anisotropy, "KHR_materials_anisotropy"),
             (self.light_spectra, crate::loader::LIGHTS_SPECTRUM),
+            (self.fluorescence, crate::loader::FLUORESCENCE),
         ]
         .iter()
         .filter(|(on, _)| *on)

@@ -2,7 +2,7 @@
 //! cameras and lights it writes, each checked to read back as the same values.
 
 use super::*;
-use crate::loader::LIGHTS_SPECTRUM;
+use crate::loader::{FLUORESCENCE, LIGHTS_SPECTRUM};
 use crate::spectrum::SpectrumShape;
 
 pub(super) const NO_TEXTURES: &str = "the exporter does not write images";
@@ -383,6 +383,21 @@ pub(super) fn material(
     if let Some(shape) = &m.emission_spectrum {
         used.light_spectra = true;
         ext = ext.with(LIGHTS_SPECTRUM, spectrum(&el, shape)?);
+    }
+    if let Some(paint) = &m.fluorescence {
+        paint
+            .check()
+            .map_err(|why| invalid(&el, format!("{FLUORESCENCE}: {why}")))?;
+        used.fluorescence = true;
+        ext = ext.with(
+            FLUORESCENCE,
+            Obj::default()
+                .with("excitation", spectrum(&el, &paint.excitation)?)
+                .with("emission", spectrum(&el, &paint.emission)?)
+                .with("concentration", num(paint.concentration))
+                .with("quantumYield", num(paint.quantum_yield))
+                .build(),
+        );
     }
     if !ext.0.is_empty() {
         out = out.with("extensions", ext.build());

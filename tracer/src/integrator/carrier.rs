@@ -74,10 +74,15 @@ pub(crate) trait Carrier: Copy {
     fn light(&self, rgb: Vec3, spectrum: Option<&DenseSpectrum>) -> Self::Colour;
     /// Linear Rec. 709 of what a path gathered.
     fn to_rgb(&self, c: Self::Colour) -> Vec3;
-    /// From here on carries the hero wavelength alone, `c` at it, and gives it (in nm):
-    /// where a dispersive refraction sends each wavelength its own way. `None` for a
-    /// carrier without wavelengths.
-    fn keep_hero(&mut self, c: &mut Self::Colour) -> Option<f32>;
+    /// From here on carries the hero wavelength alone, and gives it (in nm): where a
+    /// dispersive refraction sends each wavelength its own way, or fluorescence changes
+    /// it. `None` for a carrier without wavelengths.
+    fn keep_hero(&mut self) -> Option<f32>;
+    /// `c` at the hero wavelength alone.
+    fn hero_only(c: Self::Colour) -> Self::Colour;
+    /// The hero now travels at `nm` (fluorescence, followed back from the camera), while
+    /// the film still counts it at the wavelength it was sampled at.
+    fn shift_hero(&mut self, nm: f32);
 }
 
 /// The RGB path: everything is already RGB.
@@ -99,9 +104,13 @@ impl Carrier for Rgb {
     fn to_rgb(&self, c: Vec3) -> Vec3 {
         c
     }
-    fn keep_hero(&mut self, _: &mut Vec3) -> Option<f32> {
+    fn keep_hero(&mut self) -> Option<f32> {
         None
     }
+    fn hero_only(c: Vec3) -> Vec3 {
+        c
+    }
+    fn shift_hero(&mut self, _: f32) {}
 }
 
 impl Carrier for SampledWavelengths {
@@ -132,9 +141,14 @@ impl Carrier for SampledWavelengths {
     fn to_rgb(&self, c: Vec4) -> Vec3 {
         spectrum::to_rec709(c, self)
     }
-    fn keep_hero(&mut self, c: &mut Vec4) -> Option<f32> {
+    fn keep_hero(&mut self) -> Option<f32> {
         self.terminate_secondary();
-        *c = Vec4::new(c.x, 0.0, 0.0, 0.0);
         Some(self.lambda[0])
+    }
+    fn hero_only(c: Vec4) -> Vec4 {
+        Vec4::new(c.x, 0.0, 0.0, 0.0)
+    }
+    fn shift_hero(&mut self, nm: f32) {
+        self.lambda[0] = nm;
     }
 }

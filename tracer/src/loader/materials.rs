@@ -380,6 +380,7 @@ fn read_raw_extensions(
         });
     }
     out.emission_spectrum = super::spectra::extension(raw.json, raw.element)?;
+    out.fluorescence = super::spectra::fluorescence(raw.json, raw.element)?;
     let dispersion = &raw.json["extensions"]["KHR_materials_dispersion"];
     if dispersion.is_object() {
         out.dispersion = raw.number(dispersion, "dispersion", 0.0)?;

@@ -1,11 +1,13 @@
 //! TESSERA_lights_spectrum (`docs/TESSERA_lights_spectrum.md`): a spectrum described in
-//! JSON as a blackbody temperature, a Gaussian peak, or a table of (nm, value) pairs.
+//! JSON as a blackbody temperature, a Gaussian peak, or a table of (nm, value) pairs; and
+//! TESSERA_materials_fluorescence (`docs/TESSERA_materials_fluorescence.md`), a paint of
+//! two such spectra.
 
 use gltf::json::Value;
 
 use super::error::{Element, SceneError};
-use super::LIGHTS_SPECTRUM;
-use crate::spectrum::{DenseSpectrum, SpectrumShape, LAMBDA_MAX, LAMBDA_MIN};
+use super::{FLUORESCENCE, LIGHTS_SPECTRUM};
+use crate::spectrum::{DenseSpectrum, FluorescenceDef, SpectrumShape, LAMBDA_MAX, LAMBDA_MIN};
 
 /// The spectrum of `ext`, the extension's object on `element`; `what` names the object
 /// in errors (for example "TESSERA_lights_spectrum").
@@ -82,4 +84,37 @@ pub(crate) fn extension(
             Ok(Some(shape))
         }
     }
+}
+
+/// TESSERA_materials_fluorescence of the material `json`, if it has it.
+pub(crate) fn fluorescence(
+    json: &Value,
+    element: Element,
+) -> Result<Option<FluorescenceDef>, SceneError> {
+    let Some(ext) = json["extensions"].get(FLUORESCENCE) else {
+        return Ok(None);
+    };
+    let fail = |why: String| SceneError::at(element, format!("{FLUORESCENCE}: {why}"));
+    if !ext.is_object() {
+        return Err(fail(format!("{ext} is not an object")));
+    }
+    let shape = |key: &str| match ext.get(key) {
+        None => Err(fail(format!("needs \"{key}\", a spectrum"))),
+        Some(v) => spectrum(v, element, &format!("{FLUORESCENCE} {key}")),
+    };
+    let number = |key: &str| match &ext[key] {
+        Value::Null => Ok(1.0),
+        v => v
+            .as_f64()
+            .map(|x| x as f32)
+            .ok_or_else(|| fail(format!("{key} {v} is not a number"))),
+    };
+    let def = FluorescenceDef {
+        excitation: shape("excitation")?,
+        emission: shape("emission")?,
+        concentration: number("concentration")?,
+        quantum_yield: number("quantumYield")?,
+    };
+    def.check().map_err(fail)?;
+    Ok(Some(def))
 }
