@@ -13,6 +13,10 @@ use glam::{DMat4, DQuat, DVec3};
 use crate::math;
 use crate::scene::{Node, Scene, Trs};
 
+mod properties;
+
+pub use properties::{animates_emission, lights_at, materials_at, Property, PropertyChannel};
+
 /// One glTF animation.
 #[derive(Clone, Debug, Default)]
 pub struct Animation {
@@ -20,6 +24,8 @@ pub struct Animation {
     pub name: Option<String>,
     /// Its channels, each driving one property of one node.
     pub channels: Vec<Channel>,
+    /// Its channels driving a light or a material (KHR_animation_pointer).
+    pub properties: Vec<PropertyChannel>,
 }
 
 /// One channel: a sampler driving one property of one node.
@@ -287,13 +293,13 @@ fn slerp(a: DQuat, b: DQuat, u: f64) -> DQuat {
 // Animations, choices and poses
 
 impl Animation {
-    /// First and last key time over all its channels, in seconds; `None` when no channel
-    /// has keys.
+    /// First and last key time over all its channels (node and property ones), in
+    /// seconds; `None` when no channel has keys.
     pub fn time_range(&self) -> Option<(f64, f64)> {
         let mut range: Option<(f64, f64)> = None;
-        for ch in &self.channels {
-            let (Some(&first), Some(&last)) = (ch.sampler.times.first(), ch.sampler.times.last())
-            else {
+        let samplers = self.channels.iter().map(|c| &c.sampler);
+        for sampler in samplers.chain(self.properties.iter().map(|p| &p.sampler)) {
+            let (Some(&first), Some(&last)) = (sampler.times.first(), sampler.times.last()) else {
                 continue;
             };
             let (a, b) = (first as f64, last as f64);
@@ -688,6 +694,7 @@ mod tests {
     fn pose_replaces_only_the_animated_components() {
         let walk = Animation {
             name: Some("walk".into()),
+            properties: Vec::new(),
             channels: vec![channel(
                 1,
                 Target::Translation,
@@ -717,6 +724,7 @@ mod tests {
     fn time_ranges_and_choices() {
         let a = Animation {
             name: Some("walk".into()),
+            properties: Vec::new(),
             channels: vec![
                 channel(0, Target::Scale, &[0.5, 2.0], &[1.0; 6], 3),
                 channel(1, Target::Scale, &[1.0, 3.0], &[1.0; 6], 3),
@@ -724,6 +732,7 @@ mod tests {
         };
         let b = Animation {
             name: None,
+            properties: Vec::new(),
             channels: vec![channel(0, Target::Scale, &[-1.0, 0.0], &[1.0; 6], 3)],
         };
         let scene = scene_with(vec![a, b, Animation::default()]);

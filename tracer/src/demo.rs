@@ -231,6 +231,7 @@ pub fn animated_demo_scene() -> Scene {
     let slide = vec![0.15, 0.32, 0.45, -0.35, 0.32, 0.45, 0.15, 0.32, 0.45];
     b.animation(Animation {
         name: Some("demo".into()),
+        properties: Vec::new(),
         channels: vec![
             Channel::new(
                 metal,

@@ -31,7 +31,7 @@
 use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
 use gltf::json::Value;
 
-use crate::animation::{Animation, Interpolation, Target};
+use crate::animation::{Animation, Interpolation, Property, PropertyChannel, Sampler, Target};
 use crate::camera::Projection;
 use crate::light::{Environment, PunctualLight};
 use crate::loader::write_glb;
@@ -140,7 +140,7 @@ pub fn scene_to_glb(scene: &Scene) -> Result<Vec<u8>, ExportError> {
         .animations
         .iter()
         .enumerate()
-        .map(|(i, a)| animation(i, a, scene, &mut bin))
+        .map(|(i, a)| animation(i, a, scene, &mut bin, &mut used.animation_pointer))
         .collect::<Result<Vec<_>, _>>()?;
     if let Some(&bad) = scene
         .roots

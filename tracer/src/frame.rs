@@ -10,7 +10,7 @@ use crate::bvh::{Instance, MeshBvh, Placement, SceneBvh};
 use crate::camera::Camera;
 use crate::geometry::Ray;
 use crate::light::LightSet;
-use crate::material::AlphaMode;
+use crate::material::{AlphaMode, Material};
 use crate::motion::DeformedMesh;
 use crate::sampler::hash_combine;
 use crate::scene::{Features, Mesh, Primitive, Scene};
@@ -65,6 +65,8 @@ pub struct PreparedFrame {
 
 /// A scene material with what does not change from point to point.
 pub(crate) struct PreparedMaterial {
+    /// The material at this frame's time (KHR_animation_pointer applied).
+    pub material: Material,
     /// Its BSDF where every texture and the vertex colour are white (with the albedo
     /// curve of rough glass), so that points that see it so (most, in most scenes) need
     /// not build it again.
@@ -170,6 +172,12 @@ impl TriangleAt<'_> {
 }
 
 impl PreparedFrame {
+    /// Scene material `index` as this frame sees it (animations applied).
+    #[inline(always)]
+    pub fn material(&self, index: u32) -> &Material {
+        &self.materials[index as usize].material
+    }
+
     /// The deformed mesh behind instance mesh index `mesh`, if it is one.
     #[inline]
     pub(crate) fn deformed_mesh(&self, mesh: u32) -> Option<&DeformedMesh> {
@@ -242,7 +250,7 @@ impl PreparedFrame {
             return true;
         }
         let prim = &mesh.primitives[p];
-        let mat = &self.scene.materials[prim.material as usize];
+        let mat = self.material(prim.material);
         if !mat.double_sided && !mat.transmits() {
             let tri = self.triangle_at(instance, triangle, ray.time);
             let facing = tri

@@ -513,7 +513,7 @@ fn trace_path<W: Carrier>(
                 s.eta_scale *= eta_rel * eta_rel;
             }
             s.absorption = if entering {
-                frame.scene.materials[sp.material_index as usize].absorption()
+                frame.material(sp.material_index).absorption()
             } else {
                 Vec3::ZERO
             };
@@ -587,7 +587,7 @@ fn emitted_toward(
 ) -> Vec3 {
     let scene = &*frame.scene;
     let tri = frame.triangle_at(instance, triangle, time);
-    let material = &scene.materials[tri.prim.material as usize];
+    let material = frame.material(tri.prim.material);
     if !material.double_sided && tri.front_normal().dot(wi) >= 0.0 {
         return Vec3::ZERO;
     }

@@ -34,8 +34,10 @@
 //!   morph weight channels; STEP, LINEAR, CUBICSPLINE), evaluated by
 //!   [`crate::animation::pose`]. Key times must be finite and never decrease, and an
 //!   animated node must not have a `matrix` (errors); keys at equal times are merged into
-//!   the later one (warning). Channels with a target the loader does not know
-//!   (KHR_animation_pointer) are skipped with a warning.
+//!   the later one (warning). KHR_animation_pointer channels on a light's colour or
+//!   intensity, a material's emissive factor or strength, or its base colour, metallic or
+//!   roughness factor go to [`crate::animation::Animation::properties`]; other pointers
+//!   and targets the loader does not know are skipped with a warning.
 //! - Skins are read into [`Scene::skins`] (inverse bind matrices default to identity), and
 //!   JOINTS_n/WEIGHTS_n pairs into [`crate::scene::Primitive::joint_sets`], each joint with
 //!   a non-zero weight checked against the skin of every node drawing the mesh. Morph
@@ -74,6 +76,7 @@ use container::Resolver;
 pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "EXT_mesh_gpu_instancing",
     "EXT_texture_webp",
+    "KHR_animation_pointer",
     "KHR_lights_punctual",
     "KHR_materials_anisotropy",
     "KHR_materials_clearcoat",
@@ -143,9 +146,9 @@ pub fn load_slice(bytes: &[u8], base_dir: Option<&Path>) -> Result<Scene, SceneE
         ::gltf::json::deserialize::from_slice(container.json).map_err(json_error)?;
     // Channels the typed parser would refuse (KHR_animation_pointer) go first; without any,
     // parse the text itself so that errors keep their line and column.
-    let skipped = animation::strip_unsupported_channels(&mut raw);
+    let (pointers, skipped) = animation::strip_unsupported_channels(&mut raw);
     let webp = materials::prefer_webp_sources(&mut raw);
-    let mut root: ::gltf::json::Root = if skipped.is_empty() && !webp {
+    let mut root: ::gltf::json::Root = if pointers.is_empty() && skipped.is_empty() && !webp {
         ::gltf::json::deserialize::from_slice(container.json)
             .map_err(|e| typed_json_error(e, || root_at_path_slice(container.json)))?
     } else {
@@ -184,6 +187,7 @@ pub fn load_slice(bytes: &[u8], base_dir: Option<&Path>) -> Result<Scene, SceneE
         raw: &raw,
         buffers: &buffers,
         resolver,
+        pointers: &pointers,
     })?;
     scene.warnings.extend(skipped);
     Ok(scene)

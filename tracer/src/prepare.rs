@@ -22,7 +22,7 @@ use crate::frame::{PreparedFrame, PreparedMaterial};
 use crate::geometry::Aabb;
 use crate::light::{EmissiveTriangle, Environment, LightSet};
 use crate::loader::{framing_camera, mesh_bounds, scene_bounds};
-use crate::material::AlphaMode;
+use crate::material::{AlphaMode, Material};
 use crate::motion::{auto_steps, place, step_positions, DeformedMesh, PixelFootprint, PROBES};
 use crate::scene::{Node, Scene};
 use crate::settings::{CameraChoice, FrameOptions, RenderError};
@@ -352,13 +352,18 @@ pub fn prepare_frame(
     // Punctual lights sit where the middle step puts them: they light the frame but do not
     // blur inside the shutter.
     let spectra = FrameSpectra::new(&scene);
+    // Lights and materials as KHR_animation_pointer sets them at the middle of the shutter.
+    let mid_seconds = options.shutter.seconds(options.frame, options.fps, 0.5);
+    let lights_now = animation::lights_at(&scene, &animations, mid_seconds);
+    let materials_now = animation::materials_at(&scene, &animations, mid_seconds)
+        .unwrap_or_else(|| scene.materials.clone());
     let punctual: Vec<_> = mid
         .instances
         .iter()
         .filter_map(|(node, world)| {
             let light = scene.nodes[*node as usize].light?;
             Some((
-                scene.lights[light as usize],
+                lights_now[light as usize],
                 to_f32_affine(&(relative * *world)),
                 spectra.of_light.get(&light).copied(),
             ))
@@ -374,7 +379,13 @@ pub fn prepare_frame(
             &deformed[m - n_scene_meshes].bvh
         }
     });
-    let triangles = emissive_triangles(&scene, &bvh, &deformed, &spectra.of_material);
+    let triangles = emissive_triangles(
+        &scene,
+        &materials_now,
+        &bvh,
+        &deformed,
+        &spectra.of_material,
+    );
 
     // Build the BSDF's energy tables and curves now rather than inside the first tile's
     // threads.
@@ -383,7 +394,7 @@ pub fn prepare_frame(
         scene.features.sheen,
         scene.features.anisotropy,
     );
-    let materials = prepared_materials(&scene, &spectra);
+    let materials = prepared_materials(&scene, materials_now, &spectra);
     let mut features = scene.features;
     let environment = frame_environment(options, &scene, punctual.is_empty(), &mut warnings);
     features.environment = !matches!(environment, Environment::Black);
@@ -642,6 +653,7 @@ fn pixel_footprint(projection: &Projection, height: u32) -> PixelFootprint {
 /// since the light sampler's density for them is 0), which is unbiased, only noisier.
 fn emissive_triangles(
     scene: &Scene,
+    materials: &[Material],
     bvh: &SceneBvh,
     deformed: &[DeformedMesh],
     spectra: &[Option<u32>],
@@ -659,7 +671,7 @@ fn emissive_triangles(
         }
         let mesh = &scene.meshes[d.map_or(inst.mesh, |d| d.source) as usize];
         for (p, prim) in mesh.primitives.iter().enumerate() {
-            let material = &scene.materials[prim.material as usize];
+            let material = &materials[prim.material as usize];
             if !material.is_emissive() {
                 continue;
             }
@@ -685,13 +697,16 @@ fn emissive_triangles(
     triangles
 }
 
-/// Per scene material, its BSDF of the factors alone and, without textures, its values.
+/// Per material at the frame's time, its BSDF of the factors alone and, without textures, its values.
 /// The BSDF carries the albedo curve of a rough refractive interface where the roughness
 /// is not textured (see `bsdf/curve.rs`); materials without one use the shared tables.
-fn prepared_materials(scene: &Scene, spectra: &FrameSpectra) -> Vec<PreparedMaterial> {
-    scene
-        .materials
-        .iter()
+fn prepared_materials(
+    scene: &Scene,
+    materials: Vec<Material>,
+    spectra: &FrameSpectra,
+) -> Vec<PreparedMaterial> {
+    materials
+        .into_iter()
         .enumerate()
         .map(|(i, m)| {
             let curve = if m.metallic_roughness_texture.is_some() {
@@ -706,6 +721,7 @@ fn prepared_materials(scene: &Scene, spectra: &FrameSpectra) -> Vec<PreparedMate
                 fluorescence: spectra.paint_of_material[i],
                 uniform: (!m.has_textures())
                     .then(|| m.sample(&scene.textures, [Vec2::ZERO; 2], Vec4::ONE)),
+                material: m,
             }
         })
         .collect()

@@ -613,6 +613,7 @@ impl SceneBuilder {
             ..Features::default()
         };
         mats.iter().for_each(|m| features.add_material(m));
+        features.emissive |= crate::animation::animates_emission(s);
         self.scene.features = features;
         self.scene
     }

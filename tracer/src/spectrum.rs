@@ -1,5 +1,5 @@
 //! Light carried per wavelength, for the spectral path: the CIE 1931 observer and
-//! illuminant D65 ([`cie_tables`]), RGB colours lifted to smooth spectra ([`upsample`]),
+//! illuminant D65 (`cie_tables`), RGB colours lifted to smooth spectra (`upsample`),
 //! hero-wavelength sampling (Wilkie et al. 2014: four wavelengths per path, one drawn and
 //! the others at equal steps of the same distribution), and the samples' estimate of CIE
 //! XYZ and of linear Rec. 709, the colour space the RGB path writes.

@@ -10,7 +10,9 @@ use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec3, Vec3, Vec4};
 
-use tracer::animation::{Animation, Channel, Interpolation, Target};
+use tracer::animation::{
+    Animation, Channel, Interpolation, Property, PropertyChannel, Sampler, Target,
+};
 use tracer::camera::Projection;
 use tracer::demo;
 use tracer::export::{scene_to_glb, ExportError};
@@ -246,8 +248,8 @@ fn animated_demo_round_trips_with_motion_blur() {
 /// What the demos do not use: a hierarchy with a matrix node, orthographic and perspective
 /// cameras, every kind of light, alpha modes, emission above 1, morph targets with a
 /// weights channel, STEP and scale channels, TEXCOORD_0, TANGENT (with anisotropy),
-/// COLOR_0, light spectra (TESSERA_lights_spectrum) on a light and an emission, and a
-/// fluorescent paint.
+/// COLOR_0, light spectra (TESSERA_lights_spectrum) on a light and an emission, a
+/// fluorescent paint, and KHR_animation_pointer channels on lights and materials.
 fn everything_else() -> Scene {
     let mut b = SceneBuilder::default();
     let masked = b.material(Material {
@@ -377,8 +379,49 @@ fn everything_else() -> Scene {
         },
         DMat4::from_quat(DQuat::from_rotation_x(-1.0)),
     );
+    let keys = |interpolation, times: Vec<f32>, values: Vec<f32>, width| Sampler {
+        interpolation,
+        times,
+        values,
+        width,
+    };
     b.animation(Animation {
         name: None,
+        // KHR_animation_pointer: a light's and an emission's scale (written as intensity
+        // and strength), a base colour and a roughness.
+        properties: vec![
+            PropertyChannel {
+                property: Property::Light(0),
+                sampler: keys(
+                    Interpolation::Linear,
+                    vec![0.0, 0.5],
+                    vec![20.0, 15.0, 0.05, 40.0, 30.0, 0.1],
+                    3,
+                ),
+            },
+            PropertyChannel {
+                property: Property::Emission(masked),
+                sampler: keys(
+                    Interpolation::Step,
+                    vec![0.0, 0.25],
+                    vec![1.5, 0.05, 0.0, 3.0, 0.1, 0.0],
+                    3,
+                ),
+            },
+            PropertyChannel {
+                property: Property::BaseColor(blend),
+                sampler: keys(
+                    Interpolation::Linear,
+                    vec![0.0, 1.0],
+                    vec![0.1, 0.2, 0.3, 0.5, 0.3, 0.4, 0.5, 0.5],
+                    4,
+                ),
+            },
+            PropertyChannel {
+                property: Property::Roughness(masked),
+                sampler: keys(Interpolation::Step, vec![0.25], vec![0.5], 1),
+            },
+        ],
         channels: vec![
             Channel::new(
                 sheet_node,

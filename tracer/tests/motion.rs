@@ -59,6 +59,7 @@ fn camera(b: &mut SceneBuilder, local: DMat4) -> u32 {
 fn slide(node: u32, x0: f32, z: f32) -> Animation {
     Animation {
         name: Some("slide".into()),
+        properties: Vec::new(),
         channels: vec![Channel {
             node,
             target: Target::Translation,
@@ -101,6 +102,7 @@ fn moving_camera() -> Scene {
     });
     scene.animations.push(Animation {
         name: None,
+        properties: Vec::new(),
         channels: vec![Channel {
             node: cam,
             target: Target::Translation,
@@ -136,6 +138,7 @@ fn morphed() -> Scene {
     camera(&mut b, DMat4::IDENTITY);
     b.animation(Animation {
         name: None,
+        properties: Vec::new(),
         channels: vec![Channel {
             node,
             target: Target::Weights,

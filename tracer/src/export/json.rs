@@ -78,6 +78,7 @@ pub(super) struct Extensions {
     pub(super) anisotropy: bool,
     pub(super) light_spectra: bool,
     pub(super) fluorescence: bool,
+    pub(super) animation_pointer: bool,
 }
 
 impl Extensions {
@@ -103,6 +104,7 @@ impl Extensions {
             (self.anisotropy, "KHR_materials_anisotropy"),
             (self.light_spectra, crate::loader::LIGHTS_SPECTRUM),
             (self.fluorescence, crate::loader::FLUORESCENCE),
+            (self.animation_pointer, "KHR_animation_pointer"),
         ]
         .iter()
         .filter(|(on, _)| *on)

@@ -82,7 +82,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     };
     let front = ng.dot(ray.dir) < 0.0;
 
-    let material = &scene.materials[prim.material as usize];
+    let material = frame.material(prim.material);
     // Borrowed where it is the same everywhere: it is large enough that copying it shows.
     let varying_sample;
     let (sample, uniform) = match &frame.materials[prim.material as usize].uniform {

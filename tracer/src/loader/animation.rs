@@ -10,31 +10,53 @@
 //!   warning, so that every interpolation renders the rotation the file meant.
 //! - A channel that targets a node with a `matrix` is an error: the spec allows only
 //!   translation, rotation and scale on animated nodes.
-//! - A channel whose target this loader does not know (KHR_animation_pointer's `pointer`,
-//!   or a target without a node) is dropped with a warning before the document is parsed;
-//!   see [`strip_unsupported_channels`].
+//! - KHR_animation_pointer channels (`"path": "pointer"`) are taken out before the
+//!   document is parsed ([`strip_unsupported_channels`]) and read into
+//!   [`crate::animation::PropertyChannel`]s where the pointer is one Tessera animates
+//!   ([`pointer_target`]): a light's colour or intensity, a material's emissive factor or
+//!   strength (each half multiplied by the other's value in the file; animating both
+//!   halves of one is an error), base colour, metallic or roughness factor. Any other
+//!   pointer, and a target without a node, is dropped with a warning.
 
 use std::borrow::Cow;
+use std::collections::HashMap;
 
-use glam::DMat4;
+use glam::{DMat4, Vec3};
 use gltf::accessor::{DataType, Dimensions as D};
-use gltf::animation::Property;
+use gltf::animation::Property as NodeProperty;
 use gltf::json::Value;
 
 use super::accessor::read_floats;
 use super::error::{Element, SceneError};
 use super::gltf::UNIT_TOLERANCE;
-use crate::animation::{Animation, Channel, Interpolation, Sampler, Target};
+use crate::animation::{
+    Animation, Channel, Interpolation, Property, PropertyChannel, Sampler, Target,
+};
 use crate::scene::{Mesh, Node, Skin};
+
+/// A KHR_animation_pointer channel, taken out of the untyped document (the typed parser
+/// refuses `"path": "pointer"`) to be read once the document is parsed.
+#[derive(Clone, Debug)]
+pub(crate) struct PointerChannel {
+    /// The animation and the channel's index in the file.
+    pub animation: usize,
+    pub channel: usize,
+    /// The animation's sampler it uses.
+    pub sampler: usize,
+    /// The JSON pointer it animates.
+    pub pointer: String,
+}
 
 /// Removes, from the untyped document, animation channels whose target is not one of
 /// glTF's four node properties or has no node (KHR_animation_pointer writes
-/// `"path": "pointer"` and no node, which the typed parser refuses outright). Returns a
-/// warning for each, naming the animation and the channel's index in the file.
-pub(crate) fn strip_unsupported_channels(raw: &mut Value) -> Vec<String> {
+/// `"path": "pointer"` and no node, which the typed parser refuses outright). Gives the
+/// pointer channels, for [`convert_animations`], and a warning for every other channel
+/// removed, naming the animation and the channel's index in the file.
+pub(crate) fn strip_unsupported_channels(raw: &mut Value) -> (Vec<PointerChannel>, Vec<String>) {
+    let mut pointers = Vec::new();
     let mut warnings = Vec::new();
     let Some(anims) = raw.get_mut("animations").and_then(Value::as_array_mut) else {
-        return warnings;
+        return (pointers, warnings);
     };
     for (a, anim) in anims.iter_mut().enumerate() {
         let Some(channels) = anim.get_mut("channels").and_then(Value::as_array_mut) else {
@@ -45,6 +67,12 @@ pub(crate) fn strip_unsupported_channels(raw: &mut Value) -> Vec<String> {
             let target = ch.get("target");
             let path = target.and_then(|t| t.get("path")).and_then(Value::as_str);
             let has_node = target.and_then(|t| t.get("node")).is_some();
+            let pointer = target
+                .and_then(|t| t.get("extensions"))
+                .and_then(|e| e.get("KHR_animation_pointer"))
+                .and_then(|p| p.get("pointer"))
+                .and_then(Value::as_str);
+            let sampler = ch.get("sampler").and_then(Value::as_u64);
             let why = match path {
                 // A malformed target stays, for the schema check to report.
                 None => None,
@@ -52,12 +80,25 @@ pub(crate) fn strip_unsupported_channels(raw: &mut Value) -> Vec<String> {
                 Some(p @ ("translation" | "rotation" | "scale" | "weights")) => Some(format!(
                     "its '{p}' target names no node (an extension would define it)"
                 )),
-                Some("pointer") => {
-                    Some("target path 'pointer' (KHR_animation_pointer) is not supported".into())
-                }
+                Some("pointer") => match (pointer, sampler) {
+                    (Some(pointer), Some(sampler)) => {
+                        pointers.push(PointerChannel {
+                            animation: a,
+                            channel: c,
+                            sampler: sampler as usize,
+                            pointer: pointer.to_owned(),
+                        });
+                        Some(String::new())
+                    }
+                    _ => Some(
+                        "target path 'pointer' without a KHR_animation_pointer pointer or a \
+                         sampler"
+                            .into(),
+                    ),
+                },
                 Some(p) => Some(format!("target path '{p}' is not supported")),
             };
-            if let Some(why) = &why {
+            if let Some(why) = why.as_ref().filter(|w| !w.is_empty()) {
                 warnings.push(format!(
                     "animation {a}, channel {c}: {why}; channel skipped"
                 ));
@@ -66,7 +107,7 @@ pub(crate) fn strip_unsupported_channels(raw: &mut Value) -> Vec<String> {
             why.is_none()
         });
     }
-    warnings
+    (pointers, warnings)
 }
 
 /// The document's skins: joint nodes (in range of `node_count`) and inverse bind matrices
@@ -135,11 +176,13 @@ pub(crate) fn convert_skins(
 /// weights channel's width is its node's mesh's morph target count.
 pub(crate) fn convert_animations(
     doc: &gltf::Document,
+    raw: &Value,
     buffers: &[Cow<'_, [u8]>],
-    nodes: &[Node],
-    meshes: &[Mesh],
+    (nodes, meshes): (&[Node], &[Mesh]),
+    pointers: &[PointerChannel],
     warnings: &mut Vec<String>,
 ) -> Result<Vec<Animation>, SceneError> {
+    let mut sources = HashMap::new();
     let mut out = Vec::with_capacity(doc.animations().len());
     for anim in doc.animations() {
         let a = anim.index();
@@ -177,10 +220,10 @@ pub(crate) fn convert_animations(
                 ));
             }
             let target = match ch.target().property() {
-                Property::Translation => Target::Translation,
-                Property::Rotation => Target::Rotation,
-                Property::Scale => Target::Scale,
-                Property::MorphTargetWeights => Target::Weights,
+                NodeProperty::Translation => Target::Translation,
+                NodeProperty::Rotation => Target::Rotation,
+                NodeProperty::Scale => Target::Scale,
+                NodeProperty::MorphTargetWeights => Target::Weights,
             };
             let width = match target {
                 Target::Translation | Target::Scale => 3,
@@ -204,15 +247,66 @@ pub(crate) fn convert_animations(
             };
             let s = ch.sampler();
             let what = format!("sampler {} of {label} (channel {c})", s.index());
-            let sampler = convert_sampler(&s, buffers, target, width, &what, warnings)?;
+            let sampler =
+                convert_sampler(&s, buffers, Output::Node(target), width, &what, warnings)?;
             channels.push(Channel {
                 node: target_node as u32,
                 target,
                 sampler,
             });
         }
+        let mut properties = Vec::new();
+        for p in pointers.iter().filter(|p| p.animation == a) {
+            let c = p.channel;
+            let Some((property, source)) = pointer_target(&p.pointer, doc, raw)
+                .map_err(|why| SceneError::at(element, format!("channel {c}: {why}")))?
+            else {
+                warnings.push(format!(
+                    "{label}, channel {c}: KHR_animation_pointer '{}' is not one Tessera \
+                     animates (light colour and intensity; material emission, base colour, \
+                     metallic and roughness factors); channel skipped",
+                    p.pointer
+                ));
+                continue;
+            };
+            // The light's intensity holds colour × intensity, a material's emission factor
+            // × strength: a file may animate either half, not both.
+            let kind = std::mem::discriminant(&source);
+            if *sources.entry(property).or_insert(kind) != kind {
+                return Err(SceneError::at(
+                    element,
+                    format!(
+                        "channel {c}: {} animates the other half of a value another channel \
+                         animates ({property:?}: a light's colour and its intensity, or a \
+                         material's emissive factor and its strength); Tessera animates one",
+                        p.pointer
+                    ),
+                ));
+            }
+            let Some(s) = anim.samplers().nth(p.sampler) else {
+                return Err(SceneError::at(
+                    element,
+                    format!(
+                        "channel {c}: sampler {} out of range for {} samplers",
+                        p.sampler,
+                        anim.samplers().count()
+                    ),
+                ));
+            };
+            let what = format!(
+                "sampler {} of {label} (channel {c}, {})",
+                s.index(),
+                p.pointer
+            );
+            let width = source.file_width(property);
+            let mut sampler =
+                convert_sampler(&s, buffers, Output::Pointer(width), width, &what, warnings)?;
+            source.convert(&mut sampler, property.width());
+            properties.push(PropertyChannel { property, sampler });
+        }
         out.push(Animation {
             name: anim.name().map(str::to_owned),
+            properties,
             channels,
         });
     }
@@ -224,7 +318,7 @@ pub(crate) fn convert_animations(
 fn convert_sampler(
     s: &gltf::animation::Sampler<'_>,
     buffers: &[Cow<'_, [u8]>],
-    target: Target,
+    output_of: Output,
     width: usize,
     what: &str,
     warnings: &mut Vec<String>,
@@ -273,17 +367,20 @@ fn convert_sampler(
     let output = s.output();
     let at = Element::Accessor(output.index());
     let out_what = format!("output (values) of {what}");
-    let (dims, name) = match target {
-        Target::Translation => (D::Vec3, "translation"),
-        Target::Scale => (D::Vec3, "scale"),
-        Target::Rotation => (D::Vec4, "rotation"),
-        Target::Weights => (D::Scalar, "weights"),
+    let (dims, name) = match output_of {
+        Output::Node(Target::Translation) => (D::Vec3, "translation"),
+        Output::Node(Target::Scale) => (D::Vec3, "scale"),
+        Output::Node(Target::Rotation) => (D::Vec4, "rotation"),
+        Output::Node(Target::Weights) => (D::Scalar, "weights"),
+        Output::Pointer(4) => (D::Vec4, "a four-component value"),
+        Output::Pointer(3) => (D::Vec3, "a three-component value"),
+        Output::Pointer(_) => (D::Scalar, "a scalar value"),
     };
     let ty = output.data_type();
-    let type_ok = match (target, ty) {
-        (_, DataType::F32) => true,
-        (Target::Rotation | Target::Weights, DataType::I8 | DataType::U8)
-        | (Target::Rotation | Target::Weights, DataType::I16 | DataType::U16) => {
+    let rotation_or_weights = matches!(output_of, Output::Node(Target::Rotation | Target::Weights));
+    let type_ok = match ty {
+        DataType::F32 => true,
+        DataType::I8 | DataType::U8 | DataType::I16 | DataType::U16 if rotation_or_weights => {
             output.normalized()
         }
         _ => false,
@@ -300,7 +397,8 @@ fn convert_sampler(
         _ => 1,
     };
     let keys = times.len();
-    let per_element = if target == Target::Weights { width } else { 1 };
+    let weights = output_of == Output::Node(Target::Weights);
+    let per_element = if weights { width } else { 1 };
     let need = keys * per_key * per_element;
     if output.count() != need {
         return Err(SceneError::at(
@@ -313,7 +411,7 @@ fn convert_sampler(
                 } else {
                     ""
                 },
-                if target == Target::Weights {
+                if weights {
                     format!(" × {width} morph targets")
                 } else {
                     String::new()
@@ -328,7 +426,7 @@ fn convert_sampler(
         ));
     }
 
-    if target == Target::Rotation {
+    if output_of == Output::Node(Target::Rotation) {
         // A normalised integer can only come within one quantisation step of unit length.
         let tolerance = match ty {
             DataType::I8 | DataType::U8 => 1.0 / 127.0,
@@ -404,4 +502,107 @@ fn normalise_rotation_keys(
         }
     }
     (bad > 0).then_some((bad, lo, hi))
+}
+
+/// What a sampler's output drives: a node property, or KHR_animation_pointer values of
+/// this many floats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Output {
+    Node(Target),
+    Pointer(usize),
+}
+
+/// How a pointer's values become a [`Property`]'s: as they are, or multiplied by the half
+/// of the value the file does not animate (a light's intensity holds colour × intensity,
+/// a material's emission factor × strength).
+#[derive(Clone, Copy, Debug)]
+enum Source {
+    Direct,
+    /// A colour, times this.
+    Colour(f32),
+    /// A scalar, times this colour.
+    Scale(Vec3),
+}
+
+impl Source {
+    /// Floats per key in the file.
+    fn file_width(self, property: Property) -> usize {
+        match self {
+            Source::Scale(_) => 1,
+            _ => property.width(),
+        }
+    }
+
+    /// Turns `s`'s values (tangents too: the map is linear) into the property's.
+    fn convert(self, s: &mut Sampler, width: usize) {
+        match self {
+            Source::Direct => {}
+            Source::Colour(k) => s.values.iter_mut().for_each(|v| *v *= k),
+            Source::Scale(colour) => {
+                s.values = s
+                    .values
+                    .iter()
+                    .flat_map(|&v| (colour * v).to_array())
+                    .collect();
+            }
+        }
+        s.width = width;
+    }
+}
+
+/// The property a KHR_animation_pointer `pointer` animates and how its values map to it;
+/// `None` for a pointer Tessera does not animate, an error for an index out of range.
+fn pointer_target(
+    pointer: &str,
+    doc: &gltf::Document,
+    raw: &Value,
+) -> Result<Option<(Property, Source)>, String> {
+    let parts: Vec<&str> = pointer.split('/').collect();
+    let index = |s: &str, what: &str, count: usize| -> Result<u32, String> {
+        match s.parse::<usize>() {
+            Ok(i) if i < count => Ok(i as u32),
+            _ => Err(format!("{pointer}: {what} {s} out of range for {count}")),
+        }
+    };
+    Ok(Some(match parts[..] {
+        ["", "extensions", "KHR_lights_punctual", "lights", i, field @ ("color" | "intensity")] => {
+            let lights: Vec<_> = doc.lights().map(Iterator::collect).unwrap_or_default();
+            let light = &lights[index(i, "light", lights.len())? as usize];
+            let property = Property::Light(light.index() as u32);
+            if field == "color" {
+                (property, Source::Colour(light.intensity()))
+            } else {
+                (property, Source::Scale(Vec3::from_array(light.color())))
+            }
+        }
+        ["", "materials", i, ref field @ ..] => {
+            let make: fn(u32) -> Property = match field {
+                ["emissiveFactor"]
+                | ["extensions", "KHR_materials_emissive_strength", "emissiveStrength"] => {
+                    Property::Emission
+                }
+                ["pbrMetallicRoughness", "baseColorFactor"] => Property::BaseColor,
+                ["pbrMetallicRoughness", "metallicFactor"] => Property::Metallic,
+                ["pbrMetallicRoughness", "roughnessFactor"] => Property::Roughness,
+                _ => return Ok(None),
+            };
+            let m = index(i, "material", doc.materials().len())?;
+            let json = &raw["materials"][m as usize];
+            let source = match field {
+                ["emissiveFactor"] => Source::Colour(
+                    json["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"]
+                        .as_f64()
+                        .unwrap_or(1.0) as f32,
+                ),
+                ["extensions", ..] => Source::Scale(
+                    doc.materials()
+                        .nth(m as usize)
+                        .map_or(Vec3::ZERO, |mat| Vec3::from_array(mat.emissive_factor())),
+                ),
+                _ => Source::Direct,
+            };
+            (make(m), source)
+        }
+        _ => return Ok(None),
+    }))
 }

@@ -10,7 +10,7 @@ use gltf::json::Value;
 use rayon::prelude::*;
 
 use super::accessor::view_bytes;
-use super::animation::{convert_animations, convert_skins};
+use super::animation::{convert_animations, convert_skins, PointerChannel};
 use super::container::Resolver;
 use super::error::{Element, SceneError};
 use super::instancing;
@@ -33,6 +33,8 @@ pub(crate) struct Input<'a> {
     pub buffers: &'a [Cow<'a, [u8]>],
     /// Where image URIs are looked up.
     pub resolver: Resolver<'a>,
+    /// The KHR_animation_pointer channels taken out of the JSON before it was parsed.
+    pub pointers: &'a [PointerChannel],
 }
 
 /// Converts the document.
@@ -91,7 +93,14 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
         materials.push(Material::default());
     }
     check_node_deformers(&mut nodes, &meshes, &mut warnings);
-    let animations = convert_animations(doc, input.buffers, &nodes, &meshes, &mut warnings)?;
+    let animations = convert_animations(
+        doc,
+        input.raw,
+        input.buffers,
+        (&nodes, &meshes),
+        input.pointers,
+        &mut warnings,
+    )?;
 
     let cameras = doc
         .cameras()
@@ -569,7 +578,11 @@ fn convert_light(
 /// same any-hit alpha test.
 fn features(scene: &Scene) -> Features {
     let mut f = Features {
-        animation: scene.animations.iter().any(|a| !a.channels.is_empty()),
+        animation: scene
+            .animations
+            .iter()
+            .any(|a| !a.channels.is_empty() || !a.properties.is_empty()),
+        emissive: crate::animation::animates_emission(scene),
         ..Features::default()
     };
     let mut seen_mesh = vec![false; scene.meshes.len()];
