@@ -31,6 +31,15 @@ pub struct RenderArgs {
     /// A .gltf (with its .bin and images beside it) or .glb; the built-in animated demo
     /// scene when left out.
     scene: Option<PathBuf>,
+    /// A built-in scene instead of a file: `demo` (the animated demo), `cornell` (the
+    /// measured Cornell box) or `fluorescence` (the spectral showcase: a fluorescent ball,
+    /// a light that turns ultraviolet at 1 s, a dispersive prism; frames 1-48).
+    #[arg(long, value_enum, conflicts_with = "scene")]
+    builtin: Option<Builtin>,
+    /// Write the scene as a .glb to this path and render nothing: a built-in scene to
+    /// submit to the farm (`tessera submit FILE`).
+    #[arg(long)]
+    export_glb: Option<PathBuf>,
     /// Frame number; it sets the time (frame / fps) and keys the random numbers.
     #[arg(
         long,
@@ -126,6 +135,29 @@ fn parse_environment(s: &str) -> anyhow::Result<Environment> {
     Ok(Environment::Map(map))
 }
 
+/// The scenes built into the tracer.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Builtin {
+    /// The farm demo: a Cornell box with a bouncing metal sphere, a turning box and a
+    /// sliding glass sphere.
+    Demo,
+    /// The measured Cornell box with its two blocks.
+    Cornell,
+    /// The spectral showcase.
+    Fluorescence,
+}
+
+impl Builtin {
+    /// Builds it.
+    pub fn scene(self) -> Scene {
+        match self {
+            Builtin::Demo => tracer::demo::animated_demo_scene(),
+            Builtin::Cornell => tracer::demo::cornell_box(),
+            Builtin::Fluorescence => tracer::demo::fluorescence_scene(),
+        }
+    }
+}
+
 /// Loads the scene named on the command line, or `demo` when none is named.
 pub fn load_scene(path: Option<&PathBuf>, demo: fn() -> Scene) -> anyhow::Result<Scene> {
     match path {
@@ -213,10 +245,17 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     };
 
     let t_load = Instant::now();
-    let scene = Arc::new(load_scene(
-        args.scene.as_ref(),
-        tracer::demo::animated_demo_scene,
-    )?);
+    let scene = Arc::new(match args.builtin {
+        Some(builtin) => builtin.scene(),
+        None => load_scene(args.scene.as_ref(), tracer::demo::animated_demo_scene)?,
+    });
+    if let Some(path) = &args.export_glb {
+        let glb = tracer::export::scene_to_glb(&scene)
+            .map_err(|e| anyhow::anyhow!("exporting the scene to GLB: {e}"))?;
+        std::fs::write(path, glb).with_context(|| format!("writing {}", path.display()))?;
+        println!("wrote {}", path.display());
+        return Ok(());
+    }
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
@@ -367,6 +406,31 @@ mod tests {
 
     fn error_of(args: &[&str]) -> String {
         format!("{:#}", sampling_of(args).unwrap_err())
+    }
+
+    /// `--builtin` names a scene built into the tracer, never together with a file, and
+    /// `--export-glb` writes it out as a GLB that loads back as the same scene.
+    #[test]
+    fn a_builtin_scene_is_named_and_exported() {
+        assert!(Cli::try_parse_from(["render", "x.glb", "--builtin", "demo"]).is_err());
+        assert!(Cli::try_parse_from(["render", "--builtin", "teapot"]).is_err());
+        let dir = std::env::temp_dir().join(format!("tessera-builtin-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("showcase.glb");
+        let cli = Cli::try_parse_from([
+            "render",
+            "--builtin",
+            "fluorescence",
+            "--export-glb",
+            path.to_str().unwrap(),
+        ])
+        .unwrap();
+        run(cli.render).unwrap();
+        let scene = tracer::loader::load_path(&path).unwrap();
+        assert!(scene.features.fluorescence && scene.features.dispersion);
+        assert!(scene.features.light_spectra && scene.features.needs_spectral());
+        assert_eq!(scene.animations[0].properties.len(), 3);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// A negative number is a value, not a flag: its range is checked (with a message

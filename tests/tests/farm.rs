@@ -88,6 +88,59 @@ fn two_workers_render_every_frame_as_tessera_render_does() {
     }
 }
 
+/// The spectral showcase, exported by `tessera render --builtin fluorescence --export-glb`,
+/// renders on the farm as `tessera render` renders it, bit for bit: frame 23 under the
+/// white light, frame 24 after the switch to ultraviolet, darker and green.
+#[test]
+fn the_spectral_showcase_renders_on_the_farm_as_tessera_render_does() {
+    let (farm, _) = two_worker_farm();
+    let glb = farm.path().join("showcase.glb");
+    let glb_arg = glb.to_str().unwrap();
+    tessera_ok(
+        &[
+            "render",
+            "--builtin",
+            "fluorescence",
+            "--export-glb",
+            glb_arg,
+        ],
+        farm.path(),
+    );
+    let mut args = vec![
+        glb_arg, "--frames", "23-24", "--tile", "16", "--passes", "1",
+    ];
+    args.extend(settings("4"));
+    args.extend(["--wait", "--out", "showcase"]);
+    let job = farm.submit(&args);
+    assert_eq!(farm.job(job).state, JobState::Done);
+    let mut means = Vec::new();
+    for frame in [23, 24] {
+        let direct = render_directly(&glb, frame, "4", farm.path());
+        let name = proto::job::frame_file_name(frame, 24, "exr");
+        let tiled = read_exr(&farm.path().join("showcase").join(&name)).unwrap();
+        assert!(
+            tiled.layers == direct,
+            "frame {frame}: the farm's showcase differs from tessera render"
+        );
+        let sum: glam::Vec4 = direct.beauty.iter().sum();
+        let brightest = direct
+            .beauty
+            .iter()
+            .copied()
+            .fold(glam::Vec4::ZERO, |a, b| if b.y > a.y { b } else { a });
+        means.push((sum / direct.beauty.len() as f32, brightest));
+    }
+    let ((white, _), (uv, glow)) = (means[0], means[1]);
+    assert!(
+        uv.y < 0.1 * white.y,
+        "the room goes dark: {white} then {uv}"
+    );
+    assert!(
+        glow.y > glow.x && glow.y > glow.z,
+        "and what glows is green: {glow}"
+    );
+}
+
 #[test]
 fn a_worker_started_before_the_server_waits_and_then_works() {
     let mut farm = Farm::new();

@@ -1,6 +1,7 @@
 //! The built-in demo scenes, authored in code: a Cornell box (after the published Cornell
 //! measurements, scaled to a 2 m box) with an area light, a diffuse box, a metal sphere and
-//! a glass sphere; still, or animated for the farm's demo.
+//! a glass sphere; still, or animated for the farm's demo. And the spectral showcase
+//! ([`fluorescence_scene`]).
 
 use glam::{DMat4, DVec3, Vec3, Vec4};
 
@@ -11,6 +12,10 @@ use crate::material::Material;
 use crate::math;
 use crate::scene::{CameraDef, Scene, SceneBuilder, Trs};
 use crate::shapes::{cube, quad, uv_sphere};
+
+mod fluorescence;
+
+pub use fluorescence::{fluorescence_scene, FLUORESCENCE_SECONDS, SWITCH_SECONDS};
 
 /// Cornell box wall reflectances (approximations of the measured spectra).
 const WHITE: Vec3 = Vec3::new(0.73, 0.73, 0.73);

@@ -231,6 +231,17 @@ fn demo_scene_round_trips() {
     check("demo_scene", demo::demo_scene, &[(0, Shutter::default())]);
 }
 
+/// The spectral showcase (fluorescence, light spectra, dispersion, animated emission)
+/// before and after the switch.
+#[test]
+fn the_spectral_showcase_round_trips() {
+    check(
+        "fluorescence",
+        demo::fluorescence_scene,
+        &[(12, Shutter::default()), (36, Shutter::default())],
+    );
+}
+
 #[test]
 fn animated_demo_round_trips_with_motion_blur() {
     // Half a frame open: every object moves while the shutter is open at these frames.
