@@ -176,6 +176,18 @@ pub fn rotation_y_f64(angle: f64) -> DQuat {
     DQuat::from_xyzw(0.0, s, 0.0, c)
 }
 
+/// A rotation by `angle` radians about the x axis, in double precision.
+pub fn rotation_x_f64(angle: f64) -> DQuat {
+    let (s, c) = sin_cos_f64(0.5 * angle);
+    DQuat::from_xyzw(s, 0.0, 0.0, c)
+}
+
+/// A rotation by `angle` radians about the z axis.
+pub fn rotation_z(angle: f32) -> Quat {
+    let (s, c) = sin_cos(0.5 * angle);
+    Quat::from_xyzw(0.0, 0.0, s, c)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,6 +14,7 @@ use crate::animation::{
 use crate::camera::Projection;
 use crate::light::Environment;
 use crate::material::Material;
+use crate::math;
 use crate::scene::{CameraDef, Scene, SceneBuilder, Trs};
 use crate::shapes::{cube, prism, quad, uv_sphere};
 use crate::spectrum::{FluorescenceDef, SpectrumShape};
@@ -126,7 +127,7 @@ pub fn fluorescence_scene() -> Scene {
         DVec4::W,
     );
     let prism_at = DMat4::from_rotation_translation(
-        DQuat::from_rotation_x(200f64.to_radians()),
+        math::rotation_x_f64(200f64.to_radians()),
         DVec3::new(1.1, 1.0, -0.45),
     ) * axes
         * DMat4::from_translation(DVec3::new(0.0, -height / 3.0, 0.0));
@@ -185,7 +186,7 @@ pub fn fluorescence_scene() -> Scene {
     let turn = (x1 - x0) / BALL_RADIUS as f32;
     // Keys less than half a turn apart, so that each slerp turns the way the ball rolls.
     let roll: Vec<f32> = (0..=4)
-        .flat_map(|k| glam::Quat::from_rotation_z(-turn * k as f32 / 4.0).to_array())
+        .flat_map(|k| math::rotation_z(-turn * k as f32 / 4.0).to_array())
         .collect();
     let step = |on: f32, off: f32| Sampler {
         interpolation: Interpolation::Step,
