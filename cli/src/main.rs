@@ -98,6 +98,7 @@ fn run() -> anyhow::Result<()> {
             Some(bench::BenchCommand::Cornell(c)) => bench::cornell::run_cornell(c),
             Some(bench::BenchCommand::Rays(r)) => bench::rays::run(r),
             Some(bench::BenchCommand::Features(f)) => bench::features::run(f),
+            Some(bench::BenchCommand::Spectral(s)) => bench::spectral::run(s),
             None => bench::run(args),
         },
         Command::Server(args) => server::run(args, layers),

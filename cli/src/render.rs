@@ -99,6 +99,12 @@ pub struct RenderArgs {
     /// Seed mixed into every random number.
     #[arg(long, default_value_t = 0)]
     seed: u32,
+    /// Carry light at four sampled wavelengths even where the scene needs no spectral
+    /// feature (dispersion, fluorescence, light spectra take that path by themselves): to
+    /// compare with the RGB path, which converges to nearly the same image with less
+    /// colour noise.
+    #[arg(long)]
+    spectral: bool,
     /// Environment: `black`, a radiance `R,G,B` or one number, or an equirectangular .exr.
     /// By default the scene's own; a glTF scene without punctual lights gets a uniform white
     /// environment of radiance 1, one with punctual lights none.
@@ -205,6 +211,7 @@ fn sampling(args: &RenderArgs) -> anyhow::Result<(u32, RenderSettings)> {
         noise,
         max_depth,
         seed: args.seed,
+        spectral: args.spectral,
         ..RenderSettings::DEFAULT
     };
     Ok((spp, settings))
@@ -323,7 +330,15 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             )
             .with("tessera/motion-steps", frame.motion_steps.to_string())
             .with("tessera/seed", args.seed.to_string())
-            .with(ExrMetadata::FEATURES, frame.features.names().join(","));
+            .with(ExrMetadata::FEATURES, frame.features.names().join(","))
+            .with(
+                "tessera/path",
+                if tracer::integrator::carries_wavelengths(&frame, &settings) {
+                    "spectral"
+                } else {
+                    "rgb"
+                },
+            );
         if let Some(q) = args.quality {
             meta.set("tessera/quality", q.name());
         }
@@ -430,6 +445,34 @@ mod tests {
         assert!(scene.features.fluorescence && scene.features.dispersion);
         assert!(scene.features.light_spectra && scene.features.needs_spectral());
         assert_eq!(scene.animations[0].properties.len(), 3);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The frame says which path rendered it: the RGB path for a scene without spectral
+    /// features, the spectral one with `--spectral` or a scene that needs it.
+    #[test]
+    fn the_exr_names_the_path_it_took() {
+        let dir = std::env::temp_dir().join(format!("tessera-path-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for (scene, spectral, path) in [
+            ("cornell", false, "rgb"),
+            ("cornell", true, "spectral"),
+            ("fluorescence", false, "spectral"),
+        ] {
+            let out = dir.join(format!("{scene}-{spectral}.exr"));
+            let mut args = vec!["render", "--builtin", scene, "--size", "8x8", "--spp", "1"];
+            if spectral {
+                args.push("--spectral");
+            }
+            args.extend(["--out", out.to_str().unwrap()]);
+            run(Cli::try_parse_from(args).unwrap().render).unwrap();
+            let image = tracer::output::read_exr(&out).unwrap();
+            assert_eq!(
+                image.attribute("tessera/path"),
+                Some(path),
+                "{scene} {spectral}"
+            );
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -213,8 +213,14 @@ struct SampleWalk<W: Carrier> {
     branches: u32,
 }
 
+/// Whether `frame` renders on the spectral path: where the settings ask for it or the
+/// scene needs it ([`crate::scene::Features::needs_spectral`]).
+pub fn carries_wavelengths(frame: &PreparedFrame, settings: &RenderSettings) -> bool {
+    settings.spectral || frame.features.needs_spectral()
+}
+
 /// Traces camera sample `index` of pixel (`x`, `y`): in RGB, or at four wavelengths where
-/// the settings ask for the spectral path or the scene needs it.
+/// [`carries_wavelengths`] says so.
 pub fn trace_sample(
     frame: &PreparedFrame,
     settings: &RenderSettings,
@@ -222,7 +228,7 @@ pub fn trace_sample(
     y: u32,
     index: u32,
 ) -> SampleValue {
-    if settings.spectral || frame.features.needs_spectral() {
+    if carries_wavelengths(frame, settings) {
         trace_sample_with(
             frame,
             settings,

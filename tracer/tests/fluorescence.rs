@@ -273,7 +273,19 @@ fn the_extension_is_read_and_refused_as_documented() {
             "quantumYield",
         ),
         (
-            r#"{"excitation":{"gaussian":{"peak":250,"width":5}},"emission":{"blackbody":3000}}"#,
+            r#"{"excitation":{"blackbody":3000},"emission":{"blackbody":3000},"quantumYield":1.5}"#,
+            "quantumYield",
+        ),
+        (
+            r#"{"excitation":{"table":[]},"emission":{"blackbody":3000}}"#,
+            "2 to",
+        ),
+        (
+            r#"{"excitation":{"blackbody":3000},"emission":{"gaussian":{"peak":520,"width":-4}}}"#,
+            "not above 0",
+        ),
+        (
+            r#"{"excitation":{"gaussian":{"peak":320,"width":5}},"emission":{"blackbody":3000}}"#,
             "is 0 over",
         ),
         (
@@ -287,7 +299,9 @@ fn the_extension_is_read_and_refused_as_documented() {
             .expect_err(json)
             .to_string();
         assert!(
-            err.contains("TESSERA_materials_fluorescence") && err.contains(why),
+            err.contains("TESSERA_materials_fluorescence")
+                && err.contains(why)
+                && err.contains("material 0"),
             "{json}: {err}"
         );
     }

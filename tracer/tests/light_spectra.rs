@@ -228,9 +228,13 @@ fn what_is_no_spectrum_is_refused() {
         (r#"{"blackbody":20}"#, "outside"),
         (r#"{"gaussian":{"peak":500}}"#, "Gaussian width"),
         (r#"{"gaussian":{"peak":500,"width":0}}"#, "not above 0"),
-        (r#"{"gaussian":{"peak":100,"width":10}}"#, "outside"),
-        (r#"{"gaussian":{"peak":300,"width":5}}"#, "no power"),
+        (r#"{"gaussian":{"peak":500,"width":-20}}"#, "not above 0"),
+        (r#"{"gaussian":{"peak":290,"width":10}}"#, "outside"),
+        (r#"{"gaussian":{"peak":1200,"width":10}}"#, "outside"),
+        (r#"{"gaussian":{"peak":320,"width":5}}"#, "no power"),
+        (r#"{"table":[]}"#, "2 to"),
         (r#"{"table":[[500,1]]}"#, "2 to"),
+        (r#"{"table":[[500,1],[1500,1]]}"#, "outside"),
         (r#"{"table":[[500,1],[400,1]]}"#, "do not increase"),
         (r#"{"table":[[500,1],[600,-1]]}"#, "at least 0"),
         (r#"{"table":[[500,1],[600]]}"#, "[nm, value]"),
@@ -245,8 +249,13 @@ fn what_is_no_spectrum_is_refused() {
             let err = loader::load_slice(doc(light, material).as_bytes(), None)
                 .expect_err(json)
                 .to_string();
+            let named = if light == json {
+                "light 0"
+            } else {
+                "material 0"
+            };
             assert!(
-                err.contains("TESSERA_lights_spectrum") && err.contains(why),
+                err.contains("TESSERA_lights_spectrum") && err.contains(why) && err.contains(named),
                 "{json}: {err}"
             );
         }

@@ -31,6 +31,7 @@ mod plots;
 pub mod rays;
 pub mod scaling;
 mod scenes;
+pub mod spectral;
 
 use scenes::{measure_scene, reference_subjects, Subject};
 pub use scenes::{Point, SceneReport};
@@ -75,6 +76,10 @@ pub enum BenchCommand {
     /// What each scene feature costs (the report's feature table alone): camera paths per
     /// second of the demo without and with it, the fastest of several runs taken in turn.
     Features(features::FeaturesArgs),
+    /// The spectral path against the RGB path on the measured Cornell box: paths per
+    /// second, and each one's MSE against its own reference per spp (the colour noise of
+    /// hero wavelengths).
+    Spectral(spectral::SpectralArgs),
 }
 
 /// The generated mesh is a grid of this many quads a side: 1,002,528 triangles.

@@ -9,10 +9,10 @@ pub const MAX_TABLE_ENTRIES: usize = 4096;
 /// The blackbody temperatures accepted, in kelvin: from a candle's glow far below
 /// visible red to far past any star's white.
 pub const BLACKBODY_KELVIN: std::ops::RangeInclusive<f32> = 100.0..=100_000.0;
-/// The wavelengths a Gaussian's peak and a table's entries may name, in nm: the
-/// ultraviolet and infrared beyond the visible band, which light can excite fluorescence
-/// from or carry, though the camera sees 360–830 nm only.
-pub const WAVELENGTH_RANGE: std::ops::RangeInclusive<f32> = 200.0..=2000.0;
+/// The wavelengths a Gaussian's peak and a table's entries may name, in nm: the near
+/// ultraviolet and infrared around the visible band (the renderer carries 360–830 nm; a
+/// shape may reach past it, as an LED's band does).
+pub const WAVELENGTH_RANGE: std::ops::RangeInclusive<f32> = 300.0..=1000.0;
 
 /// A spectrum's shape over wavelength, in relative units.
 #[derive(Clone, Debug, PartialEq)]
