@@ -6,13 +6,11 @@ use std::sync::Arc;
 use glam::{DMat4, DVec3, Vec3, Vec4};
 
 use tracer::animation::{self, Animation, Interpolation, Property, PropertyChannel, Sampler};
-use tracer::film::TileRect;
 use tracer::light::PunctualLight;
 use tracer::loader;
 use tracer::material::Material;
-use tracer::render::{prepare_frame, FrameOptions, RenderSettings};
+use tracer::render::{prepare_frame, FrameOptions};
 use tracer::scene::{Scene, SceneBuilder};
-use tracer::shapes::quad;
 
 mod common;
 
@@ -182,9 +180,7 @@ fn a_light_and_a_colour_change_over_a_shot() {
         specular: 0.0,
         ..Material::default()
     });
-    let c = [(-9.0, -9.0), (9.0, -9.0), (9.0, 9.0), (-9.0, 9.0)].map(|(x, y)| Vec3::new(x, y, 0.0));
-    b.mesh("plane", vec![quad(c, m)], DMat4::IDENTITY);
-    common::camera_on_z(&mut b, 1.0, 0.5);
+    common::plane_in_view(&mut b, m);
     b.light(
         PunctualLight::Directional {
             illuminance: Vec3::splat(e),
@@ -221,17 +217,7 @@ fn a_light_and_a_colour_change_over_a_shot() {
             ..Default::default()
         };
         let prepared = prepare_frame(scene.clone(), &options).expect("prepares");
-        let settings = RenderSettings {
-            max_depth: 1,
-            ..RenderSettings::DEFAULT
-        };
-        let layers = common::render_rect(&prepared, &settings, TileRect::new(0, 0, 8, 8), 4);
-        let mean: DVec3 = layers
-            .beauty
-            .iter()
-            .map(|p| p.truncate().as_dvec3())
-            .sum::<DVec3>()
-            / layers.beauty.len() as f64;
+        let mean = common::mean_one_bounce(&prepared, 4).as_dvec3();
         let t = (f64::from(frame) / 24.0).min(2.0) / 2.0;
         let colour = DVec3::ONE.lerp(DVec3::new(0.2, 0.4, 0.6), t);
         let want = colour * (f64::from(e) * t / std::f64::consts::PI);

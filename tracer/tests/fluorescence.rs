@@ -4,18 +4,16 @@
 
 use std::sync::Arc;
 
-use glam::{DMat4, DVec3, Vec3, Vec4};
+use glam::{DMat4, Vec3, Vec4};
 
-use tracer::film::TileRect;
 use tracer::light::PunctualLight;
 use tracer::loader;
 use tracer::material::Material;
-use tracer::render::{prepare_frame, FrameOptions, PreparedFrame, RenderSettings};
+use tracer::render::{prepare_frame, FrameOptions, PreparedFrame};
 use tracer::scene::SceneBuilder;
-use tracer::shapes::quad;
 use tracer::spectrum::{
-    self, DenseSpectrum, Fluorescence, FluorescenceDef, SigmoidPolynomial, SpectrumShape,
-    LAMBDA_MAX, LAMBDA_MIN,
+    DenseSpectrum, Fluorescence, FluorescenceDef, SigmoidPolynomial, SpectrumShape, LAMBDA_MAX,
+    LAMBDA_MIN,
 };
 
 mod common;
@@ -36,11 +34,6 @@ fn fluorescein(concentration: f32, quantum_yield: f32) -> FluorescenceDef {
     }
 }
 
-/// Every nm of the band, at bin middles.
-fn band() -> impl Iterator<Item = f32> {
-    (0..(LAMBDA_MAX - LAMBDA_MIN) as u32).map(|i| LAMBDA_MIN + i as f32 + 0.5)
-}
-
 /// No light leaves at a shorter wavelength than it arrived at, and what is re-emitted
 /// is at most Q times what is absorbed (less where the emission band reaches below the
 /// absorbed wavelength); with the reflected part, never more than arrived.
@@ -48,9 +41,9 @@ fn band() -> impl Iterator<Item = f32> {
 fn the_stokes_shift_holds_and_no_energy_is_made() {
     let (c, q) = (0.8, 0.9);
     let paint = Fluorescence::new(&fluorescein(c, q)).expect("a paint");
-    for from in band() {
+    for from in common::band() {
         let mut reradiated = 0.0;
-        for to in band() {
+        for to in common::band() {
             let (_, f) = paint.bbrrdf(from, to, 1.0);
             if to <= from {
                 assert_eq!(f, 0.0, "{from} nm → {to} nm");
@@ -67,7 +60,7 @@ fn the_stokes_shift_holds_and_no_energy_is_made() {
     }
     // Absorbed well below the emission band, nearly all of Q comes back.
     let from = 400.5;
-    let reradiated: f32 = band().map(|to| paint.bbrrdf(from, to, 1.0).1).sum();
+    let reradiated: f32 = common::band().map(|to| paint.bbrrdf(from, to, 1.0).1).sum();
     let want = q * c * paint.absorption(from);
     assert!(
         (reradiated - want).abs() < 1e-3 * want,
@@ -83,7 +76,7 @@ fn the_path_samples_the_absorbed_wavelength_from_the_absorption() {
     let paint = Fluorescence::new(&fluorescein(0.7, 0.8)).expect("a paint");
     let (to, r) = (530.25, 0.3);
     // ∫ a below λo over the 1 nm bins (the one holding λo in part).
-    let below: f64 = band()
+    let below: f64 = common::band()
         .map(|nm| f64::from(paint.absorption(nm)) * f64::from((to - (nm - 0.5)).clamp(0.0, 1.0)))
         .sum();
     let reflected = (1.0 - 0.7 * paint.absorption(to)) * r;
@@ -133,25 +126,12 @@ fn the_path_samples_the_absorbed_wavelength_from_the_absorption() {
     }
 }
 
-/// The linear Rec. 709 colour of radiance `l(λ)`, as the film computes it.
-fn colour_of(l: impl Fn(f32) -> f64) -> Vec3 {
-    let (mut xyz, mut y) = (DVec3::ZERO, 0.0);
-    for nm in band() {
-        let cmf = spectrum::cmf(nm).as_dvec3();
-        xyz += cmf * l(nm);
-        y += cmf.y;
-    }
-    spectrum::XYZ_TO_REC709 * (xyz / y).as_vec3()
-}
-
 /// A flat plane of `material` under a directional light of `illuminance` lux and
 /// spectrum `light`, filling the view.
 fn lit_plane(material: Material, illuminance: f32, light: SpectrumShape) -> PreparedFrame {
     let mut b = SceneBuilder::default();
     let m = b.material(material);
-    let c = [(-9.0, -9.0), (9.0, -9.0), (9.0, 9.0), (-9.0, 9.0)].map(|(x, y)| Vec3::new(x, y, 0.0));
-    b.mesh("plane", vec![quad(c, m)], DMat4::IDENTITY);
-    common::camera_on_z(&mut b, 1.0, 0.5);
+    common::plane_in_view(&mut b, m);
     b.light_with_spectrum(
         PunctualLight::Directional {
             illuminance: Vec3::splat(illuminance),
@@ -165,16 +145,6 @@ fn lit_plane(material: Material, illuminance: f32, light: SpectrumShape) -> Prep
         ..Default::default()
     };
     prepare_frame(Arc::new(b.finish()), &options).expect("prepares")
-}
-
-fn mean(frame: &PreparedFrame, spp: u32) -> Vec3 {
-    let settings = RenderSettings {
-        max_depth: 1,
-        ..RenderSettings::DEFAULT
-    };
-    let layers = common::render_rect(frame, &settings, TileRect::new(0, 0, 16, 16), spp);
-    let sum: DVec3 = layers.beauty.iter().map(|p| p.truncate().as_dvec3()).sum();
-    (sum / layers.beauty.len() as f64).as_vec3()
 }
 
 fn painted(base: f32, paint: FluorescenceDef) -> Material {
@@ -203,11 +173,11 @@ fn a_single_bounce_matches_the_closed_form() {
         let light = DenseSpectrum::light(&shape).expect("visible");
         let frame = lit_plane(painted(base, def.clone()), illuminance, shape);
         assert!(frame.features.fluorescence && frame.features.needs_spectral());
-        let got = mean(&frame, 2048);
+        let got = common::mean_one_bounce(&frame, 2048);
         let e_over_pi = f64::from(illuminance) / std::f64::consts::PI;
-        let want = colour_of(|to| {
+        let want = common::colour_of_spectrum(|to| {
             let (reflected, _) = paint.bbrrdf(to, to, r.eval(to));
-            let excited: f64 = band()
+            let excited: f64 = common::band()
                 .filter(|&from| from < to)
                 .map(|from| f64::from(paint.bbrrdf(from, to, 0.0).1 * light.eval(from)))
                 .sum();
@@ -235,7 +205,10 @@ fn no_paint_is_the_plain_surface() {
     without.fluorescence = None;
     let reference = lit_plane(without, 2.0, shape.clone());
     assert!(!plain.features.fluorescence);
-    assert_eq!(mean(&plain, 16), mean(&reference, 16));
+    assert_eq!(
+        common::mean_one_bounce(&plain, 16),
+        common::mean_one_bounce(&reference, 16)
+    );
     let dark = lit_plane(painted(0.5, fluorescein(1.0, 0.0)), 2.0, shape);
     assert!(!dark.features.fluorescence);
 }

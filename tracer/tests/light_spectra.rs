@@ -4,32 +4,16 @@
 
 use std::sync::Arc;
 
-use glam::{DMat4, DVec3, Vec3, Vec4};
+use glam::{DMat4, Vec3, Vec4};
 
-use tracer::film::TileRect;
 use tracer::light::{Environment, PunctualLight};
 use tracer::loader;
 use tracer::material::Material;
-use tracer::render::{prepare_frame, FrameOptions, PreparedFrame, RenderSettings};
+use tracer::render::{prepare_frame, FrameOptions, PreparedFrame};
 use tracer::scene::SceneBuilder;
-use tracer::shapes::quad;
-use tracer::spectrum::{self, DenseSpectrum, SpectrumShape, LAMBDA_MAX, LAMBDA_MIN};
+use tracer::spectrum::{self, DenseSpectrum, SpectrumShape};
 
 mod common;
-
-/// The linear Rec. 709 colour of light of spectrum `s` (the CIE observer, 1 nm steps),
-/// scaled so that a flat spectrum of 1 has luminance 1, as the film's is.
-fn colour_of(s: impl Fn(f32) -> f32) -> Vec3 {
-    let (mut xyz, mut y) = (DVec3::ZERO, 0.0);
-    let mut nm = LAMBDA_MIN;
-    while nm <= LAMBDA_MAX {
-        let cmf = spectrum::cmf(nm).as_dvec3();
-        xyz += cmf * f64::from(s(nm));
-        y += cmf.y;
-        nm += 1.0;
-    }
-    spectrum::XYZ_TO_REC709 * (xyz / y).as_vec3()
-}
 
 fn frame(b: SceneBuilder) -> PreparedFrame {
     let options = FrameOptions {
@@ -38,30 +22,6 @@ fn frame(b: SceneBuilder) -> PreparedFrame {
         ..Default::default()
     };
     prepare_frame(Arc::new(b.finish()), &options).expect("prepares")
-}
-
-/// The mean colour of the whole image, at `spp` samples per pixel and one bounce.
-fn mean(frame: &PreparedFrame, spp: u32) -> Vec3 {
-    let settings = RenderSettings {
-        max_depth: 1,
-        ..RenderSettings::DEFAULT
-    };
-    let layers = common::render_rect(frame, &settings, TileRect::new(0, 0, 16, 16), spp);
-    let sum: DVec3 = layers.beauty.iter().map(|p| p.truncate().as_dvec3()).sum();
-    (sum / layers.beauty.len() as f64).as_vec3()
-}
-
-/// A white Lambertian plane filling the view of a camera at z = 1, facing +z.
-fn plane(b: &mut SceneBuilder) {
-    let white = b.material(Material {
-        base_color: Vec4::ONE,
-        metallic: 0.0,
-        specular: 0.0,
-        ..Material::default()
-    });
-    let c = [(-9.0, -9.0), (9.0, -9.0), (9.0, 9.0), (-9.0, 9.0)].map(|(x, y)| Vec3::new(x, y, 0.0));
-    b.mesh("plane", vec![quad(c, white)], DMat4::IDENTITY);
-    common::camera_on_z(b, 1.0, 0.5);
 }
 
 fn shapes() -> [(&'static str, SpectrumShape); 5] {
@@ -100,7 +60,13 @@ fn a_light_of_its_own_spectrum_lights_as_the_closed_form_says() {
     for (colour, name_of_colour) in [(Vec3::ONE, "white"), (Vec3::new(1.0, 0.5, 0.25), "orange")] {
         for (name, shape) in shapes() {
             let mut b = SceneBuilder::default();
-            plane(&mut b);
+            let white = b.material(Material {
+                base_color: Vec4::ONE,
+                metallic: 0.0,
+                specular: 0.0,
+                ..Material::default()
+            });
+            common::plane_in_view(&mut b, white);
             b.light_with_spectrum(
                 PunctualLight::Directional {
                     illuminance: colour * illuminance,
@@ -110,10 +76,10 @@ fn a_light_of_its_own_spectrum_lights_as_the_closed_form_says() {
             );
             let frame = frame(b);
             assert!(frame.features.light_spectra && frame.features.needs_spectral());
-            let got = mean(&frame, 256);
+            let got = common::mean_one_bounce(&frame, 256);
             let dense = DenseSpectrum::light(&shape).expect("visible power");
             let filter = spectrum::UnboundedSpectrum::new(colour);
-            let want = colour_of(|nm| dense.eval(nm) * filter.eval(nm))
+            let want = common::colour_of_spectrum(|nm| f64::from(dense.eval(nm) * filter.eval(nm)))
                 * (illuminance / std::f32::consts::PI);
             let scale = want.abs().max_element().max(0.05);
             eprintln!("{name}, {name_of_colour}: {got} vs {want}");
@@ -139,15 +105,13 @@ fn an_emissive_material_of_its_own_spectrum_shows_its_colour() {
         emission_spectrum: Some(shape.clone()),
         ..Material::default()
     });
-    let c = [(-9.0, -9.0), (9.0, -9.0), (9.0, 9.0), (-9.0, 9.0)].map(|(x, y)| Vec3::new(x, y, 0.0));
-    b.mesh("glow", vec![quad(c, glow)], DMat4::IDENTITY);
-    common::camera_on_z(&mut b, 1.0, 0.5);
+    common::plane_in_view(&mut b, glow);
     b.environment(Environment::Black);
     let frame = frame(b);
     assert!(frame.features.light_spectra);
-    let got = mean(&frame, 256);
+    let got = common::mean_one_bounce(&frame, 256);
     let dense = DenseSpectrum::light(&shape).expect("visible power");
-    let want = colour_of(|nm| 2.0 * dense.eval(nm));
+    let want = common::colour_of_spectrum(|nm| 2.0 * f64::from(dense.eval(nm)));
     assert!(
         ((got - want) / want.max_element()).abs().max_element() < 0.015,
         "{got} vs {want}"
@@ -161,7 +125,7 @@ fn a_blackbody_near_d65_is_nearly_white() {
     let dense = DenseSpectrum::light(&SpectrumShape::Blackbody(6504.0)).expect("visible");
     // (0.977, 0.921, 0.970): D65 is not quite Planckian, and a blackbody spends more of
     // its power where the eye is less sensitive.
-    let c = colour_of(|nm| dense.eval(nm));
+    let c = common::colour_of_spectrum(|nm| f64::from(dense.eval(nm)));
     assert!((c - Vec3::ONE).abs().max_element() < 0.09, "{c}");
 }
 

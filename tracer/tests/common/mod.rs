@@ -12,7 +12,8 @@ use tracer::light::Environment;
 use tracer::material::Material;
 use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
 use tracer::scene::{CameraDef, Scene, SceneBuilder};
-use tracer::shapes::uv_sphere;
+use tracer::shapes::{quad, uv_sphere};
+use tracer::spectrum;
 
 /// A perspective camera (vertical field of view `yfov`) at `z` on the Z axis, looking
 /// down −Z at the origin.
@@ -63,6 +64,45 @@ pub fn render_rect(
     spp: u32,
 ) -> Layers {
     render_region(frame, settings, rect, SampleRange::new(0, spp), 16, &|_| {}).resolve()
+}
+
+/// Every nm of the band the renderer carries (360–830 nm), at the middles of 1 nm bins.
+pub fn band() -> impl Iterator<Item = f32> {
+    let (lo, hi) = (spectrum::LAMBDA_MIN, spectrum::LAMBDA_MAX);
+    (0..(hi - lo) as u32).map(move |i| lo + i as f32 + 0.5)
+}
+
+/// The linear Rec. 709 colour the film gives light of spectral radiance `l(λ)`: the CIE
+/// observer over [`band`], scaled so that a flat spectrum of 1 has luminance 1.
+pub fn colour_of_spectrum(l: impl Fn(f32) -> f64) -> Vec3 {
+    let (mut xyz, mut y) = (DVec3::ZERO, 0.0);
+    for nm in band() {
+        let cmf = spectrum::cmf(nm).as_dvec3();
+        xyz += cmf * l(nm);
+        y += cmf.y;
+    }
+    spectrum::XYZ_TO_REC709 * (xyz / y).as_vec3()
+}
+
+/// A quad of `material` in the z = 0 plane, facing +z and 18 units a side, and a camera at
+/// z = 1 ([`camera_on_z`]) that sees nothing else.
+pub fn plane_in_view(b: &mut SceneBuilder, material: u32) {
+    let c = [(-9.0, -9.0), (9.0, -9.0), (9.0, 9.0), (-9.0, 9.0)].map(|(x, y)| Vec3::new(x, y, 0.0));
+    b.mesh("plane", vec![quad(c, material)], DMat4::IDENTITY);
+    camera_on_z(b, 1.0, 0.5);
+}
+
+/// The mean colour over the whole of `frame` at `spp` samples per pixel and one bounce:
+/// what a plane under a light shows.
+pub fn mean_one_bounce(frame: &PreparedFrame, spp: u32) -> Vec3 {
+    let settings = RenderSettings {
+        max_depth: 1,
+        ..RenderSettings::DEFAULT
+    };
+    let rect = TileRect::new(0, 0, frame.width, frame.height);
+    let layers = render_rect(frame, &settings, rect, spp);
+    let sum: DVec3 = layers.beauty.iter().map(|p| p.truncate().as_dvec3()).sum();
+    (sum / layers.beauty.len() as f64).as_vec3()
 }
 
 /// SplitMix64: small, deterministic, good enough for Monte Carlo tests and test geometry.
