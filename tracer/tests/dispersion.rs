@@ -103,15 +103,15 @@ fn refract(d: DVec3, n: DVec3, from: f64, to: f64) -> Option<(DVec3, f64)> {
     Some((t, 1.0 - 0.5 * (rs * rs + rp * rp)))
 }
 
-/// A camera ray through the prism at IOR `n`: where it leaves, its direction, and the
-/// share of its energy that passes both faces.
-fn through_prism(o: DVec3, d: DVec3, n: f64) -> Option<(DVec3, DVec3, f64)> {
+/// A camera ray through the prism at IOR `n`: where it leaves, its direction, the share
+/// of its energy that passes both faces, and the distance it travels inside.
+fn through_prism(o: DVec3, d: DVec3, n: f64) -> Option<(DVec3, DVec3, f64, f64)> {
     let [entry, exit] = faces();
     let p1 = entry.hit(o, d);
     let (d1, t1) = refract(d, entry.normal, 1.0, n)?;
     let p2 = exit.hit(p1, d1);
     let (d2, t2) = refract(d1, -exit.normal, n, 1.0)?;
-    Some((p2, d2.normalize(), t1 * t2))
+    Some((p2, d2.normalize(), t1 * t2, (p2 - p1).length()))
 }
 
 /// The slit: a plane far behind the prism facing the light that the image's middle ray
@@ -123,7 +123,7 @@ struct Slit {
 
 fn slit() -> Slit {
     // The camera sits at the origin looking down −z.
-    let (p, d, _) = through_prism(DVec3::ZERO, DVec3::NEG_Z, f64::from(IOR))
+    let (p, d, _, _) = through_prism(DVec3::ZERO, DVec3::NEG_Z, f64::from(IOR))
         .expect("the middle ray passes the prism");
     Slit {
         plane: Plane {
@@ -137,9 +137,33 @@ fn slit() -> Slit {
 /// The slit's half width and half height.
 const SLIT_HALF: (f64, f64) = (SLIT_DISTANCE * SLIT_WIDTH / 2.0, 50.0);
 
-/// The prism (of `dispersion`) and a slit of white light, or of light of spectrum
-/// `slit_light`, seen by a camera at the origin.
-fn scene_and_frame(dispersion: f32, slit_light: Option<&SpectrumShape>) -> PreparedFrame {
+/// The prism's glass and the slit's light.
+#[derive(Clone, Default)]
+struct Setup {
+    /// KHR_materials_dispersion of the glass.
+    dispersion: f32,
+    /// The slit's spectrum; white where `None`.
+    slit_light: Option<SpectrumShape>,
+    /// KHR_materials_volume's `attenuationDistance`, over which the glass turns white
+    /// light the grey [`ATTENUATION_COLOUR`]; clear glass where `None`.
+    attenuation_distance: Option<f32>,
+}
+
+/// The glass's `attenuationColor`, grey: its spectrum is flat, so the closed form's
+/// `exp(−σ L)` holds at every wavelength.
+const ATTENUATION_COLOUR: f32 = 0.5;
+
+impl Setup {
+    /// The absorption coefficient per unit length (Beer–Lambert).
+    fn sigma(&self) -> f64 {
+        self.attenuation_distance.map_or(0.0, |d| {
+            -f64::from(math::ln(ATTENUATION_COLOUR)) / f64::from(d)
+        })
+    }
+}
+
+/// The prism and the slit of `setup`, seen by a camera at the origin.
+fn scene_and_frame(setup: &Setup) -> PreparedFrame {
     let mut b = SceneBuilder::default();
     let glass = b.material(Material {
         base_color: glam::Vec4::ONE,
@@ -148,13 +172,15 @@ fn scene_and_frame(dispersion: f32, slit_light: Option<&SpectrumShape>) -> Prepa
         transmission: 1.0,
         thickness: 1.0,
         ior: IOR,
-        dispersion,
+        dispersion: setup.dispersion,
+        attenuation_color: Vec3::splat(ATTENUATION_COLOUR),
+        attenuation_distance: setup.attenuation_distance.unwrap_or(f32::INFINITY),
         ..Material::default()
     });
     let light = b.material(Material {
         base_color: glam::Vec4::new(0.0, 0.0, 0.0, 1.0),
         emissive: Vec3::ONE,
-        emission_spectrum: slit_light.cloned(),
+        emission_spectrum: setup.slit_light.clone(),
         double_sided: true,
         ..Material::default()
     });
@@ -190,14 +216,15 @@ fn scene_and_frame(dispersion: f32, slit_light: Option<&SpectrumShape>) -> Prepa
 
 /// Per column (rows summed), CIE XYZ of the image that Snell's and Fresnel's laws give:
 /// each pixel averaged over 64 × 2 positions and over 360–830 nm in 1 nm steps, of the
-/// slit's light (white, which is D65 on the spectral path, or of spectrum `slit_light`) that
-/// passes both faces of the prism at that wavelength's IOR and lands on the slit.
-fn predicted(
-    frame: &PreparedFrame,
-    dispersion: f32,
-    slit_light: Option<&SpectrumShape>,
-) -> Vec<DVec3> {
-    let light = slit_light.map(|s| DenseSpectrum::light(s).expect("visible power"));
+/// slit's light (white, which is D65 on the spectral path, or of the setup's spectrum)
+/// that passes both faces of the prism at that wavelength's IOR, less what the glass
+/// absorbs on the way, and lands on the slit.
+fn predicted(frame: &PreparedFrame, setup: &Setup) -> Vec<DVec3> {
+    let light = setup
+        .slit_light
+        .as_ref()
+        .map(|s| DenseSpectrum::light(s).expect("visible power"));
+    let sigma = setup.sigma();
     let emitted = |nm| light.as_ref().map_or(spectrum::d65(nm), |l| l.eval(nm));
     const SUB: (u32, u32) = (64, 2);
     let s = slit();
@@ -218,15 +245,18 @@ fn predicted(
                 );
                 let ray = frame.camera.generate_ray(film, 0.0);
                 for &nm in &lambdas {
-                    let n = f64::from(dispersive_ior(IOR, dispersion, nm));
-                    let Some((p, d, passed)) =
+                    let n = f64::from(dispersive_ior(IOR, setup.dispersion, nm));
+                    let Some((p, d, passed, inside)) =
                         through_prism(ray.origin.as_dvec3(), ray.dir.as_dvec3(), n)
                     else {
                         continue;
                     };
                     let at = s.plane.hit(p, d) - s.plane.point;
                     if at.dot(s.across).abs() < SLIT_HALF.0 && at.y.abs() < SLIT_HALF.1 {
-                        *column += spectrum::cmf(nm).as_dvec3() * (passed * f64::from(emitted(nm)));
+                        *column += spectrum::cmf(nm).as_dvec3()
+                            * (passed
+                                * (1.0 + math::exp_m1_f64(-sigma * inside))
+                                * f64::from(emitted(nm)));
                     }
                 }
             }
@@ -285,13 +315,8 @@ const WHITE: Match = Match {
 /// The rendered image against the prediction: each of X, Y and Z (those with at least a
 /// hundredth of the brightest one's light) centred on the same column and as bright, as
 /// closely as `m` says. Gives the centroids.
-fn assert_matches(
-    frame: &PreparedFrame,
-    dispersion: f32,
-    slit: Option<&SpectrumShape>,
-    m: Match,
-) -> [f64; 3] {
-    let want = centroids(&predicted(frame, dispersion, slit));
+fn assert_matches(frame: &PreparedFrame, setup: &Setup, m: Match) -> [f64; 3] {
+    let want = centroids(&predicted(frame, setup));
     let got = centroids(&rendered(frame, m.spp));
     let brightest = want.iter().map(|w| w.1).fold(0.0, f64::max);
     for (k, (w, g)) in want.iter().zip(&got).enumerate() {
@@ -319,12 +344,42 @@ fn assert_matches(
 /// scene takes the spectral path itself: the settings do not ask for it.
 #[test]
 fn a_dispersive_prism_fans_white_light_as_snells_law_says() {
-    let frame = scene_and_frame(1.0, None);
+    let flint = Setup {
+        dispersion: 1.0,
+        ..Setup::default()
+    };
+    let frame = scene_and_frame(&flint);
     assert!(frame.features.dispersion && frame.features.needs_spectral());
     assert!(frame.features.names().contains(&"dispersion"));
-    let [_, y, z] = assert_matches(&frame, 1.0, None, WHITE);
+    let [_, y, z] = assert_matches(&frame, &flint, WHITE);
     // Bent further means seen towards the prism's base: +x in the image.
     assert!(z - y > 20.0, "blue at {z}, green at {y}: no spectrum");
+}
+
+/// Dispersive glass that absorbs (KHR_materials_volume's attenuation) takes from each
+/// wavelength what Beer–Lambert says over the length that wavelength travels inside: the
+/// slit's spectrum through the flint prism, half as bright for each 0.8 units of glass,
+/// matches the closed form with `exp(−σ L(λ))`, and is darker than through clear glass.
+#[test]
+fn dispersive_glass_absorbs_along_each_wavelengths_path() {
+    let tinted = Setup {
+        dispersion: 1.0,
+        attenuation_distance: Some(0.8),
+        ..Setup::default()
+    };
+    let frame = scene_and_frame(&tinted);
+    assert!(frame.features.volume && frame.features.dispersion);
+    assert_matches(&frame, &tinted, WHITE);
+    let clear = predicted(
+        &frame,
+        &Setup {
+            attenuation_distance: None,
+            ..tinted.clone()
+        },
+    );
+    let tinted_sum: f64 = predicted(&frame, &tinted).iter().map(|c| c.y).sum();
+    let clear_sum: f64 = clear.iter().map(|c| c.y).sum();
+    assert!(tinted_sum < 0.8 * clear_sum, "{tinted_sum} vs {clear_sum}");
 }
 
 /// Light of one colour (a 10 nm band from a slit of that spectrum) through the flint
@@ -337,14 +392,19 @@ fn each_wavelength_bends_by_its_own_ior() {
     let mut seen = Vec::new();
     for peak in [450.0, 550.0, 650.0] {
         let slit = SpectrumShape::Gaussian { peak, width: 10.0 };
-        let frame = scene_and_frame(1.0, Some(&slit));
+        let setup = Setup {
+            dispersion: 1.0,
+            slit_light: Some(slit),
+            ..Setup::default()
+        };
+        let frame = scene_and_frame(&setup);
         // One band's light is a few percent of the samples' wavelengths: noisier.
         let band = Match {
             spp: 2048,
             centroid: 0.3,
             sum: 0.1,
         };
-        let [_, y, _] = assert_matches(&frame, 1.0, Some(&slit), band);
+        let [_, y, _] = assert_matches(&frame, &setup, band);
         let n = f64::from(dispersive_ior(IOR, 1.0, peak));
         let column = column_reaching_the_slit(&frame, n);
         eprintln!("{peak} nm, n {n:.4}: seen at {y:.2}, Snell's law says {column:.2}");
@@ -365,7 +425,7 @@ fn column_reaching_the_slit(frame: &PreparedFrame, n: f64) -> f64 {
     let offset = |x: f64| {
         let film = Vec2::new((x / f64::from(WIDTH)) as f32, 0.5);
         let ray = frame.camera.generate_ray(film, 0.0);
-        let (p, d, _) = through_prism(ray.origin.as_dvec3(), ray.dir.as_dvec3(), n)?;
+        let (p, d, _, _) = through_prism(ray.origin.as_dvec3(), ray.dir.as_dvec3(), n)?;
         Some((s.plane.hit(p, d) - s.plane.point).dot(s.across))
     };
     let mut lo = (0..WIDTH)
@@ -390,9 +450,10 @@ fn column_reaching_the_slit(frame: &PreparedFrame, n: f64) -> f64 {
 /// white (X, Y and Z on one column), on the RGB path.
 #[test]
 fn a_prism_without_dispersion_splits_nothing() {
-    let frame = scene_and_frame(0.0, None);
+    let crown = Setup::default();
+    let frame = scene_and_frame(&crown);
     assert!(!frame.features.dispersion && !frame.features.needs_spectral());
-    let [x, y, z] = assert_matches(&frame, 0.0, None, WHITE);
+    let [x, y, z] = assert_matches(&frame, &crown, WHITE);
     assert!((x - y).abs() < 0.1 && (z - y).abs() < 0.1, "{x} {y} {z}");
 }
 
