@@ -3,10 +3,10 @@
 //! | module | what it holds |
 //! |---|---|
 //! | [`scene`] | the loaded scene: nodes, meshes, materials, cameras, lights, skins |
-//! | [`animation`] | glTF animation samplers evaluated into a pose at any time |
+//! | [`animation`] | glTF animation samplers evaluated into a pose at any time, and KHR_animation_pointer's lights and materials |
 //! | [`deform`] | morph targets and linear blend skinning of a primitive for one pose |
 //! | [`loader`] | glTF 2.0 (.gltf/.glb) into a [`scene::Scene`], with errors naming the element |
-//! | [`demo`] | the built-in demo scene, authored in code |
+//! | [`demo`] | the built-in scenes, authored in code: the demo, the Cornell box, the spectral showcase |
 //! | [`export`] | a [`scene::Scene`] into a self-contained GLB that the loader reads back |
 //! | [`shapes`] | quads, cubes and spheres as triangle primitives |
 //! | [`geometry`] | rays, hits, boxes, shading frames, the self-intersection offset |
@@ -19,7 +19,8 @@
 //! | [`bsdf`] | the glTF metallic-roughness BSDF, GGX with visible-normal sampling |
 //! | [`light`] | punctual, emissive-triangle and environment lights; the light sampler |
 //! | [`sampler`] | random numbers as a pure function of (pixel, sample, dimension, frame, seed) |
-//! | [`integrator`] | unidirectional path tracing with NEE and MIS |
+//! | [`integrator`] | unidirectional path tracing with NEE and MIS, in RGB or at four sampled wavelengths |
+//! | [`spectrum`] | light per wavelength: the CIE observer, RGB lifted to spectra, hero wavelengths, light spectra, fluorescent paint |
 //! | [`film`] | tile buffers: beauty, albedo, normal, depth |
 //! | [`motion`] | the shutter, motion steps, meshes deformed for one frame |
 //! | [`limits`] | the bounds of a render request: image size, samples, depth, fps, motion |
