@@ -8,7 +8,6 @@
 //! per-step placements. A still scene, or a closed shutter, gets one pose and the static
 //! path, which pays nothing per ray for motion blur.
 
-use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use glam::{Affine3A, DMat3, DMat4, DQuat, DVec3, Vec2, Vec3, Vec4};
@@ -26,7 +25,10 @@ use crate::material::{AlphaMode, Material};
 use crate::motion::{auto_steps, place, step_positions, DeformedMesh, PixelFootprint, PROBES};
 use crate::scene::{Node, Scene};
 use crate::settings::{CameraChoice, FrameOptions, RenderError};
-use crate::spectrum::{DenseSpectrum, Fluorescence, SpectrumShape};
+
+mod spectra;
+
+use spectra::FrameSpectra;
 
 /// The node graph at one time: every node instance and every mesh draw with its world
 /// transform, and the first world transform of each node (the one joints of a skin use).
@@ -426,61 +428,6 @@ pub fn prepare_frame(
         features,
         warnings,
     })
-}
-
-/// The spectra of a frame's lights and emissive materials (TESSERA_lights_spectrum),
-/// tabulated once, and which light and material has which.
-struct FrameSpectra {
-    dense: Vec<DenseSpectrum>,
-    /// Scene light → index in `dense`.
-    of_light: BTreeMap<u32, u32>,
-    /// Per scene material, the index in `dense` of its emission's spectrum.
-    of_material: Vec<Option<u32>>,
-    /// The fluorescent paints (TESSERA_materials_fluorescence), and per scene material
-    /// the index of its own in `paints`.
-    paints: Vec<Fluorescence>,
-    paint_of_material: Vec<Option<u32>>,
-}
-
-impl FrameSpectra {
-    fn new(scene: &Scene) -> Self {
-        let mut dense = Vec::new();
-        // A shape with no power in the visible band (the loader refuses those) emits
-        // white rather than nothing.
-        let mut add = |shape: &SpectrumShape| {
-            let spectrum = DenseSpectrum::light(shape)?;
-            dense.push(spectrum);
-            Some(dense.len() as u32 - 1)
-        };
-        let of_light = scene
-            .light_spectra
-            .iter()
-            .filter_map(|(&light, shape)| Some((light, add(shape)?)))
-            .collect();
-        let of_material = scene
-            .materials
-            .iter()
-            .map(|m| m.emission_spectrum.as_ref().and_then(&mut add))
-            .collect();
-        let mut paints = Vec::new();
-        let paint_of_material = scene
-            .materials
-            .iter()
-            .map(|m| {
-                let paint =
-                    Fluorescence::new(m.fluorescence.as_ref().filter(|_| m.is_fluorescent())?)?;
-                paints.push(paint);
-                Some(paints.len() as u32 - 1)
-            })
-            .collect();
-        Self {
-            dense,
-            of_light,
-            of_material,
-            paints,
-            paint_of_material,
-        }
-    }
 }
 
 /// The frame's instances, one per mesh draw: rigid ones with one transform per step
