@@ -354,7 +354,7 @@ fn trace_path<W: Carrier>(
             out.depth = Some((sp.p - ray.origin).dot(view_axis).abs());
         }
 
-        let material = &frame.materials[sp.material_index as usize];
+        let prepared = &frame.materials[sp.material_index as usize];
         // Light emitted by the surface (glTF emission is one-sided for single-sided
         // materials, seen from the front only).
         let le = sp.emission;
@@ -368,12 +368,12 @@ fn trace_path<W: Carrier>(
                         .pdf_triangle(hit.instance, hit.triangle, s.prev_p, sp.p, sp.ng);
                 power_heuristic(s.prev_pdf, light_pdf)
             };
-            let spectrum = light_spectrum(frame, material.emission_spectrum);
+            let spectrum = light_spectrum(frame, prepared.emission_spectrum);
             *radiance += s.throughput * s.carrier.light(le, spectrum) * w;
         }
 
         // The material's own BSDF where textures and vertex colour leave it as it is.
-        let material_bsdf = &material.bsdf;
+        let material_bsdf = &prepared.bsdf;
         let textured;
         let mut bsdf = match sp.varying {
             Some(params) if params != material_bsdf.params => {
@@ -385,9 +385,9 @@ fn trace_path<W: Carrier>(
         // A dispersive interface refracts each wavelength its own way: the path follows
         // its hero wavelength alone, at that wavelength's IOR (as pbrt-v4 does).
         let dispersed;
-        if W::SPECTRAL && material.dispersion > 0.0 {
+        if W::SPECTRAL && prepared.dispersion > 0.0 {
             if let Some(nm) = hero_alone(&mut walk.carrier, &mut s.carrier, &mut s.throughput) {
-                let ior = dispersive_ior(bsdf.params.ior, material.dispersion, nm);
+                let ior = dispersive_ior(bsdf.params.ior, prepared.dispersion, nm);
                 dispersed = Bsdf::new(SurfaceParams { ior, ..bsdf.params });
                 bsdf = &dispersed;
             }
@@ -399,7 +399,7 @@ fn trace_path<W: Carrier>(
         // Fluorescent paint: the path reflects at its wavelength or takes the one the
         // light was absorbed at, and the surface scatters as white Lambertian from there.
         let paint_white;
-        if let Some(paint) = material
+        if let Some(paint) = prepared
             .fluorescence
             .filter(|_| W::SPECTRAL)
             .and_then(|i| frame.fluorescence.get(i as usize))
@@ -519,7 +519,7 @@ fn trace_path<W: Carrier>(
                 s.eta_scale *= eta_rel * eta_rel;
             }
             s.absorption = if entering {
-                frame.material(sp.material_index).absorption()
+                prepared.material.absorption()
             } else {
                 Vec3::ZERO
             };

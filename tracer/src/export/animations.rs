@@ -70,15 +70,7 @@ pub(super) fn animation(
         } else {
             width
         };
-        samplers.push(sampler(
-            &el,
-            s,
-            path,
-            width,
-            s.values.clone(),
-            components,
-            bin,
-        )?);
+        samplers.push(sampler(&el, s, path, width, &s.values, components, bin)?);
         channels.push(
             Obj::default()
                 .with("sampler", samplers.len() - 1)
@@ -108,7 +100,7 @@ pub(super) fn animation(
         }
         let (pointer, values, components) = pointer_values(&el, ch, scene)?;
         samplers.push(sampler(
-            &el, s, &pointer, components, values, components, bin,
+            &el, s, &pointer, components, &values, components, bin,
         )?);
         *used = true;
         channels.push(
@@ -148,7 +140,7 @@ fn sampler(
     s: &Sampler,
     path: &str,
     width: usize,
-    values: Vec<f32>,
+    values: &[f32],
     components: usize,
     bin: &mut Bin,
 ) -> Result<Value, ExportError> {
@@ -183,9 +175,9 @@ fn sampler(
             ),
         ));
     }
-    finite(el, "values", &values)?;
+    finite(el, "values", values)?;
     let input = bin.floats(&s.times, 1, true, None);
-    let output = bin.floats(&values, components, false, None);
+    let output = bin.floats(values, components, false, None);
     let interpolation = match s.interpolation {
         Interpolation::Step => "STEP",
         Interpolation::Linear => "LINEAR",

@@ -82,10 +82,11 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     };
     let front = ng.dot(ray.dir) < 0.0;
 
-    let material = frame.material(prim.material);
+    let prepared = &frame.materials[prim.material as usize];
+    let material = &prepared.material;
     // Borrowed where it is the same everywhere: it is large enough that copying it shows.
     let varying_sample;
-    let (sample, uniform) = match &frame.materials[prim.material as usize].uniform {
+    let (sample, uniform) = match &prepared.uniform {
         Some(sample) if prim.colors.is_empty() => (sample, true),
         _ => {
             let (uvs, color) = (prim.uvs_at(t, b1, b2), prim.color_at(t, b1, b2));

@@ -173,12 +173,13 @@ pub(crate) fn convert_skins(
 
 /// The document's animations, each channel with its own copy of its sampler's keys.
 /// `nodes` and `meshes` are the converted ones: channels must target TRS nodes, and a
-/// weights channel's width is its node's mesh's morph target count.
+/// weights channel's width is its node's mesh's morph target count. `pointers` are the
+/// KHR_animation_pointer channels [`strip_unsupported_channels`] took out.
 pub(crate) fn convert_animations(
     doc: &gltf::Document,
-    raw: &Value,
     buffers: &[Cow<'_, [u8]>],
-    (nodes, meshes): (&[Node], &[Mesh]),
+    nodes: &[Node],
+    meshes: &[Mesh],
     pointers: &[PointerChannel],
     warnings: &mut Vec<String>,
 ) -> Result<Vec<Animation>, SceneError> {
@@ -258,7 +259,7 @@ pub(crate) fn convert_animations(
         let mut properties = Vec::new();
         for p in pointers.iter().filter(|p| p.animation == a) {
             let c = p.channel;
-            let Some((property, source)) = pointer_target(&p.pointer, doc, raw)
+            let Some((property, source)) = pointer_target(&p.pointer, doc)
                 .map_err(|why| SceneError::at(element, format!("channel {c}: {why}")))?
             else {
                 warnings.push(format!(
@@ -555,7 +556,6 @@ impl Source {
 fn pointer_target(
     pointer: &str,
     doc: &gltf::Document,
-    raw: &Value,
 ) -> Result<Option<(Property, Source)>, String> {
     let parts: Vec<&str> = pointer.split('/').collect();
     let index = |s: &str, what: &str, count: usize| -> Result<u32, String> {
@@ -587,18 +587,11 @@ fn pointer_target(
                 _ => return Ok(None),
             };
             let m = index(i, "material", doc.materials().len())?;
-            let json = &raw["materials"][m as usize];
+            // The other half of the emission, read as the material loader reads it.
+            let material = doc.materials().nth(m as usize).expect("in range");
             let source = match field {
-                ["emissiveFactor"] => Source::Colour(
-                    json["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"]
-                        .as_f64()
-                        .unwrap_or(1.0) as f32,
-                ),
-                ["extensions", ..] => Source::Scale(
-                    doc.materials()
-                        .nth(m as usize)
-                        .map_or(Vec3::ZERO, |mat| Vec3::from_array(mat.emissive_factor())),
-                ),
+                ["emissiveFactor"] => Source::Colour(material.emissive_strength().unwrap_or(1.0)),
+                ["extensions", ..] => Source::Scale(Vec3::from_array(material.emissive_factor())),
                 _ => Source::Direct,
             };
             (make(m), source)

@@ -95,9 +95,9 @@ pub(crate) fn build(input: &Input<'_>) -> Result<Scene, SceneError> {
     check_node_deformers(&mut nodes, &meshes, &mut warnings);
     let animations = convert_animations(
         doc,
-        input.raw,
         input.buffers,
-        (&nodes, &meshes),
+        &nodes,
+        &meshes,
         input.pointers,
         &mut warnings,
     )?;

@@ -137,11 +137,13 @@ impl DenseSpectrum {
     /// light's intensity keeps its meaning whatever its spectrum, down to an ultraviolet
     /// lamp the camera cannot see. `None` for a shape with no power in 360–830 nm.
     pub fn light(shape: &SpectrumShape) -> Option<Self> {
-        let raw = Self::from_fn(|nm| shape.eval(nm));
-        let white = Self::from_fn(d65);
-        let scale = white.sum() / raw.sum();
-        (scale.is_finite() && scale > 0.0)
-            .then(|| Self::from_fn(|nm| shape.eval(nm) * scale as f32))
+        let mut spectrum = Self::from_fn(|nm| shape.eval(nm));
+        let scale = (Self::from_fn(d65).sum() / spectrum.sum()) as f32;
+        if !(scale.is_finite() && scale > 0.0) {
+            return None;
+        }
+        spectrum.values.iter_mut().for_each(|v| *v *= scale);
+        Some(spectrum)
     }
 
     /// Σ of its values: its integral over 360–830 nm, in steps of 1 nm.
