@@ -6,6 +6,7 @@ mod client;
 mod control;
 mod demo;
 mod history;
+mod install;
 mod logs;
 mod manage;
 mod progress;
@@ -72,6 +73,8 @@ enum Command {
     Workers(control::WorkersArgs),
     /// A job's event log, or what the workers logged for one of its tasks (`--task N`).
     Logs(history::LogsArgs),
+    /// Install an optional part: `oidn` (Intel Open Image Denoise, for denoising).
+    Install(install::InstallArgs),
 }
 
 /// Runs the command; an error is printed as one line, its causes after colons, and never
@@ -118,5 +121,6 @@ fn run() -> anyhow::Result<()> {
         Command::Logs(args) => history::run(args),
         Command::Gc(args) => manage::gc(args),
         Command::Demo(args) => demo::run(args),
+        Command::Install(args) => install::run(args),
     }
 }

@@ -110,6 +110,15 @@ pub struct RenderArgs {
     /// environment of radiance 1, one with punctual lights none.
     #[arg(long)]
     environment: Option<String>,
+    /// Also denoise each frame with Intel Open Image Denoise (guided by the albedo and
+    /// normal layers): the EXR gets a `denoised` layer beside the noisy beauty, and the
+    /// PNG preview shows it. Needs the library: `tessera install oidn`.
+    #[arg(long)]
+    denoise: bool,
+    /// Where Open Image Denoise is installed (default: where `tessera install oidn` puts
+    /// it, then the system's library path).
+    #[arg(long, env = "TESSERA_OIDN", value_name = "DIR")]
+    oidn: Option<PathBuf>,
     /// Worker threads (all cores by default).
     #[arg(long)]
     threads: Option<usize>,
@@ -251,6 +260,12 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         ),
     };
 
+    // Before anything is rendered: a missing library is said at once.
+    let oidn = match args.denoise {
+        true => Some(post::Oidn::load(args.oidn.as_deref())?),
+        false => None,
+    };
+
     let t_load = Instant::now();
     let scene = Arc::new(match args.builtin {
         Some(builtin) => builtin.scene(),
@@ -314,8 +329,18 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         );
         let render_time = t_render.elapsed().as_secs_f64();
 
-        let layers = tile.resolve();
+        let mut layers = tile.resolve();
         let reached = layers.sampling();
+        let denoise_time = match &oidn {
+            Some(oidn) => {
+                let t = Instant::now();
+                let threads = args.threads.unwrap_or(0) as u32;
+                layers.denoised = post::denoise_layers(oidn, &layers, threads)
+                    .with_context(|| format!("denoising frame {frame_number}"))?;
+                Some(t.elapsed().as_secs_f64())
+            }
+            None => None,
+        };
         let mut meta = ExrMetadata::new()
             .with(ExrMetadata::VERSION, env!("CARGO_PKG_VERSION"))
             .with(ExrMetadata::SPP, spp.to_string())
@@ -341,6 +366,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             );
         if let Some(q) = args.quality {
             meta.set("tessera/quality", q.name());
+        }
+        if let Some(seconds) = denoise_time {
+            meta.set(ExrMetadata::DENOISER, post::DENOISER_NAME);
+            meta.set(ExrMetadata::DENOISE_SECONDS, format!("{seconds:.3}"));
         }
         if let Some(t) = settings.noise {
             meta.set("tessera/noise-threshold", t.threshold.to_string());
@@ -377,6 +406,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             tile.rays as f64 / render_time / 1e6,
             tile.dropped
         );
+        let line = match denoise_time {
+            Some(t) => format!("{line}; denoised in {t:.2} s"),
+            None => line,
+        };
         bar.suspend(|| println!("{line}"));
         if let Output::File(_) = out {
             bar.suspend(|| println!("wrote {} and {}", exr.display(), png.display()));

@@ -415,7 +415,7 @@ impl FrameSource<'_> {
         let target = ExrTarget {
             path: &path,
             meta: &meta,
-            layers: &ImageLayer::ALL,
+            layers: &ImageLayer::RENDERED,
             compression: ExrCompression::Zip,
         };
         self.write_bands(Some(target), false)
@@ -483,7 +483,7 @@ impl FrameSource<'_> {
 }
 
 /// The tracer's layers for the job's output layers.
-fn image_layers(wanted: &[OutputLayer]) -> Vec<ImageLayer> {
+pub fn image_layers(wanted: &[OutputLayer]) -> Vec<ImageLayer> {
     wanted
         .iter()
         .map(|l| match l {

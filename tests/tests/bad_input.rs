@@ -336,7 +336,7 @@ fn bad_uploads_from_a_rogue_worker_are_refused_and_the_job_renders_exactly() {
     let lease = rogue.lease();
     let good_layers = render_lease(&scene, &lease);
     let frame_size = (lease.width, lease.height);
-    let exr = |layers: &Layers| tile_exr(&lease, layers, frame_size, &ImageLayer::ALL);
+    let exr = |layers: &Layers| tile_exr(&lease, layers, frame_size, &ImageLayer::RENDERED);
     let good = exr(&good_layers);
     let path = rogue.result_path(lease.token.task_id);
 
@@ -365,7 +365,7 @@ fn bad_uploads_from_a_rogue_worker_are_refused_and_the_job_renders_exactly() {
         ("tile too small", exr(&small), &["data window", "16x16"]),
         (
             "frame too large",
-            tile_exr(&lease, &good_layers, (64, 48), &ImageLayer::ALL),
+            tile_exr(&lease, &good_layers, (64, 48), &ImageLayer::RENDERED),
             &["display window", "32x24"],
         ),
         (
@@ -505,7 +505,7 @@ fn bad_uploads_from_a_rogue_worker_are_refused_and_the_job_renders_exactly() {
         &expiring,
         &render_lease(&scene, &expiring),
         frame_size,
-        &ImageLayer::ALL,
+        &ImageLayer::RENDERED,
     );
     let answer = rogue
         .upload(

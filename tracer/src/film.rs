@@ -350,6 +350,9 @@ pub struct Layers {
     /// Estimated relative error per pixel (see [`noise_estimate`];
     /// [`NO_NOISE_ESTIMATE`] where there were too few samples).
     pub noise: Vec<f32>,
+    /// The beauty's RGB after a denoiser ran over the whole frame; empty where none did
+    /// (the tracer never makes it: tiles and direct renders have none).
+    pub denoised: Vec<Vec3>,
 }
 
 impl Layers {
@@ -365,15 +368,23 @@ impl Layers {
             depth: vec![NO_HIT_DEPTH; n],
             samples: vec![0.0; n],
             noise: vec![NO_NOISE_ESTIMATE; n],
+            denoised: Vec::new(),
         }
     }
 
-    /// Copies `tile` into its place inside `self` (tiles assemble into frames).
+    /// Copies `tile` into its place inside `self` (tiles assemble into frames); its
+    /// denoised layer too where it has one.
     ///
     /// # Panics
     /// If `tile` does not lie inside `self`.
     pub fn paste(&mut self, tile: &Layers) {
+        if !tile.denoised.is_empty() && self.denoised.is_empty() {
+            self.denoised = vec![Vec3::ZERO; self.rect.area()];
+        }
         for (src, dst, w) in row_spans(self.rect, tile.rect) {
+            if !tile.denoised.is_empty() {
+                self.denoised[dst..dst + w].copy_from_slice(&tile.denoised[src..src + w]);
+            }
             self.beauty[dst..dst + w].copy_from_slice(&tile.beauty[src..src + w]);
             self.albedo[dst..dst + w].copy_from_slice(&tile.albedo[src..src + w]);
             self.normal[dst..dst + w].copy_from_slice(&tile.normal[src..src + w]);
@@ -396,7 +407,13 @@ impl Layers {
     /// If `sub` does not lie inside `self`.
     pub fn crop(&self, sub: TileRect) -> Layers {
         let mut out = Layers::new(sub);
+        if !self.denoised.is_empty() {
+            out.denoised = vec![Vec3::ZERO; sub.area()];
+        }
         for (dst, src, w) in row_spans(self.rect, sub) {
+            if !self.denoised.is_empty() {
+                out.denoised[dst..dst + w].copy_from_slice(&self.denoised[src..src + w]);
+            }
             out.beauty[dst..dst + w].copy_from_slice(&self.beauty[src..src + w]);
             out.albedo[dst..dst + w].copy_from_slice(&self.albedo[src..src + w]);
             out.normal[dst..dst + w].copy_from_slice(&self.normal[src..src + w]);

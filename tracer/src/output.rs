@@ -32,7 +32,7 @@ pub use self::bands::{
 };
 pub use self::exr::{
     check_finite, decode_exr, encode_exr, encode_exr_layers, read_exr, validate_tile, write_exr,
-    ExrCompression, ExrImage, ImageLayer, CHANNEL_NAMES,
+    ExrCompression, ExrImage, ImageLayer, CHANNEL_NAMES, DENOISED_CHANNELS,
 };
 pub use self::preview::{
     aces_filmic, encode_preview_png, preview_rgba8, srgb_oetf, write_preview_png,
@@ -189,7 +189,11 @@ fn check_lengths(layers: &Layers) -> Result<(), OutputError> {
         ("samples", layers.samples.len()),
         ("noise", layers.noise.len()),
     ];
-    for (layer, len) in lens {
+    let denoised = match layers.denoised.len() {
+        0 => None,
+        len => Some(("denoised", len)),
+    };
+    for (layer, len) in lens.into_iter().chain(denoised) {
         if len != expected {
             return Err(OutputError::LayerSize {
                 layer,

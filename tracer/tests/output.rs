@@ -14,7 +14,7 @@ use tracer::film::{Layers, TileRect, NO_HIT_DEPTH};
 use tracer::output::{
     aces_filmic, check_finite, decode_exr, encode_exr, encode_exr_layers, encode_preview_png,
     read_exr, srgb_oetf, validate_tile, write_exr, write_preview_png, ExrCompression, ExrMetadata,
-    ImageLayer, OutputError, CHANNEL_NAMES,
+    ImageLayer, OutputError, CHANNEL_NAMES, DENOISED_CHANNELS,
 };
 
 /// A fresh, empty folder for one test.
@@ -115,7 +115,8 @@ fn exr_round_trip_is_exact() {
 #[test]
 fn uncompressed_exr_round_trips_exactly_and_says_so() {
     let layers = sample_layers(TileRect::new(3, 2, 37, 21));
-    let encode = |c| encode_exr_layers((64, 32), &layers, &meta(), &ImageLayer::ALL, c).unwrap();
+    let encode =
+        |c| encode_exr_layers((64, 32), &layers, &meta(), &ImageLayer::RENDERED, c).unwrap();
     let (zip, raw) = (
         encode(ExrCompression::Zip),
         encode(ExrCompression::Uncompressed),
@@ -505,4 +506,96 @@ fn png_preview_has_the_frame_size_and_transparent_outside_the_region() {
     let brighter = image::load_from_memory(&bytes).unwrap().to_rgba8();
     let expected = (srgb_oetf(aces_filmic(0.36)) * 255.0).round() as u8;
     assert_eq!(brighter.get_pixel(3, 2).0[0], expected);
+}
+
+/// Layers of `rect` with a denoised beauty unlike the noisy one.
+fn denoised_layers(rect: TileRect) -> Layers {
+    let mut l = sample_layers(rect);
+    l.denoised = (0..rect.area())
+        .map(|i| Vec3::new(0.25 + i as f32 * 1e-3, 0.5, 1e-7))
+        .collect();
+    l
+}
+
+#[test]
+fn the_denoised_layer_round_trips_beside_the_noisy_beauty() {
+    let rect = TileRect::new(0, 0, 24, 17);
+    let layers = denoised_layers(rect);
+    let bytes = encode_exr((24, 17), &layers, &meta()).unwrap();
+    let back = decode_exr(&bytes).unwrap();
+    assert_eq!(back.layers, layers);
+    assert_eq!(
+        bits(&back.layers),
+        bits(&layers),
+        "the noisy layers are kept"
+    );
+
+    // An independent reader sees the denoised channels by their names.
+    let path = temp_dir("denoised").join("frame.exr");
+    write_exr(&path, (24, 17), &layers, &meta()).unwrap();
+    let image = read_all_flat_layers_from_file(&path).unwrap();
+    let names: Vec<String> = image.layer_data[0]
+        .channel_data
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    for name in DENOISED_CHANNELS.iter().chain(CHANNEL_NAMES.iter()) {
+        assert!(names.iter().any(|n| n == name), "{name} in {names:?}");
+    }
+
+    // Layers without it write no denoised channels, and read back without it.
+    let plain = sample_layers(rect);
+    let back = decode_exr(&encode_exr((24, 17), &plain, &meta()).unwrap()).unwrap();
+    assert!(back.layers.denoised.is_empty());
+}
+
+#[test]
+fn a_tile_with_a_denoised_layer_is_refused() {
+    let rect = TileRect::new(8, 0, 8, 8);
+    let bytes = encode_exr((32, 8), &denoised_layers(rect), &meta()).unwrap();
+    let err = validate_tile(&bytes, rect, (32, 8)).unwrap_err();
+    assert!(err.to_string().contains("denoised"), "{err}");
+}
+
+#[test]
+fn the_preview_shows_the_denoised_beauty_where_there_is_one() {
+    let rect = TileRect::new(0, 0, 4, 4);
+    let mut layers = sample_layers(rect);
+    let noisy = encode_preview_png((4, 4), &layers, 0.0).unwrap();
+    layers.denoised = vec![Vec3::new(0.18, 0.18, 0.18); rect.area()];
+    let clean = encode_preview_png((4, 4), &layers, 0.0).unwrap();
+    assert_ne!(noisy, clean);
+    let image = image::load_from_memory(&clean).unwrap().to_rgba8();
+    let grey = image.get_pixel(2, 2).0;
+    assert_eq!(grey[0], grey[1]);
+    assert_eq!(grey[1], grey[2]);
+    let expected = (srgb_oetf(aces_filmic(0.18)) * 255.0).round() as u8;
+    assert_eq!(grey[0], expected);
+}
+
+#[test]
+fn frames_written_in_bands_need_the_denoised_layer_they_declare() {
+    use tracer::output::{write_frame_in_bands, ExrTarget};
+    let dir = temp_dir("denoised-bands");
+    let path = dir.join("frame.exr");
+    let frame = (16, 40);
+    let whole = denoised_layers(TileRect::new(0, 0, 16, 40));
+    let target = ExrTarget {
+        path: &path,
+        meta: &meta(),
+        layers: &ImageLayer::ALL,
+        compression: ExrCompression::Zip,
+    };
+    write_frame_in_bands(frame, 16, Some(target), None, |band| {
+        Ok::<_, OutputError>(whole.crop(band))
+    })
+    .unwrap();
+    assert_eq!(read_exr(&path).unwrap().layers, whole);
+
+    let err = write_frame_in_bands(frame, 16, Some(target), None, |band| {
+        Ok::<_, OutputError>(sample_layers(band))
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("denoised"), "{err}");
 }

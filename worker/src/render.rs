@@ -137,7 +137,7 @@ pub fn encode_tile(
         (lease.width, lease.height),
         &tile.resolve(),
         &meta,
-        &ImageLayer::ALL,
+        &ImageLayer::RENDERED,
         compression,
     )?;
     let meta = ResultMetadata {

@@ -41,6 +41,10 @@ impl ExrMetadata {
     pub const NOISE: &'static str = "tessera/noise";
     /// Seconds spent rendering the image (summed over its tiles on a farm).
     pub const RENDER_SECONDS: &'static str = "tessera/render-seconds";
+    /// The denoiser that made the `denoised` layer (absent when there is none).
+    pub const DENOISER: &'static str = "tessera/denoiser";
+    /// Seconds the denoiser took.
+    pub const DENOISE_SECONDS: &'static str = "tessera/denoise-seconds";
 
     /// No attributes.
     pub fn new() -> Self {

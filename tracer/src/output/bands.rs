@@ -123,6 +123,15 @@ fn write_exr_in_bands<E: From<OutputError>>(
             .into());
         }
         check_lengths(&layers)?;
+        if layers.denoised.is_empty()
+            && exr.is_some_and(|t| t.layers.contains(&ImageLayer::Denoised))
+        {
+            return Err(OutputError::Unsupported(format!(
+                "band {} has no denoised layer for the frame's `denoised` channels",
+                rect_text(rect)
+            ))
+            .into());
+        }
         Ok(layers)
     };
     let Some(target) = exr else {

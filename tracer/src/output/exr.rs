@@ -33,6 +33,10 @@ pub const CHANNEL_NAMES: [&str; 13] = [
     "noise",
 ];
 
+/// The channels of the denoised beauty, which only a whole frame can have (a denoiser
+/// sees across tile edges): [`Layers::denoised`].
+pub const DENOISED_CHANNELS: [&str; 3] = ["denoised.R", "denoised.G", "denoised.B"];
+
 /// Where each of [`CHANNEL_NAMES`] lives in [`Layers`].
 const SLOTS: [Slot; 13] = [
     Slot::Beauty(0),
@@ -65,17 +69,30 @@ pub enum ImageLayer {
     Samples,
     /// `noise`.
     Noise,
+    /// `denoised.R denoised.G denoised.B`: written where the [`Layers`] have it.
+    Denoised,
 }
 
 impl ImageLayer {
-    /// Every layer, in file order.
-    pub const ALL: [ImageLayer; 6] = [
+    /// The layers the tracer renders, in file order: every tile has them.
+    pub const RENDERED: [ImageLayer; 6] = [
         ImageLayer::Beauty,
         ImageLayer::Albedo,
         ImageLayer::Normal,
         ImageLayer::Depth,
         ImageLayer::Samples,
         ImageLayer::Noise,
+    ];
+
+    /// Every layer, in file order.
+    pub const ALL: [ImageLayer; 7] = [
+        ImageLayer::Beauty,
+        ImageLayer::Albedo,
+        ImageLayer::Normal,
+        ImageLayer::Depth,
+        ImageLayer::Samples,
+        ImageLayer::Noise,
+        ImageLayer::Denoised,
     ];
 }
 
@@ -88,6 +105,16 @@ pub(super) enum Slot {
     Depth,
     Samples,
     Noise,
+    Denoised(usize),
+}
+
+/// Every channel a Tessera EXR can hold, with where it lives in [`Layers`].
+fn all_channels() -> impl Iterator<Item = (&'static str, Slot)> {
+    CHANNEL_NAMES.into_iter().zip(SLOTS).chain(
+        DENOISED_CHANNELS
+            .into_iter()
+            .zip([0, 1, 2].map(Slot::Denoised)),
+    )
 }
 
 impl Slot {
@@ -100,6 +127,7 @@ impl Slot {
             Slot::Depth => ImageLayer::Depth,
             Slot::Samples => ImageLayer::Samples,
             Slot::Noise => ImageLayer::Noise,
+            Slot::Denoised(_) => ImageLayer::Denoised,
         }
     }
 
@@ -112,11 +140,18 @@ impl Slot {
             Slot::Depth => layers.depth[i],
             Slot::Samples => layers.samples[i],
             Slot::Noise => layers.noise[i],
+            Slot::Denoised(c) => layers.denoised[i][c],
         }
     }
 
-    /// Sets this component at pixel `i`.
+    /// Sets this component at pixel `i` (making the denoised layer when it is the first
+    /// of its values).
     pub(super) fn set(self, layers: &mut Layers, i: usize, v: f32) {
+        if let Slot::Denoised(_) = self {
+            if layers.denoised.is_empty() {
+                layers.denoised = vec![glam::Vec3::ZERO; layers.rect.area()];
+            }
+        }
         match self {
             Slot::Beauty(c) => layers.beauty[i][c] = v,
             Slot::Albedo(c) => layers.albedo[i][c] = v,
@@ -124,6 +159,7 @@ impl Slot {
             Slot::Depth => layers.depth[i] = v,
             Slot::Samples => layers.samples[i] = v,
             Slot::Noise => layers.noise[i] = v,
+            Slot::Denoised(c) => layers.denoised[i][c] = v,
         }
     }
 }
@@ -168,8 +204,9 @@ pub enum ExrCompression {
 }
 
 /// Encodes `layers` as the data window of a `frame_size` frame: one EXR part, ZIP
-/// compressed scan lines, the channels of [`CHANNEL_NAMES`] in `f32`, Rec.709
-/// chromaticities, and `meta` as string attributes.
+/// compressed scan lines, the channels of [`CHANNEL_NAMES`] (and [`DENOISED_CHANNELS`]
+/// where the layers have them) in `f32`, Rec.709 chromaticities, and `meta` as string
+/// attributes.
 pub fn encode_exr(
     frame_size: (u32, u32),
     layers: &Layers,
@@ -184,8 +221,8 @@ pub fn encode_exr(
     )
 }
 
-/// [`encode_exr`] with only the `wanted` layers' channels (beauty is always written),
-/// stored with `compression`.
+/// [`encode_exr`] with only the `wanted` layers' channels (beauty is always written; the
+/// denoised beauty where `layers` have it), stored with `compression`.
 pub fn encode_exr_layers(
     frame_size: (u32, u32),
     layers: &Layers,
@@ -194,7 +231,12 @@ pub fn encode_exr_layers(
     compression: ExrCompression,
 ) -> Result<Vec<u8>, OutputError> {
     check_shape(frame_size, layers)?;
-    let header = header(frame_size, layers.rect, meta, wanted, compression)?;
+    let present: SmallVec<[ImageLayer; 7]> = wanted
+        .iter()
+        .copied()
+        .filter(|&l| l != ImageLayer::Denoised || !layers.denoised.is_empty())
+        .collect();
+    let header = header(frame_size, layers.rect, meta, &present, compression)?;
     let mut out = Cursor::new(Vec::new());
     ::exr::block::write(&mut out, smallvec![header], true, |meta, chunks| {
         write_blocks(&meta, chunks, layers)
@@ -214,11 +256,9 @@ pub(super) fn header(
     wanted: &[ImageLayer],
     compression: ExrCompression,
 ) -> Result<Header, OutputError> {
-    let mut channels: SmallVec<[ChannelDescription; 5]> = CHANNEL_NAMES
-        .iter()
-        .zip(SLOTS)
+    let mut channels: SmallVec<[ChannelDescription; 5]> = all_channels()
         .filter(|(_, slot)| slot.layer() == ImageLayer::Beauty || wanted.contains(&slot.layer()))
-        .map(|(&name, _)| ChannelDescription::named(name, SampleType::F32))
+        .map(|(name, _)| ChannelDescription::named(name, SampleType::F32))
         .collect();
     channels.sort_unstable_by(|a, b| a.name.cmp(&b.name));
 
@@ -320,12 +360,11 @@ pub(super) fn write_blocks(
 }
 
 /// The component of [`Layers`] that the channel `name` holds, if it is one of
-/// [`CHANNEL_NAMES`].
+/// [`CHANNEL_NAMES`] or [`DENOISED_CHANNELS`].
 pub(super) fn slot_named(name: &str) -> Option<Slot> {
-    CHANNEL_NAMES
-        .iter()
-        .position(|&n| n == name)
-        .map(|i| SLOTS[i])
+    all_channels()
+        .find(|&(n, _)| n == name)
+        .map(|(_, slot)| slot)
 }
 
 /// [`encode_exr`] written atomically to `path` (a temp file in the same folder, fsync,
@@ -412,6 +451,11 @@ pub fn validate_tile(
     }
 
     let image = decode(bytes, expected_rect.area(), true, &CHANNEL_NAMES)?;
+    if !image.layers.denoised.is_empty() {
+        return Err(OutputError::Unsupported(
+            "a tile has no denoised layer: only a whole frame is denoised".to_string(),
+        ));
+    }
     check_finite(&image.layers)?;
     Ok(image.layers)
 }
@@ -423,7 +467,10 @@ pub fn check_finite(layers: &Layers) -> Result<(), OutputError> {
     let rect = layers.rect;
     let w = rect.width.max(1) as usize;
     for i in 0..rect.area() {
-        for (&channel, slot) in CHANNEL_NAMES.iter().zip(SLOTS) {
+        for (channel, slot) in all_channels() {
+            if slot.layer() == ImageLayer::Denoised && layers.denoised.is_empty() {
+                continue;
+            }
             let value = slot.get(layers, i);
             if !value.is_finite() {
                 return Err(OutputError::NonFinite {
@@ -536,7 +583,7 @@ fn decode(
     if find("A").is_none() {
         layers.beauty.iter_mut().for_each(|b| b.w = 1.0);
     }
-    for (&name, slot) in CHANNEL_NAMES.iter().zip(SLOTS) {
+    for (name, slot) in all_channels() {
         let Some(channel) = find(name) else { continue };
         if channel.sample_data.len() != rect.area() {
             return Err(OutputError::Unsupported(format!(

@@ -62,9 +62,9 @@ fn exposure_scale(exposure: f32) -> f32 {
     }
 }
 
-/// The beauty layer as 8-bit sRGB RGBA, row-major over `layers.rect`, 4 bytes a pixel:
-/// linear RGB times 2^`exposure` (stops; 0 leaves it as is), ACES filmic per channel,
-/// then the sRGB OETF, rounded.
+/// The beauty layer (its denoised RGB where the layers have one) as 8-bit sRGB RGBA,
+/// row-major over `layers.rect`, 4 bytes a pixel: linear RGB times 2^`exposure` (stops; 0
+/// leaves it as is), ACES filmic per channel, then the sRGB OETF, rounded.
 ///
 /// Alpha is 255: the beauty RGB already holds what rays that missed saw (the
 /// environment), so using the EXR's coverage alpha here would cut the sky out of the
@@ -72,9 +72,15 @@ fn exposure_scale(exposure: f32) -> f32 {
 pub fn preview_rgba8(layers: &Layers, exposure: f32) -> Vec<u8> {
     let scale = exposure_scale(exposure);
     let mut out = vec![0u8; layers.beauty.len() * 4];
-    out.par_chunks_mut(4)
-        .zip(layers.beauty.par_iter())
-        .for_each(|(px, &b)| px.copy_from_slice(&preview_pixel(b, scale)));
+    if layers.denoised.is_empty() {
+        out.par_chunks_mut(4)
+            .zip(layers.beauty.par_iter())
+            .for_each(|(px, &b)| px.copy_from_slice(&preview_pixel(b, scale)));
+    } else {
+        out.par_chunks_mut(4)
+            .zip(layers.denoised.par_iter())
+            .for_each(|(px, &d)| px.copy_from_slice(&preview_pixel(d.extend(1.0), scale)));
+    }
     out
 }
 
