@@ -3,9 +3,7 @@
 
 use anyhow::Context;
 use clap::Args;
-use proto::{
-    FailureGroup, FailureKind, FailureList, FrameList, FrameState, JobList, JobStatus, WorkerList,
-};
+use proto::{FailureGroup, FailureKind, FailureList, FrameList, JobList, JobStatus, WorkerList};
 use serde::Serialize;
 
 use crate::client::{Client, Control, JobRef, ServerOpts};
@@ -135,9 +133,10 @@ pub fn jobs_table(jobs: &JobList) -> String {
             vec![
                 j.id.to_string(),
                 j.name.clone(),
-                match j.stuck {
-                    Some(_) => format!("{} (stuck)", state_name(j.state)),
-                    None => state_name(j.state).to_string(),
+                match (&j.stuck, &j.waiting) {
+                    (Some(_), _) => format!("{} (stuck)", state_name(j.state)),
+                    (None, Some(_)) => format!("{} (waiting)", state_name(j.state)),
+                    (None, None) => state_name(j.state).to_string(),
                 },
                 format!("{}/{}", j.frames_done, j.frames_total),
                 format!("{:.1}%", j.progress * 100.0),
@@ -146,16 +145,6 @@ pub fn jobs_table(jobs: &JobList) -> String {
         })
         .collect();
     table(&["ID", "NAME", "STATE", "FRAMES", "PROGRESS", "ETA"], &rows)
-}
-
-fn frame_state_name(state: FrameState) -> &'static str {
-    match state {
-        FrameState::Queued => "queued",
-        FrameState::Rendering => "rendering",
-        FrameState::Failed => "failed",
-        FrameState::Cancelled => "cancelled",
-        FrameState::Done => "done",
-    }
 }
 
 /// One job in detail: settings, tasks by state, progress, why it is stuck, every frame,
@@ -258,6 +247,9 @@ pub fn job_details(
     if let Some(why) = &j.stuck {
         fields.push(("STUCK", why.clone()));
     }
+    if let Some(why) = &j.waiting {
+        fields.push(("WAITING", why.clone()));
+    }
     let mut out = format!("job {} \"{}\": {}\n", j.id, j.name, state_name(j.state));
     for (k, v) in fields {
         out.push_str(&format!("  {k:<9} {v}\n"));
@@ -269,7 +261,7 @@ pub fn job_details(
         .map(|f| {
             vec![
                 f.frame.to_string(),
-                frame_state_name(f.state).to_string(),
+                f.state.as_str().to_string(),
                 format!("{}/{}", f.tasks_done, f.tasks_total),
                 f.spp_mean.map_or("-".into(), |s| format!("{s:.1}")),
                 f.noise.map_or("-".into(), |e| format!("{e:.4}")),
@@ -345,6 +337,7 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
                     _ => "-".into(),
                 },
                 ago(w.last_seen_ms, now_ms),
+                if w.denoiser.is_some() { "yes" } else { "-" }.to_string(),
                 if w.tags.is_empty() {
                     "-".into()
                 } else {
@@ -365,6 +358,7 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
             "SPEED",
             "FAILED (1H)",
             "LAST SEEN",
+            "DENOISES",
             "TAGS",
         ],
         &rows,
@@ -477,7 +471,7 @@ pub fn workers(args: WorkersArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use proto::{FrameStatus, JobSpec, JobState, TaskCounts, TaskToken, WorkerInfo};
+    use proto::{FrameState, FrameStatus, JobSpec, JobState, TaskCounts, TaskToken, WorkerInfo};
 
     fn job(id: u64, name: &str, state: JobState, eta: Option<f64>) -> JobStatus {
         JobStatus {
@@ -503,6 +497,7 @@ mod tests {
             budget: None,
             attempts_failed: 0,
             stuck: None,
+            waiting: None,
         }
     }
 
@@ -684,6 +679,7 @@ mod tests {
             quarantined: None,
             platform: None,
             tags: vec![],
+            denoiser: None,
             samples_per_second: None,
             recent_failures: 0,
             last_failure: None,
@@ -693,19 +689,17 @@ mod tests {
         (bad.recent_failures, bad.last_failure) = (2, Some("out of memory".into()));
         bad.tags = vec!["gpu".into(), "studio-a".into()];
         bad.quarantined = Some("its tile of task 9 differs".into());
+        let mut render01 = worker(1, "render-01", true, Some(3), Some(12));
+        render01.denoiser = Some("Open Image Denoise 2.5.1".into());
         let list = WorkerList {
-            workers: vec![
-                worker(1, "render-01", true, Some(3), Some(12)),
-                worker(2, "b", false, None, None),
-                bad,
-            ],
+            workers: vec![render01, worker(2, "b", false, None, None), bad],
         };
         assert_eq!(
             workers_table(&list, 60_000),
-            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  SPEED             FAILED (1H)       LAST SEEN  TAGS\n\
-             1   render-01  8        yes     ok           job 3 frame 12  17          -                 -                 2s ago     -\n\
-             2   b          8        no      ok           -               17          -                 -                 2s ago     -\n\
-             3   c          8        yes     quarantined  -               17          2.50 M samples/s  2: out of memory  2s ago     gpu,studio-a"
+            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  SPEED             FAILED (1H)       LAST SEEN  DENOISES  TAGS\n\
+             1   render-01  8        yes     ok           job 3 frame 12  17          -                 -                 2s ago     yes       -\n\
+             2   b          8        no      ok           -               17          -                 -                 2s ago     -         -\n\
+             3   c          8        yes     quarantined  -               17          2.50 M samples/s  2: out of memory  2s ago     -         gpu,studio-a"
         );
     }
 }

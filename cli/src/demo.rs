@@ -56,6 +56,35 @@ pub struct DemoArgs {
     /// the downloaded frames (frames/).
     #[arg(long, default_value = "./tessera-demo")]
     pub dir: PathBuf,
+    /// Denoise the frames with Open Image Denoise [default: when it is installed;
+    /// `tessera install oidn` installs it].
+    #[arg(long, conflicts_with = "no_denoise")]
+    pub denoise: bool,
+    /// Do not denoise, even where Open Image Denoise is installed.
+    #[arg(long)]
+    pub no_denoise: bool,
+}
+
+impl DemoArgs {
+    /// Whether the demo denoises, and a note for the user when it does not on its own
+    /// (the library is missing); `--denoise` without the library is an error.
+    fn denoising(&self) -> anyhow::Result<(bool, Option<String>)> {
+        if self.no_denoise {
+            return Ok((false, None));
+        }
+        match post::Oidn::load(None) {
+            Ok(_) => Ok((true, None)),
+            Err(e) if self.denoise => Err(e.into()),
+            Err(_) => Ok((
+                false,
+                Some(
+                    "frames are not denoised: Open Image Denoise is not installed \
+                     (`tessera install oidn` installs it, no root needed)"
+                        .into(),
+                ),
+            )),
+        }
+    }
 }
 
 /// The largest power-of-two tile side (at most 256) that still cuts a `w`×`h` frame into
@@ -81,6 +110,7 @@ pub fn demo_job(args: &DemoArgs) -> JobArgs {
         shutter: Some(parse_shutter(DEMO_SHUTTER).expect("the demo shutter is valid")),
         passes: Some(DEMO_PASSES.min(args.spp)),
         name: Some("tessera demo".into()),
+        denoise: args.denoise,
         ..JobArgs::default()
     }
 }
@@ -361,6 +391,15 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
     clear_old_frames(&frames)?;
+    let (denoise, note) = args.denoising()?;
+    if let Some(note) = note {
+        println!("note: {note}");
+    }
+    let args = DemoArgs {
+        denoise,
+        no_denoise: !denoise,
+        ..args
+    };
     log_to_file(&logs.join("server.log"))?;
     let glb = tracer::export::scene_to_glb(&tracer::demo::animated_demo_scene())
         .map_err(|e| anyhow::anyhow!("exporting the demo scene to GLB: {e}"))?;

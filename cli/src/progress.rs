@@ -123,6 +123,9 @@ pub fn progress_message(s: &JobStatus) -> String {
     if s.samples_per_second > 0.0 {
         parts.push(rate(s.samples_per_second));
     }
+    if let Some(why) = &s.waiting {
+        parts.push(format!("waiting: {why}"));
+    }
     parts.join(" · ")
 }
 
@@ -374,6 +377,7 @@ mod tests {
             budget: None,
             attempts_failed: 0,
             stuck: None,
+            waiting: None,
         }
     }
 

@@ -27,9 +27,18 @@ pub struct JobArgs {
     #[arg(long, allow_hyphen_values = true)]
     pub fps: Option<f64>,
     /// A quality preset: draft, preview or final (README.md lists what each sets);
-    /// --spp, --max-depth, --noise-threshold and --min-spp override its parts.
+    /// --spp, --max-depth, --noise-threshold, --min-spp and --no-denoise override its
+    /// parts.
     #[arg(long)]
     pub quality: Option<Quality>,
+    /// Denoise each frame once it is assembled, on a worker with Intel Open Image Denoise
+    /// (`tessera install oidn`): the EXR gets a `denoised` layer beside the noisy beauty
+    /// and the PNG shows it [default: off; on in the preview and final presets].
+    #[arg(long, conflicts_with = "no_denoise")]
+    pub denoise: bool,
+    /// Do not denoise, whatever the preset says.
+    #[arg(long)]
+    pub no_denoise: bool,
     /// Samples per pixel; with a noise threshold, the most a pixel takes [default: 64].
     #[arg(long)]
     pub spp: Option<u32>,
@@ -131,6 +140,7 @@ impl JobArgs {
             spec.max_depth = preset.max_depth;
             spec.noise_threshold = Some(preset.noise_threshold);
             spec.min_spp = Some(preset.min_spp);
+            spec.denoise = preset.denoise;
         }
         if let Some(spp) = self.spp {
             spec.spp = spp;
@@ -150,6 +160,11 @@ impl JobArgs {
                 spec.noise_threshold = None;
             }
             spec.min_spp = self.min_spp;
+            // Nor does a preset's denoising, which a budget job cannot do yet.
+            spec.denoise = false;
+        }
+        if self.denoise || self.no_denoise {
+            spec.denoise = self.denoise;
         }
         if let Some(depth) = self.max_depth {
             spec.max_depth = depth;
@@ -598,6 +613,7 @@ mod tests {
         assert_eq!(spec.time_budget, Some(256.0));
         assert_eq!((spec.spp, spec.max_depth), (preset.spp, preset.max_depth));
         assert_eq!((spec.noise_threshold, spec.min_spp), (None, None));
+        assert!(!spec.denoise);
         let spec = parse(&["--time-budget", "60", "--min-spp", "8"])
             .to_spec(&scene())
             .unwrap();
@@ -607,6 +623,20 @@ mod tests {
             .to_spec(&scene())
             .unwrap();
         assert_eq!(spec.noise_threshold, Some(0.1));
+    }
+
+    #[test]
+    fn the_preview_and_final_presets_denoise_unless_told_not_to() {
+        let denoises = |args: &[&str]| parse(args).to_spec(&scene()).unwrap().denoise;
+        assert!(!denoises(&[]));
+        assert!(!denoises(&["--quality", "draft"]));
+        assert!(denoises(&["--quality", "preview"]));
+        assert!(denoises(&["--quality", "final"]));
+        assert!(!denoises(&["--quality", "final", "--no-denoise"]));
+        assert!(denoises(&["--quality", "draft", "--denoise"]));
+        assert!(denoises(&["--denoise"]));
+        let both = Cli::try_parse_from(["submit", "--denoise", "--no-denoise"]);
+        assert!(both.is_err());
     }
 
     #[test]

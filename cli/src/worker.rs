@@ -52,6 +52,15 @@ pub struct WorkerArgs {
     /// for any other.
     #[arg(long, env = "TESSERA_UPLOAD_COMPRESSION", default_value = "auto")]
     pub upload_compression: worker::UploadCompression,
+    /// Take no denoise tasks, even where Open Image Denoise is installed (it renders tiles
+    /// only).
+    #[arg(long, env = "TESSERA_NO_DENOISE")]
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub no_denoise: bool,
+    /// Where Open Image Denoise is installed (default: where `tessera install oidn` puts
+    /// it, then the system's library path). A worker that finds it takes denoise tasks.
+    #[arg(long, env = "TESSERA_OIDN", value_name = "DIR")]
+    pub oidn: Option<PathBuf>,
     /// Misbehave on purpose, for the farm's fault tests: `fail-job=JOB` or `perturb`.
     #[arg(long, hide = true)]
     #[serde(skip)]
@@ -88,6 +97,8 @@ pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
         name,
         tags: args.tags,
         upload_compression: args.upload_compression,
+        denoise: !args.no_denoise,
+        oidn: args.oidn,
         fault: args.inject_fault,
     };
     tracing::info!(

@@ -30,6 +30,7 @@ const RECT: TileRect = TileRect {
 fn task() -> TaskRow {
     TaskRow {
         id: 7,
+        kind: proto::TaskKind::Render,
         job_id: 3,
         frame: 1,
         tile: 2,

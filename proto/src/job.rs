@@ -65,9 +65,11 @@ impl FrameRange {
 pub enum Quality {
     /// Blocking and timing: 16 spp at most, 4 bounces, stop at error 0.1.
     Draft,
-    /// Judging light and materials: 128 spp at most, 8 bounces, stop at error 0.03.
+    /// Judging light and materials: 128 spp at most, 8 bounces, stop at error 0.03,
+    /// denoised.
     Preview,
-    /// Delivery: 1024 spp at most, 12 bounces, stop at error 0.01 (Cycles' default).
+    /// Delivery: 1024 spp at most, 12 bounces, stop at error 0.01 (Cycles' default),
+    /// denoised.
     Final,
 }
 
@@ -90,6 +92,8 @@ pub struct QualitySettings {
     pub noise_threshold: f64,
     /// Samples every pixel takes before it may stop.
     pub min_spp: u32,
+    /// Frames are denoised.
+    pub denoise: bool,
 }
 
 impl Quality {
@@ -107,16 +111,17 @@ impl Quality {
 
     /// The settings the preset stands for.
     pub fn settings(self) -> QualitySettings {
-        let (spp, max_depth, noise_threshold, min_spp) = match self {
-            Quality::Draft => (16, 4, 0.1, 4),
-            Quality::Preview => (128, 8, 0.03, 16),
-            Quality::Final => (1024, 12, 0.01, 32),
+        let (spp, max_depth, noise_threshold, min_spp, denoise) = match self {
+            Quality::Draft => (16, 4, 0.1, 4, false),
+            Quality::Preview => (128, 8, 0.03, 16, true),
+            Quality::Final => (1024, 12, 0.01, 32, true),
         };
         QualitySettings {
             spp,
             max_depth,
             noise_threshold,
             min_spp,
+            denoise,
         }
     }
 }
@@ -254,6 +259,12 @@ pub struct JobSpec {
     /// Layers written to the frames (default all; `beauty` is always written).
     #[serde(default = "default_layers")]
     pub layers: Vec<OutputLayer>,
+    /// Denoise each frame once it is assembled (Intel Open Image Denoise, guided by the
+    /// albedo and normal): a task that a worker with the library leases; the frame's EXR
+    /// gets a `denoised` layer beside the noisy beauty, and its PNG preview shows it
+    /// (default: off; on in the `preview` and `final` presets).
+    #[serde(default)]
+    pub denoise: bool,
 }
 
 impl JobSpec {
@@ -284,6 +295,7 @@ impl JobSpec {
             priority: 0,
             max_attempts: default_max_attempts(),
             layers: default_layers(),
+            denoise: false,
         }
     }
 }
@@ -396,6 +408,11 @@ pub struct JobStatus {
     /// quarantined), and what to do; absent while it can.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stuck: Option<String>,
+    /// What the job waits for that no live worker offers now (frames to denoise and no
+    /// worker with Open Image Denoise), and what to do. Unlike `stuck`, the job goes on by
+    /// itself once such a worker comes; absent while nothing waits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub waiting: Option<String>,
 }
 
 /// Where a time-budget job's plan stands. The server plans again whenever a frame is
@@ -465,8 +482,26 @@ pub enum FrameState {
     Failed,
     /// Cancelled before it finished.
     Cancelled,
-    /// Assembled: EXR and PNG can be downloaded.
+    /// Assembled, and its denoise step is still to run (the job denoises): the EXR has
+    /// the noisy layers only so far.
+    Denoising,
+    /// Finished (assembled, and denoised where the job asks): EXR and PNG can be
+    /// downloaded.
     Done,
+}
+
+impl FrameState {
+    /// Its name on the wire.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FrameState::Queued => "queued",
+            FrameState::Rendering => "rendering",
+            FrameState::Failed => "failed",
+            FrameState::Cancelled => "cancelled",
+            FrameState::Denoising => "denoising",
+            FrameState::Done => "done",
+        }
+    }
 }
 
 /// One frame of a job.

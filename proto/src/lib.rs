@@ -39,8 +39,8 @@ pub use task::{
 };
 pub use worker::{
     FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, Rect, ResultAck,
-    ResultMetadata, SampleSpan, TaskLogLines, TaskToken, WorkerInfo, WorkerLeft, WorkerList,
-    WorkerRegistered, WorkerRegistration,
+    ResultMetadata, SampleSpan, TaskKind, TaskLogLines, TaskToken, WorkerInfo, WorkerLeft,
+    WorkerList, WorkerRegistered, WorkerRegistration,
 };
 
 /// Every path of the API starts with this.

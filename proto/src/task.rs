@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::worker::{Rect, SampleSpan};
+use crate::worker::{Rect, SampleSpan, TaskKind};
 
 /// Where a task stands.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -95,6 +95,9 @@ pub struct TaskFailure {
 pub struct TaskInfo {
     /// The task's id.
     pub id: u64,
+    /// Render a tile, or denoise a frame.
+    #[serde(default)]
+    pub kind: TaskKind,
     /// Its frame.
     pub frame: i32,
     /// Its tile's index in the frame.

@@ -39,6 +39,10 @@ pub struct WorkerRegistration {
     /// only jobs whose every required tag it has.
     #[serde(default)]
     pub tags: Vec<String>,
+    /// The denoiser it has loaded (Open Image Denoise and its version), if any: only such
+    /// a worker is given denoise tasks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub denoiser: Option<String>,
 }
 
 /// The answer to a registration: the worker's id and the timing it must keep.
@@ -95,6 +99,9 @@ pub struct WorkerInfo {
     /// Its tags ([`WorkerRegistration::tags`]).
     #[serde(default)]
     pub tags: Vec<String>,
+    /// Its denoiser ([`WorkerRegistration::denoiser`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub denoiser: Option<String>,
     /// Camera samples per second over its last tasks (none done yet: absent).
     #[serde(default)]
     pub samples_per_second: Option<f64>,
@@ -176,6 +183,38 @@ pub struct SampleSpan {
     pub end: u32,
 }
 
+/// What a task asks of its worker.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum TaskKind {
+    /// Render the lease's tile and samples; upload the tile.
+    #[default]
+    Render,
+    /// Denoise the lease's assembled frame (`GET /workers/{id}/tasks/{task}/frame`, the
+    /// whole frame as its tile); upload the denoised RGB as the beauty of an EXR of the
+    /// whole frame, with 0 samples and 0 rays.
+    Denoise,
+}
+
+impl TaskKind {
+    /// Every kind.
+    pub const ALL: [TaskKind; 2] = [TaskKind::Render, TaskKind::Denoise];
+
+    /// Its name on the wire (and in the server's database).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TaskKind::Render => "render",
+            TaskKind::Denoise => "denoise",
+        }
+    }
+
+    /// The kind named `s`.
+    pub fn parse(s: &str) -> Option<TaskKind> {
+        TaskKind::ALL.into_iter().find(|k| k.as_str() == s)
+    }
+}
+
 /// Everything a worker needs to render one task with the tracer: `FrameOptions` (frame,
 /// fps, size, camera, shutter, motion steps, animation), `RenderSettings` (max depth,
 /// seed, noise target), the tile and the sample range.
@@ -184,6 +223,9 @@ pub struct SampleSpan {
 pub struct Lease {
     /// The fencing token to send back with heartbeats, the result or a failure.
     pub token: TaskToken,
+    /// What to do: render the tile, or denoise the assembled frame.
+    #[serde(default)]
+    pub kind: TaskKind,
     /// The job.
     pub job_id: u64,
     /// Scene digest: `GET /scenes/{digest}` (cache it).

@@ -167,8 +167,9 @@ function jobCard(job) {
   const priority = card.querySelector(".priority input");
   if (priority.dataset.edited !== "true") priority.value = job.spec.priority;
   const stuck = card.querySelector(".stuck");
-  stuck.hidden = !job.stuck;
-  stuck.textContent = job.stuck ? "Stuck: " + job.stuck : "";
+  const why = job.stuck ? "Stuck: " + job.stuck : job.waiting ? "Waiting: " + job.waiting : "";
+  stuck.hidden = !why;
+  stuck.textContent = why;
   showFailures(card, job);
   notifyIfEnded(card, previous, job);
   document.getElementById("no-jobs").hidden = true;
@@ -289,8 +290,10 @@ function frameCell(jobId, frame) {
   if (!fig) return;
   fig.dataset.state = frame.state;
   fig.title = `frame ${frame.frame}: ${frame.state}` + (frame.failure ? ` (${frame.failure})` : "");
-  // A thumbnail once a pass or the frame is in; it changes as passes land.
-  if (frame.state === "done" || (frame.state === "rendering" && frame.tasks_done > 0)) {
+  // A thumbnail once a pass or the frame is in; it changes as passes land, and once more
+  // when the frame is denoised.
+  const assembled = frame.state === "done" || frame.state === "denoising";
+  if (assembled || (frame.state === "rendering" && frame.tasks_done > 0)) {
     let img = fig.querySelector("img");
     if (!img) {
       img = el("img");
@@ -298,7 +301,8 @@ function frameCell(jobId, frame) {
       img.loading = "lazy";
       fig.prepend(img);
     }
-    const src = withToken(`${API}/jobs/${jobId}/frames/${frame.frame}/png?v=${frame.tasks_done}`);
+    const src = withToken(
+      `${API}/jobs/${jobId}/frames/${frame.frame}/png?v=${frame.tasks_done}-${frame.state}`);
     if (img.getAttribute("src") !== src) img.src = src;
   }
 }
@@ -328,7 +332,8 @@ function workerRow(w) {
   const cells = row.children;
   cells[0].textContent = w.name;
   cells[1].textContent = w.threads;
-  cells[2].textContent = w.version;
+  cells[2].textContent = w.denoiser ? `${w.version} · denoises` : w.version;
+  cells[2].title = w.denoiser || "";
   cells[3].textContent = w.current_task
     ? `job ${w.current_job} · frame ${w.current_frame} · task ${w.current_task.task_id}`
     : "idle";

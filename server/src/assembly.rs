@@ -25,13 +25,8 @@ use crate::error::{Error, Result};
 use crate::limits::MAX_TILE_SIZE;
 use crate::store::{sha256_hex, Store};
 
-/// Checks an uploaded tile against its task and returns its pixels.
-pub fn check_tile(
-    bytes: &[u8],
-    meta: &ResultMetadata,
-    task: &TaskRow,
-    frame_size: (u32, u32),
-) -> Result<Layers> {
+/// Checks that an upload's bytes hash to the SHA-256 its header says.
+pub fn check_checksum(bytes: &[u8], meta: &ResultMetadata) -> Result<()> {
     let actual = sha256_hex(bytes);
     if actual != meta.sha256 {
         return Err(Error::BadTile(format!(
@@ -42,6 +37,17 @@ pub fn check_tile(
             bytes.len()
         )));
     }
+    Ok(())
+}
+
+/// Checks an uploaded tile against its task and returns its pixels.
+pub fn check_tile(
+    bytes: &[u8],
+    meta: &ResultMetadata,
+    task: &TaskRow,
+    frame_size: (u32, u32),
+) -> Result<Layers> {
+    check_checksum(bytes, meta)?;
     if meta.samples != task.samples.len() {
         return Err(Error::Invalid {
             field: ResultMetadata::SAMPLES.into(),
@@ -543,6 +549,7 @@ mod tests {
     fn task(id: u64, tile: u32, pass: u32, rect: TileRect) -> TaskRow {
         TaskRow {
             id,
+            kind: proto::TaskKind::Render,
             job_id: 1,
             frame: 3,
             tile,

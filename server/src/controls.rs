@@ -26,6 +26,7 @@ pub fn submit(conn: &mut Connection, plan: &Plan, now: i64) -> Result<u64> {
         tasks::insert(
             &tx,
             &NewTask {
+                kind: proto::TaskKind::Render,
                 job: id,
                 frame: t.frame,
                 tile: t.tile,
@@ -191,13 +192,15 @@ pub fn rerender(conn: &mut Connection, job: u64, frames: &[i32], now: i64) -> Re
             || frames::needs_assembly(&tx, job, frame)?
         {
             return Err(Error::Conflict(format!(
-                "frame {frame} of job {job} is still rendering: rerender it once it is done"
+                "frame {frame} of job {job} is still rendering or denoising: rerender it once it \
+                 is done"
             )));
         }
         let mut renders = 0;
         for task in &tasks {
             rerendered.push(task.id);
-            if task.check_of.is_some() {
+            // Checks and the denoise step come again with the frame's new tiles.
+            if task.check_of.is_some() || task.kind == proto::TaskKind::Denoise {
                 tasks::delete(&tx, task.id)?;
                 continue;
             }

@@ -58,6 +58,9 @@ pub fn receive(
         });
     }
     let spec = app.db.with(|c| jobs::spec(c, task.job_id))?;
+    if task.kind == proto::TaskKind::Denoise {
+        return crate::denoising::receive(app, worker, token, meta, bytes, &task, &spec);
+    }
     let layers = match assembly::check_tile(bytes, meta, &task, (spec.width, spec.height)) {
         Ok(layers) => layers,
         Err(e) => {
@@ -260,6 +263,10 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     let (now, timing) = (now_ms(), app.timing());
     app.db
         .with(|c| mark_assembled(c, job, frame, now, &facts.reached, timing))?;
+    if spec.denoise {
+        // Its denoise task is waiting to be leased.
+        app.work.notify_waiters();
+    }
     app.metrics
         .frame_assembled(started.elapsed().as_secs_f64(), tile_bytes);
     let checks = app
@@ -290,6 +297,7 @@ pub fn mark_assembled(
     let tx = conn.transaction()?;
     frames::set_assembled(&tx, job, frame, now, reached)?;
     log(&tx, now, Some(job), "frame_assembled", &frame.to_string())?;
+    crate::denoising::queue(&tx, job, frame, &jobs::spec(&tx, job)?)?;
     budget::replan_with(&tx, job, now, timing)?;
     jobs::update_finished(&tx, job, now)?;
     tx.commit()?;
@@ -404,6 +412,7 @@ mod tests {
                     version: "t",
                     platform: None,
                     tags: &[],
+                    denoiser: None,
                 },
                 credential: None,
             };

@@ -15,6 +15,7 @@
 //! | [`budget`] | time-budget jobs: the farm's measured speed decides which passes fit |
 //! | [`scene`] | scene uploads checked with the tracer's loader and summarised |
 //! | [`intake`], [`assembly`] | tile uploads checked and accepted; frames assembled |
+//! | [`denoising`] | a frame's denoise task: queued once assembled, its upload written in as the `denoised` layer |
 //! | [`status`] | a job's status: state, progress, speed, ETA |
 //! | [`events`], [`metrics`] | the event hub; Prometheus metrics |
 //! | [`verify`] | bit-for-bit checks of tiles on a second worker; quarantine |
@@ -36,6 +37,7 @@ pub mod config;
 pub mod controls;
 pub mod dashboard;
 pub mod db;
+pub mod denoising;
 pub mod error;
 pub mod events;
 #[cfg(test)]

@@ -4,7 +4,9 @@
 //! [`tasks::advance`]); times are passed in (`now`, Unix ms) so tests need no clock. The
 //! job controls are in [`crate::controls`].
 
-use proto::{FailureAck, FailureKind, Lease, LogLine, Rect, SampleSpan, TaskLogLines, TaskToken};
+use proto::{
+    FailureAck, FailureKind, Lease, LogLine, Rect, SampleSpan, TaskKind, TaskLogLines, TaskToken,
+};
 use rusqlite::{Connection, Transaction};
 
 use crate::config::Timing;
@@ -81,6 +83,7 @@ pub fn lease_keeping(
             task_id: id,
             attempt,
         },
+        kind: task.kind,
         job_id: task.job_id,
         scene: spec.scene,
         frame: task.frame,
@@ -227,6 +230,19 @@ pub fn accept(
     tasks::advance(&tx, &task, TaskEvent::Complete)?;
     tasks::set_done(&tx, task.id, now, rays, render_ms)?;
     workers::count_done(&tx, worker)?;
+    if task.kind == TaskKind::Denoise {
+        // Its frame's denoised layer is written: the frame is finished.
+        crate::denoising::mark_denoised(&tx, &task, now)?;
+        jobs::update_finished(&tx, task.job_id, now)?;
+        tx.commit()?;
+        return Ok(Accepted::New {
+            job: task.job_id,
+            frame: task.frame,
+            pass: task.pass,
+            frame_complete: false,
+            pass_complete: false,
+        });
+    }
     frames::count_done(&tx, task.job_id, task.frame)?;
     match (task.check_of, verdict) {
         (Some(_), Some(verdict)) => verify::record(&tx, &task, worker, verdict, now)?,

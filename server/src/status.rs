@@ -106,6 +106,18 @@ pub fn job_status(conn: &Connection, job: u64, now: i64, live_since: i64) -> Res
     } else {
         None
     };
+    let waiting = if control == JobControl::Active {
+        let frames = tasks::queued_denoise_count(conn, job)?;
+        (frames > 0 && !workers::denoiser_live_for_job(conn, job, live_since)?).then(|| {
+            format!(
+                "{frames} frame(s) wait to be denoised, and no live worker that may take this \
+                 job has Open Image Denoise: run `tessera install oidn` on a worker's machine \
+                 and restart its worker (it takes denoise tasks once it finds the library)"
+            )
+        })
+    } else {
+        None
+    };
     Ok(JobStatus {
         id: job,
         name,
@@ -123,6 +135,7 @@ pub fn job_status(conn: &Connection, job: u64, now: i64, live_since: i64) -> Res
         budget,
         attempts_failed,
         stuck,
+        waiting,
     })
 }
 
@@ -181,6 +194,7 @@ pub fn tasks(
         .into_iter()
         .map(|t| TaskInfo {
             id: t.id,
+            kind: t.kind,
             frame: t.frame,
             tile: t.tile,
             pass: t.pass,

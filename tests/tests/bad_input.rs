@@ -174,6 +174,7 @@ impl Rogue {
             credential: None,
             platform: None,
             tags: vec![],
+            denoiser: None,
         };
         let mut rogue = Rogue {
             port: farm.port,

@@ -369,6 +369,31 @@ impl Api {
         }
     }
 
+    /// `GET /workers/{id}/tasks/{task}/frame`: the assembled frame a denoise lease
+    /// denoises, as EXR bytes; `None` when the lease is gone.
+    pub async fn frame(&self, worker: u64, token: TaskToken) -> Result<Option<Vec<u8>>, ApiError> {
+        let req = self.auth(
+            self.http
+                .get(format!(
+                    "{}/workers/{worker}/tasks/{}/frame?attempt={}",
+                    self.base, token.task_id, token.attempt
+                ))
+                .timeout(TRANSFER_TIMEOUT),
+        );
+        let res = self.send(req).await?;
+        match res.status() {
+            StatusCode::OK => Ok(Some(
+                res.bytes()
+                    .await
+                    .map_err(|e| self.unreachable(&e))?
+                    .to_vec(),
+            )),
+            StatusCode::CONFLICT => Ok(None),
+            StatusCode::NOT_FOUND => Err(unknown_worker(res).await),
+            status => Err(unexpected("frame download", status, res).await),
+        }
+    }
+
     /// `POST /workers/{id}/tasks/{task}/result` with the tile's EXR bytes.
     pub async fn upload(
         &self,

@@ -32,6 +32,11 @@ pub struct WorkerConfig {
     pub tags: Vec<String>,
     /// How uploaded tiles are compressed.
     pub upload_compression: UploadCompression,
+    /// Whether to take denoise tasks when Open Image Denoise is found.
+    pub denoise: bool,
+    /// Where Open Image Denoise is installed (`None`: where `tessera install oidn` puts
+    /// it, then the system's library path).
+    pub oidn: Option<PathBuf>,
     /// A fault to inject, for testing how the farm copes with a bad worker; `None` for
     /// every real worker.
     pub fault: Option<Fault>,
@@ -193,6 +198,8 @@ mod tests {
             name: "w".into(),
             tags: vec![],
             upload_compression: UploadCompression::Auto,
+            denoise: true,
+            oidn: None,
             fault: None,
         }
     }

@@ -34,7 +34,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use proto::{Lease, TaskLogLines, TaskToken, WorkerRegistered, WorkerRegistration};
+use proto::{Lease, TaskKind, TaskLogLines, TaskToken, WorkerRegistered, WorkerRegistration};
 use tokio::task::JoinHandle;
 use tracer::film::TileBuffer;
 use tracer::output::ExrCompression;
@@ -48,6 +48,7 @@ use crate::api::{
 use crate::backoff::{jitter, seconds, Backoff, IDLE_PAUSE};
 use crate::cache::{is_digest, sha256_hex, Cached, SceneCache};
 use crate::config::{Fault, WorkerConfig};
+use crate::denoise::{encode_denoised, Denoiser};
 use crate::identity;
 use crate::render::{encode_tile, frame_key, frame_options, render_lease};
 use crate::stop::Stop;
@@ -114,6 +115,7 @@ pub async fn run(
         },
         config.upload_compression
     );
+    let denoiser = config.denoise.then(|| load_denoiser(&config)).flatten();
     let mut daemon = Daemon {
         api,
         fault: config.fault,
@@ -125,7 +127,9 @@ pub async fn run(
                 .map(|i| i.credential),
             platform: Some(crate::config::platform()),
             tags: config.tags.clone(),
+            denoiser: denoiser.as_ref().map(|_| post::DENOISER_NAME.to_string()),
         },
+        denoiser,
         identity_dir: config.cache_dir.clone(),
         registered: None,
         stop,
@@ -144,8 +148,31 @@ pub async fn run(
     result.map(|()| daemon.summary)
 }
 
+/// Open Image Denoise where the config says to look, for denoise tasks; `None` (said in
+/// the log) when it is not there.
+fn load_denoiser(config: &WorkerConfig) -> Option<Denoiser> {
+    match post::Oidn::load(config.oidn.as_deref()) {
+        Ok(oidn) => {
+            tracing::info!(
+                "denoise tasks taken: Open Image Denoise from {}",
+                oidn.path().display()
+            );
+            Some(Denoiser {
+                oidn: Arc::new(oidn),
+                threads: config.threads.min(u32::MAX as usize) as u32,
+            })
+        }
+        Err(e) => {
+            tracing::info!("no denoise tasks: {e}");
+            None
+        }
+    }
+}
+
 struct Daemon {
     api: Api,
+    /// Open Image Denoise, when this worker takes denoise tasks.
+    denoiser: Option<Denoiser>,
     /// Where the identity file is kept ([`identity`]).
     identity_dir: std::path::PathBuf,
     fault: Option<Fault>,
@@ -184,6 +211,14 @@ enum Fate {
     Failed,
     Abandoned,
     Interrupted,
+}
+
+/// What a lease produced, to upload.
+enum Product {
+    /// A rendered tile.
+    Tile(TileBuffer),
+    /// A frame's denoised RGB.
+    Denoised(Vec<glam::Vec3>),
 }
 
 /// Why a task could not be rendered.
@@ -469,7 +504,7 @@ impl Daemon {
         // The render runs on the rayon pool; when this select drops it, the pool's threads
         // stop at their next pixel because `cancel` is set below.
         let produced = tokio::select! {
-            r = self.produce(&lease, &cancel) => Some(r),
+            r = self.produce(reg.worker_id, &lease, &cancel) => Some(r),
             end = &mut heartbeat => {
                 cancel.store(true, Ordering::Relaxed);
                 self.count(Fate::Abandoned);
@@ -489,7 +524,7 @@ impl Daemon {
             }
             _ = stop.wait() => None,
         };
-        let (tile, render_ms) = match produced {
+        let (product, render_ms) = match produced {
             None | Some(Err(TaskError::Stopped)) => {
                 cancel.store(true, Ordering::Relaxed);
                 self.count(Fate::Interrupted);
@@ -520,13 +555,69 @@ impl Daemon {
             token: lease.token,
             lines: task_log::take(task),
         });
-        let delivery = courier.deliver(lease, tile, render_ms, self.compression);
+        let delivery = courier.deliver(lease, product, render_ms, self.compression);
         self.delivery = Some(tokio::spawn(delivery.in_current_span()));
         Ok(())
     }
 
-    /// Scene, frame, render: `Ok` with the tile and its render time in milliseconds.
+    /// Scene, frame, render: `Ok` with the tile and its render time in milliseconds; or,
+    /// for a denoise lease, the frame and its denoising.
     async fn produce(
+        &mut self,
+        worker: u64,
+        lease: &Lease,
+        cancel: &Arc<AtomicBool>,
+    ) -> Result<(Product, u64), TaskError> {
+        match lease.kind {
+            TaskKind::Render => {
+                let (tile, ms) = self.render(lease, cancel).await?;
+                Ok((Product::Tile(tile), ms))
+            }
+            TaskKind::Denoise => {
+                let (denoised, ms) = self.denoise(worker, lease).await?;
+                Ok((Product::Denoised(denoised), ms))
+            }
+        }
+    }
+
+    /// The frame of a denoise lease, fetched and denoised.
+    async fn denoise(
+        &mut self,
+        worker: u64,
+        lease: &Lease,
+    ) -> Result<(Vec<glam::Vec3>, u64), TaskError> {
+        let Some(denoiser) = self.denoiser.clone() else {
+            return Err(TaskError::Failed(
+                "this worker registered no denoiser, yet was given a denoise task".into(),
+            ));
+        };
+        let token = lease.token;
+        let exr = match self
+            .api
+            .retry("frame download", &self.stop, InFlight::Drop, || {
+                self.api.frame(worker, token)
+            })
+            .await
+        {
+            Ok(Some(Some(bytes))) => bytes,
+            Ok(Some(None)) => {
+                return Err(TaskError::Failed(
+                    "the lease was gone when the frame was asked for".into(),
+                ))
+            }
+            Ok(None) => return Err(TaskError::Stopped),
+            Err(e @ ApiError::Unexpected { .. }) => return Err(TaskError::Failed(e.to_string())),
+            Err(e) => return Err(TaskError::Api(e)),
+        };
+        let (pool, job) = (self.pool.clone(), lease.clone());
+        tokio::task::spawn_blocking(move || pool.install(|| denoiser.denoise(&job, &exr)))
+            .await
+            .map_err(|e| TaskError::Failed(format!("denoising panicked: {e}")))?
+            .map_err(|e| TaskError::Failed(format!("denoising frame {}: {e}", lease.frame)))
+    }
+
+    /// Scene, frame, render: `Ok` with the tile and its render time in milliseconds.
+    async fn render(
         &mut self,
         lease: &Lease,
         cancel: &Arc<AtomicBool>,
@@ -720,13 +811,16 @@ impl Courier {
     async fn deliver(
         self,
         lease: Lease,
-        tile: TileBuffer,
+        product: Product,
         render_ms: u64,
         compression: ExrCompression,
     ) -> Delivered {
         let job = lease.clone();
-        let encoded = tokio::task::spawn_blocking(move || {
-            encode_tile(&job, &tile, render_ms, compression).map_err(|e| e.to_string())
+        let encoded = tokio::task::spawn_blocking(move || match product {
+            Product::Tile(tile) => {
+                encode_tile(&job, &tile, render_ms, compression).map_err(|e| e.to_string())
+            }
+            Product::Denoised(denoised) => encode_denoised(&job, &denoised, render_ms, compression),
         })
         .await
         .unwrap_or_else(|e| Err(format!("panicked: {e}")));
@@ -747,6 +841,20 @@ impl Courier {
             })
             .await;
         let (fate, result) = match answer {
+            Ok(Some(UploadAnswer::Stored(ack))) if lease.kind == TaskKind::Denoise => {
+                tracing::info!(
+                    "denoised frame uploaded: job {} frame {} denoised in {} ms{}",
+                    lease.job_id,
+                    lease.frame,
+                    meta.render_ms,
+                    if ack.accepted {
+                        ""
+                    } else {
+                        " (a repeat: ignored)"
+                    },
+                );
+                (Fate::Done, Ok(()))
+            }
             Ok(Some(UploadAnswer::Stored(ack))) => {
                 tracing::info!(
                     "tile uploaded: job {} frame {} tile ({}, {}) samples {}..{} rendered in \

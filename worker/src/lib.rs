@@ -11,6 +11,7 @@
 //! | [`cache`] | scenes on disk as `<digest>.glb`: verified on read, written atomically |
 //! | [`identity`] | the credential a registration answered, kept for the next start |
 //! | [`render`] | a [`proto::Lease`] into tracer frame options, a tile render, its EXR bytes |
+//! | [`denoise`] | a denoise lease: the frame denoised with Open Image Denoise, its upload |
 //! | [`task_log`] | the lines logged per task, sent with its heartbeats, failure report or the next lease request |
 //! | `stop` | the shutdown signal every wait listens to |
 //! | `daemon` | [`run`]: the register / lease / render / upload loop |
@@ -23,6 +24,7 @@ pub mod backoff;
 pub mod cache;
 pub mod config;
 mod daemon;
+pub mod denoise;
 pub mod identity;
 pub mod render;
 mod stop;

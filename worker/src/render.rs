@@ -160,6 +160,7 @@ mod tests {
                 task_id: 7,
                 attempt: 2,
             },
+            kind: proto::TaskKind::Render,
             job_id: 3,
             scene: "ab".repeat(32),
             frame: 12,

@@ -728,6 +728,7 @@ async fn load(
                 credential: None,
                 platform: None,
                 tags: vec![],
+                denoiser: None,
             };
             let id = api.register(&reg).await?.worker_id;
             Ok::<_, ApiError>((api, id))

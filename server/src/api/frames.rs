@@ -4,7 +4,7 @@ use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use proto::{FrameList, FrameState};
+use proto::FrameList;
 
 use super::error::{Id, PathParams};
 use crate::app::AppState;
@@ -46,13 +46,7 @@ async fn file(
         Ok(bytes) => Ok(([(header::CONTENT_TYPE, content_type)], bytes).into_response()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(Error::NotFound(format!(
             "frame {frame} of job {job} has no {ext} yet (it is {})",
-            match f.state {
-                FrameState::Queued => "queued",
-                FrameState::Rendering => "rendering",
-                FrameState::Failed => "failed",
-                FrameState::Cancelled => "cancelled",
-                FrameState::Done => "done",
-            }
+            f.state.as_str()
         ))),
         Err(e) => Err(e.into()),
     }

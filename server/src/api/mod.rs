@@ -8,7 +8,7 @@
 //! | `jobs.rs` | `POST/GET /jobs`, `GET/DELETE /jobs/{id}`, `POST /jobs/{id}/{cancel,pause,resume,retry,rerender,priority}` |
 //! | `tasks.rs` | `GET /jobs/{id}/tasks`, `GET /jobs/{id}/failures`, `GET /jobs/{id}/tasks/{task}/log`, `GET /jobs/{id}/log` |
 //! | `frames.rs` | `GET /jobs/{id}/frames`, `GET /jobs/{id}/frames/{frame}/{exr,png}` |
-//! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat,leave,clear}`, `POST /workers/{id}/tasks/{task}/{result,failure}` |
+//! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat,leave,clear}`, `POST /workers/{id}/tasks/{task}/{result,failure}`, `GET /workers/{id}/tasks/{task}/frame` |
 //! | `events.rs` | `GET /events` (server-sent events) |
 //! | `gc.rs` | `POST /gc` (retention) |
 //! | `system.rs` | `/healthz`, `/metrics`, `/api/v1/openapi.json` |
@@ -111,6 +111,7 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .routes(routes!(workers::heartbeat))
         .routes(routes!(workers::failure))
         .routes(routes!(workers::leave))
+        .routes(routes!(workers::frame))
         .layer(json_limit)
         .route_layer(itself());
     let tile_upload = OpenApiRouter::new()

@@ -41,9 +41,11 @@ pub async fn register(
     JsonBody(reg): JsonBody<WorkerRegistration>,
 ) -> Result<(StatusCode, Json<WorkerRegistered>)> {
     let platform = reg.platform.iter().map(|p| ("platform", p));
+    let denoiser = reg.denoiser.iter().map(|d| ("denoiser", d));
     for (field, value) in [("name", &reg.name), ("version", &reg.version)]
         .into_iter()
         .chain(platform)
+        .chain(denoiser)
     {
         if value.is_empty() || value.len() > MAX_WORKER_TEXT_BYTES {
             return Err(Error::Invalid {
@@ -77,6 +79,7 @@ pub async fn register(
                     version: &reg.version,
                     platform: reg.platform.as_deref(),
                     tags: &reg.tags,
+                    denoiser: reg.denoiser.as_deref(),
                 },
                 credential: reg.credential.as_deref(),
             };
@@ -294,7 +297,15 @@ pub async fn result(
             field: field.into(),
             message,
         })?;
-    let bytes = read_body(body, app.config.max_tile_bytes, "tile").await?;
+    // A denoise task uploads its whole frame: its limit is the frame's size.
+    let limit = app
+        .db
+        .run(move |c| db::tasks::upload_limit(c, task))
+        .await?
+        .map_or(app.config.max_tile_bytes, |frame| {
+            frame.max(app.config.max_tile_bytes)
+        });
+    let bytes = read_body(body, limit, "tile").await?;
     let token = TaskToken {
         task_id: task,
         attempt: meta.attempt,
@@ -315,6 +326,51 @@ pub async fn result(
         accepted: received.accepted,
         frame_done: received.frame_done,
     }))
+}
+
+/// The query of `GET /workers/{id}/tasks/{task}/frame`.
+#[derive(Clone, Copy, Debug, serde::Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct FrameQuery {
+    /// The lease's attempt.
+    attempt: u32,
+}
+
+/// The assembled EXR of the frame a denoise lease denoises (the lease must be current).
+#[utoipa::path(
+    get,
+    path = "/workers/{id}/tasks/{task}/frame",
+    tag = "workers",
+    params(
+        ("id" = u64, Path, description = "worker id"),
+        ("task" = u64, Path, description = "task id"),
+        FrameQuery,
+    ),
+    responses(
+        (status = 200, content_type = "image/x-exr", body = Vec<u8>),
+        (status = 409, description = "lease gone", body = proto::ErrorBody),
+        (status = 422, description = "the task renders a tile", body = proto::ErrorBody),
+    ),
+    security(("worker_credential" = []))
+)]
+#[tracing::instrument(name = "task", skip_all, fields(id = task.0, worker = worker.0))]
+pub async fn frame(
+    State(app): State<AppState>,
+    PathParams((worker, task)): PathParams<(Id, Id)>,
+    QueryParams(q): QueryParams<FrameQuery>,
+) -> Result<Response> {
+    let token = TaskToken {
+        task_id: task.0,
+        attempt: q.attempt,
+    };
+    let a = app.clone();
+    let path = tokio::task::spawn_blocking(move || {
+        crate::denoising::frame_for_worker(&a, worker.0, token)
+    })
+    .await
+    .map_err(|e| Error::Internal(format!("finding the frame panicked: {e}")))??;
+    let bytes = tokio::fs::read(&path).await?;
+    Ok(([(axum::http::header::CONTENT_TYPE, "image/x-exr")], bytes).into_response())
 }
 
 /// Reports that a lease could not be rendered: the task goes back to the queue (or fails

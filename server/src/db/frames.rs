@@ -98,9 +98,19 @@ pub fn needs_assembly(conn: &Connection, job: u64, frame: i32) -> Result<bool> {
 pub fn reset(tx: &Transaction, job: u64, frame: i32, tasks: u64) -> Result<()> {
     tx.exec(
         "UPDATE frames SET tasks_total = ?3, tasks_done = 0, assembled_ms = NULL,
-                           assembled_tasks = NULL, spp_mean = NULL, noise = NULL, failure = NULL
+                           assembled_tasks = NULL, spp_mean = NULL, noise = NULL, failure = NULL,
+                           denoised_ms = NULL
          WHERE job_id = ?1 AND frame = ?2",
         params![job, frame, tasks],
+    )?;
+    Ok(())
+}
+
+/// A frame's denoised layer is written.
+pub fn set_denoised(tx: &Transaction, job: u64, frame: i32, now: i64) -> Result<()> {
+    tx.exec(
+        "UPDATE frames SET denoised_ms = ?3 WHERE job_id = ?1 AND frame = ?2",
+        params![job, frame, now],
     )?;
     Ok(())
 }
@@ -133,10 +143,18 @@ pub fn unassembled(conn: &Connection) -> Result<Vec<(u64, i32)>> {
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 
-/// A job's frames, and those assembled.
+/// A frame `f` whose denoise task is not done (queued, leased, failed or cancelled).
+const DENOISE_UNFINISHED: &str = "EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = f.job_id
+        AND t.frame = f.frame AND t.kind = 'denoise' AND t.state != 'done')";
+
+/// A job's frames, and those finished: assembled, and denoised where the job denoises.
 pub fn counts(conn: &Connection, job: u64) -> Result<(u64, u64)> {
     Ok(conn.row(
-        "SELECT count(*), coalesce(sum(assembled_ms IS NOT NULL), 0) FROM frames WHERE job_id = ?1",
+        &format!(
+            "SELECT count(*),
+                    coalesce(sum(f.assembled_ms IS NOT NULL AND NOT {DENOISE_UNFINISHED}), 0)
+             FROM frames f WHERE f.job_id = ?1"
+        ),
         [job],
         |r| Ok((r.get(0)?, r.get(1)?)),
     )?)
@@ -161,7 +179,9 @@ const STATUS_QUERY: &str = "SELECT f.frame, f.tasks_total, f.tasks_done, f.assem
         (SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id AND t.frame = f.frame
            AND t.state = 'leased'),
         j.control, f.failure,
-        (SELECT max(frame) FROM frames WHERE job_id = f.job_id)
+        (SELECT max(frame) FROM frames WHERE job_id = f.job_id),
+        (SELECT count(*) FROM tasks t WHERE t.job_id = f.job_id AND t.frame = f.frame
+           AND t.kind = 'denoise' AND t.state != 'done')
      FROM frames f JOIN jobs j ON j.id = f.job_id";
 
 fn status_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
@@ -175,6 +195,7 @@ fn status_from_row(r: &rusqlite::Row) -> rusqlite::Result<FrameStatus> {
         tasks_failed: failed,
         control: super::jobs::control_from_sql(r, 8)?,
         started: done > 0 || leased > 0,
+        denoise_unfinished: r.get::<_, u64>(11)? > 0,
     });
     Ok(FrameStatus {
         frame,

@@ -167,6 +167,15 @@ const MIGRATIONS: &[&str] = &[
     DROP INDEX tasks_queue;
     CREATE INDEX tasks_queue ON tasks (state, job_id, round, frame, pass, tile);
     "#,
+    // 15: denoising. A frame of a job that denoises gets a denoise task once assembled
+    // (not counted in its tasks_total: those are its render tasks); only a worker that
+    // registered a denoiser leases one.
+    r#"
+    ALTER TABLE tasks ADD COLUMN kind TEXT NOT NULL DEFAULT 'render'
+        CHECK (kind IN ('render', 'denoise'));
+    ALTER TABLE frames ADD COLUMN denoised_ms INTEGER;
+    ALTER TABLE workers ADD COLUMN denoiser TEXT;
+    "#,
 ];
 
 /// The schema version this build writes.

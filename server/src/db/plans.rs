@@ -145,6 +145,7 @@ pub fn add_pass(
         tasks::insert(
             tx,
             &NewTask {
+                kind: proto::TaskKind::Render,
                 job,
                 frame,
                 tile,

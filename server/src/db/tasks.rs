@@ -2,6 +2,7 @@
 //! [`crate::state::transition`], the queries the scheduler leases by, and the sets of tasks
 //! assembly, checks and time budgets read.
 
+use proto::TaskKind;
 use rusqlite::{params, Connection, OptionalExtension, Transaction};
 use tracer::film::{SampleRange, TileRect};
 
@@ -14,6 +15,8 @@ use crate::state::{transition, TaskEvent, TaskState};
 pub struct TaskRow {
     /// Task id.
     pub id: u64,
+    /// Render a tile, or denoise a frame.
+    pub kind: TaskKind,
     /// Job id.
     pub job_id: u64,
     /// Frame number.
@@ -39,7 +42,8 @@ pub struct TaskRow {
 }
 
 const COLUMNS: &str = "t.id, t.job_id, t.frame, t.tile, t.pass, t.x, t.y, t.w, t.h, \
-     t.sample_start, t.sample_end, t.state, t.attempt, t.failures, t.worker_id, t.check_of";
+     t.sample_start, t.sample_end, t.state, t.attempt, t.failures, t.worker_id, t.check_of, \
+     t.kind";
 
 fn from_row(r: &rusqlite::Row) -> rusqlite::Result<TaskRow> {
     let state: String = r.get(11)?;
@@ -62,6 +66,16 @@ fn from_row(r: &rusqlite::Row) -> rusqlite::Result<TaskRow> {
         failures: r.get(13)?,
         worker_id: r.get(14)?,
         check_of: r.get(15)?,
+        kind: {
+            let kind: String = r.get(16)?;
+            TaskKind::parse(&kind).ok_or_else(|| {
+                rusqlite::Error::FromSqlConversionFailure(
+                    16,
+                    rusqlite::types::Type::Text,
+                    format!("unknown task kind `{kind}`").into(),
+                )
+            })?
+        },
     })
 }
 
@@ -100,9 +114,11 @@ pub fn advance(tx: &Transaction, task: &TaskRow, event: TaskEvent) -> Result<Tas
     Ok(to)
 }
 
-/// What a new task renders.
+/// What a new task does.
 #[derive(Clone, Copy, Debug)]
 pub struct NewTask {
+    /// Render a tile, or denoise a frame.
+    pub kind: TaskKind,
     /// Its job.
     pub job: u64,
     /// Its frame.
@@ -125,6 +141,7 @@ impl NewTask {
     /// A check of the render task `task`: the same tile and samples.
     pub fn check_of(task: &TaskRow) -> NewTask {
         NewTask {
+            kind: TaskKind::Render,
             job: task.job_id,
             frame: task.frame,
             tile: task.tile,
@@ -136,14 +153,30 @@ impl NewTask {
             round: 0,
         }
     }
+
+    /// The denoise task of an assembled frame of `size`: the whole frame, no samples,
+    /// leased before the later frames' tiles (round 0), so that frames finish in order.
+    pub fn denoise(job: u64, frame: i32, size: (u32, u32)) -> NewTask {
+        NewTask {
+            kind: TaskKind::Denoise,
+            job,
+            frame,
+            tile: 0,
+            pass: 0,
+            rect: TileRect::new(0, 0, size.0, size.1),
+            samples: SampleRange::new(0, 0),
+            check_of: None,
+            round: 0,
+        }
+    }
 }
 
 /// Queues one task.
 pub fn insert(tx: &Transaction, t: &NewTask) -> Result<()> {
     tx.exec(
         "INSERT INTO tasks (job_id, frame, tile, pass, x, y, w, h, sample_start, sample_end,
-                            state, check_of, round)
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued', ?11, ?12)",
+                            state, check_of, round, kind)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, 'queued', ?11, ?12, ?13)",
         params![
             t.job,
             t.frame,
@@ -156,23 +189,36 @@ pub fn insert(tx: &Transaction, t: &NewTask) -> Result<()> {
             t.samples.start,
             t.samples.end,
             t.check_of,
-            t.round
+            t.round,
+            t.kind.as_str()
         ],
     )?;
     Ok(())
 }
 
-/// Active jobs with a queued task that `worker` has the tags for and is not blocked from,
-/// with whether each is a time-budget job: by priority (highest first), then age.
+/// A task `t` that the worker `?N` can do: a render task, or a denoise task when it has a
+/// denoiser.
+fn can_take(worker: &str) -> String {
+    format!(
+        "(t.kind = 'render' OR EXISTS (SELECT 1 FROM workers d
+                                       WHERE d.id = {worker} AND d.denoiser IS NOT NULL))"
+    )
+}
+
+/// Active jobs with a queued task that `worker` can do, has the tags for and is not
+/// blocked from, with whether each is a time-budget job: by priority (highest first), then
+/// age.
 pub fn leasable_jobs(tx: &Transaction, worker: u64) -> Result<Vec<(u64, bool)>> {
     let mut stmt = tx.prepare_cached(&format!(
         "SELECT j.id, j.budget_plan IS NOT NULL FROM jobs j
          WHERE j.control = 'active'
-           AND EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = j.id AND t.state = 'queued')
+           AND EXISTS (SELECT 1 FROM tasks t WHERE t.job_id = j.id AND t.state = 'queued'
+                         AND {})
            AND NOT EXISTS (SELECT 1 FROM job_blocks b
                            WHERE b.job_id = j.id AND b.worker_id = ?1)
            AND {}
          ORDER BY j.priority DESC, j.created_ms, j.id",
+        can_take("?1"),
         has_required_tags("j.spec", "(SELECT tags FROM workers WHERE id = ?1)")
     ))?;
     let rows = stmt.query_map([worker], |r| Ok((r.get(0)?, r.get(1)?)))?;
@@ -214,16 +260,19 @@ pub fn next_for(
             &format!(
                 "SELECT t.id FROM tasks t
              WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
+               AND {}
                AND NOT EXISTS (
                    SELECT 1 FROM workers w
                    WHERE w.id != ?2 AND w.last_seen_ms >= ?3 AND w.left_ms IS NULL
                      AND w.quarantined_ms IS NULL
+                     AND (t.kind = 'render' OR w.denoiser IS NOT NULL)
                      AND {tagged}
                      AND NOT EXISTS (SELECT 1 FROM task_failures f
                                      WHERE f.task_id = t.id AND f.worker_id = w.id)
                      AND NOT EXISTS (SELECT 1 FROM job_blocks b
                                      WHERE b.job_id = t.job_id AND b.worker_id = w.id))
-             ORDER BY {order} LIMIT 1"
+             ORDER BY {order} LIMIT 1",
+                can_take("?2")
             ),
             params![job, worker, live_since],
             |r| r.get(0),
@@ -235,10 +284,11 @@ pub fn next_for(
 fn next_fresh_sql(order: &str) -> String {
     format!(
         "SELECT t.id FROM tasks t
-         WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP}
+         WHERE t.state = 'queued' AND t.job_id = ?1 AND {NOT_IN_CHECK_GROUP} AND {}
            AND NOT EXISTS (SELECT 1 FROM task_failures f
                            WHERE f.task_id = t.id AND f.worker_id = ?2)
-         ORDER BY {order} LIMIT 1"
+         ORDER BY {order} LIMIT 1",
+        can_take("?2")
     )
 }
 
@@ -395,6 +445,7 @@ pub fn done_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Vec<Task
     select(
         conn,
         "t.job_id = ?1 AND t.frame = ?2 AND t.state = 'done' AND t.check_of IS NULL
+           AND t.kind = 'render'
          ORDER BY t.tile, t.pass",
         params![job, frame],
     )
@@ -415,7 +466,7 @@ pub fn done_checks_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<V
 pub fn render_seconds_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<f64> {
     let ms: Option<i64> = conn.row(
         "SELECT SUM(render_ms) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND state = 'done'
-           AND check_of IS NULL",
+           AND check_of IS NULL AND kind = 'render'",
         params![job, frame],
         |r| r.get(0),
     )?;
@@ -426,7 +477,7 @@ pub fn render_seconds_of_frame(conn: &Connection, job: u64, frame: i32) -> Resul
 pub fn pass_done(tx: &Transaction, job: u64, frame: i32, pass: u32) -> Result<bool> {
     let left: i64 = tx.row(
         "SELECT count(*) FROM tasks WHERE job_id = ?1 AND frame = ?2 AND pass = ?3
-           AND state != 'done' AND check_of IS NULL",
+           AND state != 'done' AND check_of IS NULL AND kind = 'render'",
         params![job, frame, pass],
         |r| r.get(0),
     )?;
@@ -476,7 +527,7 @@ pub fn unchecked_unmerged_of(conn: &Connection, worker: u64) -> Result<Vec<TaskR
     select(
         conn,
         &format!(
-            "t.worker_id = ?1 AND t.state = 'done' AND t.check_of IS NULL
+            "t.worker_id = ?1 AND t.state = 'done' AND t.check_of IS NULL AND t.kind = 'render'
              AND NOT EXISTS (SELECT 1 FROM tasks c WHERE c.check_of = t.id)
              AND EXISTS (SELECT 1 FROM frames f WHERE f.job_id = t.job_id AND f.frame = t.frame
                            AND {UNMERGED})"
@@ -490,7 +541,8 @@ pub fn merged_count_of(conn: &Connection, worker: u64) -> Result<i64> {
     Ok(conn.row(
         &format!(
             "SELECT count(*) FROM tasks t JOIN frames f ON f.job_id = t.job_id AND f.frame = t.frame
-             WHERE t.worker_id = ?1 AND t.state = 'done' AND NOT {UNMERGED}"
+             WHERE t.worker_id = ?1 AND t.state = 'done' AND t.kind = 'render'
+               AND NOT {UNMERGED}"
         ),
         [worker],
         |r| r.get(0),
@@ -509,6 +561,39 @@ pub fn count_by_state(conn: &Connection) -> Result<Vec<(TaskState, u64)>> {
         }
     }
     Ok(counts)
+}
+
+/// The denoise task of a frame, if it has one.
+pub fn denoise_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Option<u64>> {
+    Ok(conn
+        .row(
+            "SELECT id FROM tasks WHERE job_id = ?1 AND frame = ?2 AND kind = 'denoise'",
+            params![job, frame],
+            |r| r.get(0),
+        )
+        .optional()?)
+}
+
+/// The upload limit of a denoise task (its whole frame, see
+/// [`crate::denoising::max_upload_bytes`]); `None` for a render task or an unknown one.
+pub fn upload_limit(conn: &Connection, task: u64) -> Result<Option<usize>> {
+    let Some(row) = load(conn, task)? else {
+        return Ok(None);
+    };
+    if row.kind != TaskKind::Denoise {
+        return Ok(None);
+    }
+    let spec = super::jobs::spec(conn, row.job_id)?;
+    Ok(Some(crate::denoising::max_upload_bytes(&spec)))
+}
+
+/// How many denoise tasks of `job` are queued.
+pub fn queued_denoise_count(conn: &Connection, job: u64) -> Result<u64> {
+    Ok(conn.row(
+        "SELECT count(*) FROM tasks WHERE job_id = ?1 AND state = 'queued' AND kind = 'denoise'",
+        [job],
+        |r| r.get(0),
+    )?)
 }
 
 /// The queued and leased tasks of jobs that are not paused or cancelled.

@@ -21,14 +21,16 @@ pub struct Profile<'a> {
     pub platform: Option<&'a str>,
     /// What it offers, for jobs that require tags.
     pub tags: &'a [String],
+    /// The denoiser it loaded, if any: only then is it given denoise tasks.
+    pub denoiser: Option<&'a str>,
 }
 
 /// Stores a new worker with its credential's hash; returns its id.
 pub fn insert(tx: &Transaction, p: &Profile, credential_hash: &str, now: i64) -> Result<u64> {
     tx.exec(
         "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms,
-                              credential, platform, tags)
-         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6, ?7)",
+                              credential, platform, tags, denoiser)
+         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6, ?7, ?8)",
         params![
             p.name,
             p.threads,
@@ -36,7 +38,8 @@ pub fn insert(tx: &Transaction, p: &Profile, credential_hash: &str, now: i64) ->
             now,
             credential_hash,
             p.platform,
-            serde_json::to_string(p.tags)?
+            serde_json::to_string(p.tags)?,
+            p.denoiser
         ],
     )?;
     Ok(tx.last_insert_rowid() as u64)
@@ -52,7 +55,8 @@ pub fn set_returned(
 ) -> Result<()> {
     tx.exec(
         "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
-                left_ms = NULL, credential = ?6, platform = ?7, tags = ?8 WHERE id = ?1",
+                left_ms = NULL, credential = ?6, platform = ?7, tags = ?8, denoiser = ?9
+         WHERE id = ?1",
         params![
             id,
             p.name,
@@ -61,7 +65,8 @@ pub fn set_returned(
             now,
             credential_hash,
             p.platform,
-            serde_json::to_string(p.tags)?
+            serde_json::to_string(p.tags)?,
+            p.denoiser
         ],
     )?;
     Ok(())
@@ -164,6 +169,23 @@ pub fn live_for_job(conn: &Connection, job: u64, live_since: i64) -> Result<Vec<
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 
+/// Whether a live worker (seen since `live_since`, not left, not quarantined) with the
+/// tags `job` requires and not blocked from it has a denoiser.
+pub fn denoiser_live_for_job(conn: &Connection, job: u64, live_since: i64) -> Result<bool> {
+    Ok(conn.row(
+        &format!(
+            "SELECT EXISTS (SELECT 1 FROM workers w
+               WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL AND w.quarantined_ms IS NULL
+                 AND w.denoiser IS NOT NULL AND {}
+                 AND NOT EXISTS (SELECT 1 FROM job_blocks b
+                                 WHERE b.job_id = ?1 AND b.worker_id = w.id))",
+            has_required_tags("(SELECT spec FROM jobs WHERE id = ?1)", "w.tags")
+        ),
+        params![job, live_since],
+        |r| r.get(0),
+    )?)
+}
+
 /// Who could work on `job` now: the live workers (seen since `live_since`, not left), and
 /// of them those quarantined, those (not quarantined) without the tags it requires, and
 /// those (neither) blocked from it.
@@ -216,6 +238,15 @@ pub fn name_and_platform(conn: &Connection, worker: u64) -> Result<(String, Opti
         "SELECT name, platform FROM workers WHERE id = ?1",
         [worker],
         |r| Ok((r.get(0)?, r.get(1)?)),
+    )?)
+}
+
+/// The denoiser `worker` registered, if any.
+pub fn denoiser(conn: &Connection, worker: u64) -> Result<Option<String>> {
+    Ok(conn.row(
+        "SELECT denoiser FROM workers WHERE id = ?1",
+        [worker],
+        |r| r.get(0),
     )?)
 }
 
@@ -275,7 +306,7 @@ pub fn counts(conn: &Connection, live_since: i64) -> Result<(u64, u64)> {
 
 const INFO_QUERY: &str = "SELECT w.id, w.name, w.threads, w.version, w.last_seen_ms, w.tasks_done,
         t.id, t.attempt, t.job_id, t.frame, w.left_ms, w.suspect_ms, w.quarantine_reason,
-        w.platform, w.tags
+        w.platform, w.tags, w.denoiser
      FROM workers w
      LEFT JOIN tasks t ON t.id = (SELECT id FROM tasks WHERE worker_id = w.id AND state = 'leased'
                                   ORDER BY leased_ms DESC LIMIT 1)";
@@ -306,6 +337,7 @@ fn info_from_row(r: &rusqlite::Row, live_since: i64) -> rusqlite::Result<WorkerI
         tags: serde_json::from_str(&r.get::<_, String>(14)?).map_err(|e| {
             rusqlite::Error::FromSqlConversionFailure(14, rusqlite::types::Type::Text, e.into())
         })?,
+        denoiser: r.get(15)?,
         samples_per_second: None,
         recent_failures: 0,
         last_failure: None,
@@ -323,7 +355,7 @@ fn with_recent(conn: &Connection, mut w: WorkerInfo, now: i64) -> rusqlite::Resu
     let (samples, ms): (Option<f64>, Option<f64>) = conn.row(
         "SELECT sum(w * h * (sample_end - sample_start) * 1.0), sum(render_ms * 1.0) FROM (
              SELECT w, h, sample_start, sample_end, render_ms FROM tasks
-             WHERE worker_id = ?1 AND state = 'done' AND render_ms > 0
+             WHERE worker_id = ?1 AND state = 'done' AND render_ms > 0 AND kind = 'render'
              ORDER BY id DESC LIMIT ?2)",
         params![w.id, SPEED_TASKS],
         |r| Ok((r.get(0)?, r.get(1)?)),

@@ -102,21 +102,7 @@ fn a_new_priority_decides_the_next_lease_and_is_checked() {
 fn render_all(c: &mut Connection, w: u64, t: i64) -> Vec<Lease> {
     let mut done = Vec::new();
     while let Some(l) = lease(c, w, t, TIMING).unwrap() {
-        if let Accepted::New {
-            job,
-            frame,
-            frame_complete: true,
-            ..
-        } = accept(c, w, l.token, 1, 1, None, t, TIMING).unwrap()
-        {
-            let summary = SamplingSummary {
-                mean_samples: 4.0,
-                min_samples: 4,
-                max_samples: 4,
-                mean_noise: None,
-            };
-            mark_assembled(c, job, frame, t, &summary, TIMING).unwrap();
-        }
+        accept_assembling(c, w, &l, t);
         done.push(l);
     }
     done

@@ -167,19 +167,23 @@ pub struct FrameFacts {
     pub control: JobControl,
     /// A task of it was leased or finished.
     pub started: bool,
+    /// Its denoise task is not done (the job denoises, and the frame is assembled).
+    pub denoise_unfinished: bool,
 }
 
 /// A frame's state: failed or done once decided, else cancelled with its job, else
-/// rendering or queued.
+/// denoising, rendering or queued.
 pub fn frame_state(f: FrameFacts) -> FrameState {
     if f.assembly_failed {
         FrameState::Failed
-    } else if f.assembled {
+    } else if f.assembled && !f.denoise_unfinished {
         FrameState::Done
     } else if f.tasks_failed > 0 {
         FrameState::Failed
     } else if f.control == JobControl::Cancelled {
         FrameState::Cancelled
+    } else if f.assembled {
+        FrameState::Denoising
     } else if f.started {
         FrameState::Rendering
     } else {
@@ -312,6 +316,7 @@ mod tests {
             tasks_failed: 0,
             control: S::Cancelled,
             started: true,
+            denoise_unfinished: false,
         };
         assert_eq!(frame_state(facts), FrameState::Done);
         let cancelled = FrameFacts {
@@ -335,5 +340,38 @@ mod tests {
             ..rendering
         };
         assert_eq!(frame_state(queued), FrameState::Queued);
+    }
+
+    #[test]
+    fn an_assembled_frame_is_done_once_denoised() {
+        let denoising = FrameFacts {
+            assembly_failed: false,
+            assembled: true,
+            tasks_failed: 0,
+            control: S::Active,
+            started: true,
+            denoise_unfinished: true,
+        };
+        assert_eq!(frame_state(denoising), FrameState::Denoising);
+        let paused = FrameFacts {
+            control: S::Paused,
+            ..denoising
+        };
+        assert_eq!(frame_state(paused), FrameState::Denoising);
+        let cancelled = FrameFacts {
+            control: S::Cancelled,
+            ..denoising
+        };
+        assert_eq!(frame_state(cancelled), FrameState::Cancelled);
+        let failed = FrameFacts {
+            tasks_failed: 1,
+            ..denoising
+        };
+        assert_eq!(frame_state(failed), FrameState::Failed);
+        let done = FrameFacts {
+            denoise_unfinished: false,
+            ..denoising
+        };
+        assert_eq!(frame_state(done), FrameState::Done);
     }
 }

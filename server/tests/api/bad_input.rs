@@ -354,6 +354,7 @@ async fn worker_calls_with_bad_ids_or_fields_are_refused() {
                 credential: None,
                 platform: None,
                 tags: vec![],
+                denoiser: None,
             })
             .send()
             .await

@@ -107,6 +107,20 @@ impl SimWorker {
     }
 
     pub async fn register_with(s: &TestServer, name: &str, token: Option<&str>) -> SimWorker {
+        Self::join(s, name, token, None).await
+    }
+
+    /// A worker that says it has `denoiser`: it is given denoise tasks.
+    pub async fn register_denoiser(s: &TestServer, name: &str, denoiser: &str) -> SimWorker {
+        Self::join(s, name, None, Some(denoiser.to_string())).await
+    }
+
+    async fn join(
+        s: &TestServer,
+        name: &str,
+        token: Option<&str>,
+        denoiser: Option<String>,
+    ) -> SimWorker {
         let client = client();
         let mut req = client.post(s.url("/workers")).json(&WorkerRegistration {
             name: name.into(),
@@ -115,6 +129,7 @@ impl SimWorker {
             credential: None,
             platform: None,
             tags: vec![],
+            denoiser,
         });
         if let Some(t) = token {
             req = req.bearer_auth(t);

@@ -6,6 +6,7 @@ mod bad_input;
 mod common;
 mod contract;
 mod dashboard;
+mod denoise;
 mod farm;
 mod faults;
 mod openapi;

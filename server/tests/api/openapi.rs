@@ -59,6 +59,7 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         ("POST", "/api/v1/workers/{id}/clear"),
         ("POST", "/api/v1/workers/{id}/tasks/{task}/result"),
         ("POST", "/api/v1/workers/{id}/tasks/{task}/failure"),
+        ("GET", "/api/v1/workers/{id}/tasks/{task}/frame"),
         ("GET", "/api/v1/events"),
         ("POST", "/api/v1/gc"),
     ];

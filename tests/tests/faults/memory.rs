@@ -57,6 +57,7 @@ impl Painter {
             credential: None,
             platform: None,
             tags: vec![],
+            denoiser: None,
         };
         let answer = post_json(port, "/api/v1/workers", &reg, None);
         assert_eq!(answer.status, 201, "{}", answer.text());

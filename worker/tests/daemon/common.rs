@@ -46,6 +46,8 @@ pub fn worker_config(server: &str, cache: &Path) -> WorkerConfig {
         name: "test-worker".into(),
         tags: vec![],
         upload_compression: UploadCompression::Auto,
+        denoise: true,
+        oidn: None,
         fault: None,
     }
 }

@@ -1,0 +1,83 @@
+//! A denoise lease: the assembled frame is fetched, denoised with Open Image Denoise on
+//! the worker's threads, and uploaded as the beauty of an EXR of the whole frame.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::Vec3;
+use proto::{Lease, ResultMetadata};
+use tracer::film::{Layers, TileRect};
+use tracer::output::{decode_exr, encode_exr_layers, ExrCompression, ExrMetadata, ImageLayer};
+
+use crate::cache::sha256_hex;
+use crate::render::RenderedTile;
+
+/// The worker's denoiser: the library, and the threads it may use (the render pool's).
+#[derive(Clone, Debug)]
+pub struct Denoiser {
+    /// Open Image Denoise, loaded.
+    pub oidn: Arc<post::Oidn>,
+    /// Threads it runs on.
+    pub threads: u32,
+}
+
+impl Denoiser {
+    /// Denoises the frame `exr` (the EXR bytes the server sent for `lease`): the
+    /// denoised RGB and the milliseconds it took. Blocking: call it off the async runtime.
+    pub fn denoise(&self, lease: &Lease, exr: &[u8]) -> Result<(Vec<Vec3>, u64), String> {
+        let image = decode_exr(exr).map_err(|e| format!("reading the frame: {e}"))?;
+        let whole = TileRect::new(0, 0, lease.width, lease.height);
+        if image.frame_size != (lease.width, lease.height) || image.layers.rect != whole {
+            return Err(format!(
+                "the frame sent is {}x{} with data window {:?}, not the whole {}x{} frame",
+                image.frame_size.0,
+                image.frame_size.1,
+                image.layers.rect,
+                lease.width,
+                lease.height
+            ));
+        }
+        let started = Instant::now();
+        let denoised = post::denoise_layers(&self.oidn, &image.layers, self.threads)
+            .map_err(|e| e.to_string())?;
+        Ok((denoised, started.elapsed().as_millis() as u64))
+    }
+}
+
+/// The upload of a denoise lease: an EXR of the whole frame whose beauty is `denoised`
+/// (alpha 1), with 0 samples and 0 rays, stored with `compression`.
+pub fn encode_denoised(
+    lease: &Lease,
+    denoised: &[Vec3],
+    denoise_ms: u64,
+    compression: ExrCompression,
+) -> Result<RenderedTile, String> {
+    let mut layers = Layers::new(TileRect::new(0, 0, lease.width, lease.height));
+    if denoised.len() != layers.beauty.len() {
+        return Err(format!(
+            "{} denoised pixels for a {}x{} frame",
+            denoised.len(),
+            lease.width,
+            lease.height
+        ));
+    }
+    for (b, d) in layers.beauty.iter_mut().zip(denoised) {
+        *b = d.extend(1.0);
+    }
+    let exr = encode_exr_layers(
+        (lease.width, lease.height),
+        &layers,
+        &ExrMetadata::new(),
+        &[ImageLayer::Beauty],
+        compression,
+    )
+    .map_err(|e| e.to_string())?;
+    let meta = ResultMetadata {
+        attempt: lease.token.attempt,
+        sha256: sha256_hex(&exr),
+        samples: 0,
+        rays: 0,
+        render_ms: denoise_ms,
+    };
+    Ok(RenderedTile { exr, meta })
+}
