@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it (.ci/run calls this). First installs the optional
 # parts that some tests need, where this machine allows it: Embree 3, for the BVH
-# comparison of `tessera bench rays --embree`, and Intel Open Image Denoise (`tessera
-# install oidn`, into the user's data folder), for the denoising tests. Then it runs
-# `cargo test --workspace` with the cargo features those parts enable. Where a part cannot
-# be installed, it says so loudly and its tests report themselves skipped. The fuzz
-# targets (a workspace of their own, run by fuzz/run.sh with nightly) are type-checked
-# against today's types first, with their lock file as committed. Arguments go to
-# `cargo test`.
+# comparison of `tessera bench rays --embree`, Intel Open Image Denoise and FFmpeg
+# (`tessera install oidn|ffmpeg`, into the user's data folder), for the denoising and
+# video tests. Then it runs `cargo test --workspace` with the cargo features those parts
+# enable. Where a part cannot be installed, it says so loudly and its tests report
+# themselves skipped. The fuzz targets (a workspace of their own, run by fuzz/run.sh with
+# nightly) are type-checked against today's types first, with their lock file as
+# committed. Arguments go to `cargo test`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -21,10 +21,12 @@ else
     echo "=== WARNING: Embree 3 is not installed: the Embree comparison's tests will be skipped ===" >&2
 fi
 
-echo "=== Open Image Denoise, for the denoising tests ==="
-if ! cargo run -p cli --quiet -- install oidn; then
-    echo "=== WARNING: Open Image Denoise could not be installed: the denoising tests will be skipped ===" >&2
-fi
+echo "=== Open Image Denoise and FFmpeg, for the denoising and video tests ==="
+for part in oidn ffmpeg; do
+    if ! cargo run -p cli --quiet -- install "$part"; then
+        echo "=== WARNING: $part could not be installed: its tests will be skipped ===" >&2
+    fi
+done
 
 if [ ${#features[@]} -gt 0 ]; then
     exec cargo test --workspace --features "$(IFS=,; echo "${features[*]}")" "$@"

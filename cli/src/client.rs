@@ -469,6 +469,17 @@ impl Client {
         Ok(bytes.to_vec())
     }
 
+    /// `GET /jobs/{id}/video`: the job's MP4.
+    pub async fn video(&self, id: u64) -> Result<Vec<u8>, ClientError> {
+        let (req, what) = self.request(Method::GET, &format!("/jobs/{id}/video"));
+        let answer = self.send(req, &what).await?;
+        let bytes = answer.bytes().await.map_err(|e| ClientError::Transport {
+            request: what,
+            detail: format!("downloading: {}", root_cause(&e)),
+        })?;
+        Ok(bytes.to_vec())
+    }
+
     /// `GET /workers`.
     pub async fn workers(&self) -> Result<WorkerList, ClientError> {
         self.get("/workers").await

@@ -250,6 +250,13 @@ pub fn job_details(
     if let Some(why) = &j.waiting {
         fields.push(("WAITING", why.clone()));
     }
+    if j.spec.video {
+        let video = match j.video {
+            true => format!("encoded: `tessera download {}` saves it as video.mp4", j.id),
+            false => "not yet: it is encoded once every frame is finished".to_string(),
+        };
+        fields.push(("VIDEO", video));
+    }
     let mut out = format!("job {} \"{}\": {}\n", j.id, j.name, state_name(j.state));
     for (k, v) in fields {
         out.push_str(&format!("  {k:<9} {v}\n"));
@@ -337,7 +344,7 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
                     _ => "-".into(),
                 },
                 ago(w.last_seen_ms, now_ms),
-                if w.denoiser.is_some() { "yes" } else { "-" }.to_string(),
+                steps(w),
                 if w.tags.is_empty() {
                     "-".into()
                 } else {
@@ -358,11 +365,27 @@ pub fn workers_table(workers: &WorkerList, now_ms: i64) -> String {
             "SPEED",
             "FAILED (1H)",
             "LAST SEEN",
-            "DENOISES",
+            "STEPS",
             "TAGS",
         ],
         &rows,
     )
+}
+
+/// The steps after rendering a worker takes: `denoise`, `encode`, both, or `-`.
+fn steps(w: &proto::WorkerInfo) -> String {
+    let steps: Vec<&str> = [
+        w.denoiser.as_ref().map(|_| "denoise"),
+        w.encoder.as_ref().map(|_| "encode"),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    if steps.is_empty() {
+        "-".into()
+    } else {
+        steps.join(",")
+    }
 }
 
 pub fn status(args: StatusArgs) -> anyhow::Result<()> {
@@ -498,6 +521,7 @@ mod tests {
             attempts_failed: 0,
             stuck: None,
             waiting: None,
+            video: false,
         }
     }
 
@@ -680,6 +704,7 @@ mod tests {
             platform: None,
             tags: vec![],
             denoiser: None,
+            encoder: None,
             samples_per_second: None,
             recent_failures: 0,
             last_failure: None,
@@ -691,15 +716,16 @@ mod tests {
         bad.quarantined = Some("its tile of task 9 differs".into());
         let mut render01 = worker(1, "render-01", true, Some(3), Some(12));
         render01.denoiser = Some("Open Image Denoise 2.5.1".into());
+        render01.encoder = Some("FFmpeg with libx264".into());
         let list = WorkerList {
             workers: vec![render01, worker(2, "b", false, None, None), bad],
         };
         assert_eq!(
             workers_table(&list, 60_000),
-            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  SPEED             FAILED (1H)       LAST SEEN  DENOISES  TAGS\n\
-             1   render-01  8        yes     ok           job 3 frame 12  17          -                 -                 2s ago     yes       -\n\
-             2   b          8        no      ok           -               17          -                 -                 2s ago     -         -\n\
-             3   c          8        yes     quarantined  -               17          2.50 M samples/s  2: out of memory  2s ago     -         gpu,studio-a"
+            "ID  NAME       THREADS  ONLINE  CHECKS       CURRENT         TASKS DONE  SPEED             FAILED (1H)       LAST SEEN  STEPS           TAGS\n\
+             1   render-01  8        yes     ok           job 3 frame 12  17          -                 -                 2s ago     denoise,encode  -\n\
+             2   b          8        no      ok           -               17          -                 -                 2s ago     -               -\n\
+             3   c          8        yes     quarantined  -               17          2.50 M samples/s  2: out of memory  2s ago     -               gpu,studio-a"
         );
     }
 }

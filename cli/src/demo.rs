@@ -63,26 +63,57 @@ pub struct DemoArgs {
     /// Do not denoise, even where Open Image Denoise is installed.
     #[arg(long)]
     pub no_denoise: bool,
+    /// End with the frames as an H.264 MP4, `demo.mp4` in --dir [default: when FFmpeg is
+    /// installed; `tessera install ffmpeg` installs it].
+    #[arg(long, conflicts_with = "no_video")]
+    pub video: bool,
+    /// Make no video, even where FFmpeg is installed.
+    #[arg(long)]
+    pub no_video: bool,
 }
 
 impl DemoArgs {
-    /// Whether the demo denoises, and a note for the user when it does not on its own
-    /// (the library is missing); `--denoise` without the library is an error.
-    fn denoising(&self) -> anyhow::Result<(bool, Option<String>)> {
-        if self.no_denoise {
-            return Ok((false, None));
-        }
-        match post::Oidn::load(None) {
-            Ok(_) => Ok((true, None)),
-            Err(e) if self.denoise => Err(e.into()),
-            Err(_) => Ok((
-                false,
-                Some(
-                    "frames are not denoised: Open Image Denoise is not installed \
-                     (`tessera install oidn` installs it, no root needed)"
-                        .into(),
-                ),
-            )),
+    /// Whether the demo denoises and makes a video, with a note for the user for each it
+    /// does not do on its own (its program is missing); asked for without it is an error.
+    fn steps(&self) -> anyhow::Result<(bool, bool, Vec<String>)> {
+        let mut notes = Vec::new();
+        let denoise = optional_step(
+            (self.denoise, self.no_denoise),
+            post::Oidn::load(None)
+                .map(drop)
+                .map_err(anyhow::Error::from),
+            "frames are not denoised: Open Image Denoise is not installed (`tessera install \
+             oidn` installs it, no root needed)",
+            &mut notes,
+        )?;
+        let video = optional_step(
+            (self.video, self.no_video),
+            post::Ffmpeg::find(None)
+                .map(drop)
+                .map_err(anyhow::Error::from),
+            "no video: FFmpeg is not installed (`tessera install ffmpeg` installs it, no root \
+             needed)",
+            &mut notes,
+        )?;
+        Ok((denoise, video, notes))
+    }
+}
+
+/// Whether an optional step runs: not when turned off (`(on, off)`), else when what it
+/// needs is `there`; asked for (`on`) without it is the error, not asked for a `note`.
+fn optional_step(
+    (on, off): (bool, bool),
+    there: anyhow::Result<()>,
+    note: &str,
+    notes: &mut Vec<String>,
+) -> anyhow::Result<bool> {
+    match (off, there) {
+        (true, _) => Ok(false),
+        (false, Ok(())) => Ok(true),
+        (false, Err(e)) if on => Err(e),
+        (false, Err(_)) => {
+            notes.push(note.to_string());
+            Ok(false)
         }
     }
 }
@@ -111,6 +142,7 @@ pub fn demo_job(args: &DemoArgs) -> JobArgs {
         passes: Some(DEMO_PASSES.min(args.spp)),
         name: Some("tessera demo".into()),
         denoise: args.denoise,
+        video: args.video,
         ..JobArgs::default()
     }
 }
@@ -391,13 +423,20 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
     clear_old_frames(&frames)?;
-    let (denoise, note) = args.denoising()?;
-    if let Some(note) = note {
+    let old_video = dir.join("demo.mp4");
+    if old_video.exists() {
+        std::fs::remove_file(&old_video)
+            .with_context(|| format!("removing {}", old_video.display()))?;
+    }
+    let (denoise, video, notes) = args.steps()?;
+    for note in notes {
         println!("note: {note}");
     }
     let args = DemoArgs {
         denoise,
         no_denoise: !denoise,
+        video,
+        no_video: !video,
         ..args
     };
     log_to_file(&logs.join("server.log"))?;
@@ -533,13 +572,19 @@ async fn session(
     };
     match progress::follow(client, job, frames_dir, check).await? {
         Followed::Interrupted(_) => Ok(Outcome::Interrupted),
-        Followed::Ended { status, downloaded } => {
+        Followed::Ended {
+            status,
+            mut downloaded,
+        } => {
             let elapsed = started.elapsed();
-            println!(
-                "{} frame(s) in {}",
-                downloaded.frames.len(),
-                downloaded.dir.display()
-            );
+            // The demo's video sits beside its folders: tessera-demo/demo.mp4.
+            if let Some(video) = downloaded.video.take() {
+                let demo = args.dir.join("demo.mp4");
+                std::fs::rename(&video, &demo)
+                    .with_context(|| format!("moving the video to {}", demo.display()))?;
+                downloaded.video = Some(demo);
+            }
+            println!("{}", downloaded.summary());
             Ok(Outcome::Finished {
                 status: Box::new(status),
                 downloaded,

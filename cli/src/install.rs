@@ -1,4 +1,4 @@
-//! `tessera install oidn`: the optional native parts, from the Python package index's
+//! `tessera install oidn|ffmpeg`: the optional native parts, from the Python package index's
 //! wheels, pinned by SHA-256, into the user's data folder (no root needed).
 
 use std::path::PathBuf;
@@ -10,7 +10,8 @@ use clap::{Args, ValueEnum};
 #[derive(Args, Debug)]
 pub struct InstallArgs {
     /// What to install: `oidn`, Intel Open Image Denoise 2.5.1 (denoising: `tessera render
-    /// --denoise`, and a worker that has it takes a job's denoise tasks).
+    /// --denoise`, and a worker that has it takes a job's denoise tasks); `ffmpeg`, FFmpeg
+    /// 9.0.2 with libx264 (a job's MP4: a worker that has it takes encode tasks).
     pub what: Part,
     /// Install into this folder (default: the one the programs look in,
     /// `$XDG_DATA_HOME/tessera/...` or `~/.local/share/tessera/...`); point `--oidn` of
@@ -31,12 +32,15 @@ pub struct InstallArgs {
 pub enum Part {
     /// Intel Open Image Denoise.
     Oidn,
+    /// FFmpeg.
+    Ffmpeg,
 }
 
 /// Runs `tessera install`.
 pub fn run(args: InstallArgs) -> anyhow::Result<()> {
     let package = match args.what {
         Part::Oidn => &post::OIDN,
+        Part::Ffmpeg => &post::FFMPEG,
     };
     let dest = args.dir.unwrap_or_else(package.default_dir);
     if !args.force && works(args.what, &dest).is_ok() {
@@ -70,6 +74,7 @@ pub fn run(args: InstallArgs) -> anyhow::Result<()> {
 fn works(part: Part, dir: &std::path::Path) -> anyhow::Result<()> {
     match part {
         Part::Oidn => check_denoises(&post::Oidn::load(Some(dir))?),
+        Part::Ffmpeg => post::Ffmpeg::find(Some(dir)).map(drop).map_err(Into::into),
     }
 }
 

@@ -162,6 +162,9 @@ pub fn download(args: DownloadArgs) -> anyhow::Result<()> {
             got.bytes,
             state_name(job.state)
         );
+        if let Some(video) = &got.video {
+            println!("the video is {}", video.display());
+        }
         Ok(())
     })
 }

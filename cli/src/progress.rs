@@ -51,6 +51,8 @@ pub struct Downloaded {
     pub bytes: u64,
     /// Files already there and kept (when resuming).
     pub kept: u64,
+    /// The job's MP4, when it has one.
+    pub video: Option<PathBuf>,
 }
 
 /// Whether nothing more will happen to the job without a person acting (retry, resume,
@@ -291,8 +293,34 @@ pub async fn download_frames(
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if client.job(id).await?.video {
+        let path = dir.join(VIDEO_FILE);
+        if !(resume && path.is_file()) {
+            let bytes = client.video(id).await.context("downloading the video")?;
+            let part = path.with_extension("mp4.part");
+            std::fs::write(&part, &bytes)
+                .and_then(|()| std::fs::rename(&part, &path))
+                .with_context(|| format!("writing {}", path.display()))?;
+            downloaded.bytes += bytes.len() as u64;
+        }
+        downloaded.video = Some(path);
+    }
     Ok(downloaded)
 }
+
+impl Downloaded {
+    /// What was downloaded where, for the user: `24 frame(s) in shot` and the video.
+    pub fn summary(&self) -> String {
+        let frames = format!("{} frame(s) in {}", self.frames.len(), self.dir.display());
+        match &self.video {
+            Some(video) => format!("{frames}; the video is {}", video.display()),
+            None => frames,
+        }
+    }
+}
+
+/// The name of a job's MP4 among its downloaded frames.
+pub const VIDEO_FILE: &str = "video.mp4";
 
 /// Waits for `job` with a progress bar ([`watch`]), then downloads its finished frames
 /// into `dir` ([`download_frames`]), even when the job failed or was cancelled.
@@ -378,6 +406,7 @@ mod tests {
             attempts_failed: 0,
             stuck: None,
             waiting: None,
+            video: false,
         }
     }
 
@@ -442,6 +471,7 @@ mod tests {
             frames: vec![1],
             bytes: 10,
             kept: 0,
+            video: None,
         };
         let e = require_done(&s, &d, "http://s").unwrap_err().to_string();
         assert!(
@@ -458,6 +488,7 @@ mod tests {
             frames: vec![1, 2, 3],
             bytes: 10,
             kept: 0,
+            video: None,
         };
         assert!(require_done(&status(JobState::Done), &d, "http://x").is_ok());
         let mut s = status(JobState::Failed);

@@ -39,6 +39,11 @@ pub struct JobArgs {
     /// Do not denoise, whatever the preset says.
     #[arg(long)]
     pub no_denoise: bool,
+    /// When every frame is finished, encode them into an H.264 MP4 at --fps on a worker
+    /// with FFmpeg (`tessera install ffmpeg`); `--wait --out DIR` downloads it as
+    /// DIR/video.mp4 [default: off].
+    #[arg(long)]
+    pub video: bool,
     /// Samples per pixel; with a noise threshold, the most a pixel takes [default: 64].
     #[arg(long)]
     pub spp: Option<u32>,
@@ -165,6 +170,9 @@ impl JobArgs {
         }
         if self.denoise || self.no_denoise {
             spec.denoise = self.denoise;
+        }
+        if self.video {
+            spec.video = true;
         }
         if let Some(depth) = self.max_depth {
             spec.max_depth = depth;
@@ -432,11 +440,7 @@ pub fn run(args: SubmitArgs) -> anyhow::Result<()> {
                 std::process::exit(130);
             }
             Followed::Ended { status, downloaded } => {
-                println!(
-                    "{} frame(s) in {}",
-                    downloaded.frames.len(),
-                    downloaded.dir.display()
-                );
+                println!("{}", downloaded.summary());
                 progress::require_done(&status, &downloaded, client.base())
             }
         }

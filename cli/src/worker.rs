@@ -61,6 +61,15 @@ pub struct WorkerArgs {
     /// it, then the system's library path). A worker that finds it takes denoise tasks.
     #[arg(long, env = "TESSERA_OIDN", value_name = "DIR")]
     pub oidn: Option<PathBuf>,
+    /// Take no encode tasks, even where FFmpeg is installed.
+    #[arg(long, env = "TESSERA_NO_ENCODE")]
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub no_encode: bool,
+    /// The FFmpeg program, or the folder it is installed in (default: where `tessera
+    /// install ffmpeg` puts it, then `ffmpeg` on the PATH). A worker that finds one with
+    /// libx264 takes encode tasks (a job's MP4).
+    #[arg(long, env = "TESSERA_FFMPEG", value_name = "PATH")]
+    pub ffmpeg: Option<PathBuf>,
     /// Misbehave on purpose, for the farm's fault tests: `fail-job=JOB` or `perturb`.
     #[arg(long, hide = true)]
     #[serde(skip)]
@@ -99,6 +108,8 @@ pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
         upload_compression: args.upload_compression,
         denoise: !args.no_denoise,
         oidn: args.oidn,
+        encode: !args.no_encode,
+        ffmpeg: args.ffmpeg,
         fault: args.inject_fault,
     };
     tracing::info!(

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-use crate::oidn;
+use crate::{oidn, video};
 
 /// A pinned wheel and the files taken from it.
 #[derive(Clone, Copy, Debug)]
@@ -18,9 +18,9 @@ pub struct Package {
     pub url: &'static str,
     /// The lower-case hex SHA-256 the download must have.
     pub sha256: &'static str,
-    /// Paths inside the archive, each unpacked into `lib/` of the install folder under
-    /// its file name.
-    pub files: &'static [&'static str],
+    /// Paths inside the archive, each with where it is unpacked to inside the install
+    /// folder.
+    pub files: &'static [(&'static str, &'static str)],
     /// The install folder the programs look in when not told another.
     pub default_dir: fn() -> PathBuf,
 }
@@ -33,12 +33,34 @@ pub const OIDN: Package = Package {
     url: "https://files.pythonhosted.org/packages/80/f7/40c72360d5ee831ad1048427202b4c7bca41b28c7caffea0df4d2dc8158e/pyoidn-2.5.1.0-py3-none-manylinux2014_x86_64.whl",
     sha256: "32ad13368f8de1ef63001942ad05b02a00cd732d1206d97f352d3a3f606d823e",
     files: &[
-        "pyoidn/oidn/lib/libOpenImageDenoise.so.2",
-        "pyoidn/oidn/lib/libOpenImageDenoise_core.so.2.5.1",
-        "pyoidn/oidn/lib/libOpenImageDenoise_device_cpu.so.2.5.1",
-        "pyoidn/oidn/lib/libtbb.so.12",
+        (
+            "pyoidn/oidn/lib/libOpenImageDenoise.so.2",
+            "lib/libOpenImageDenoise.so.2",
+        ),
+        (
+            "pyoidn/oidn/lib/libOpenImageDenoise_core.so.2.5.1",
+            "lib/libOpenImageDenoise_core.so.2.5.1",
+        ),
+        (
+            "pyoidn/oidn/lib/libOpenImageDenoise_device_cpu.so.2.5.1",
+            "lib/libOpenImageDenoise_device_cpu.so.2.5.1",
+        ),
+        ("pyoidn/oidn/lib/libtbb.so.12", "lib/libtbb.so.12"),
     ],
     default_dir: oidn::install_dir,
+};
+
+/// FFmpeg 9.0.2 for x86-64 Linux, a static build with libx264: the `imageio-ffmpeg`
+/// 0.8.1 wheel ships it as one executable.
+pub const FFMPEG: Package = Package {
+    name: "FFmpeg 9.0.2",
+    url: "https://files.pythonhosted.org/packages/de/0f/49292fbef69ee10ebcf97bb741602521caafcc6966d5fa1a2b868cc15655/imageio_ffmpeg-0.8.1-py3-none-manylinux_2_28_x86_64.whl",
+    sha256: "050d6850601c3b3890bd2b28306f3b842b3daea390a561101174375a1c460bda",
+    files: &[(
+        "imageio_ffmpeg/binaries/ffmpeg-linux-x86_64-v9.0.2",
+        "bin/ffmpeg",
+    )],
+    default_dir: video::install_dir,
 };
 
 /// Why a package could not be installed.
@@ -81,7 +103,7 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
         .collect()
 }
 
-/// Checks `wheel` against `package`'s digest and unpacks its files into `dest/lib/`,
+/// Checks `wheel` against `package`'s digest and unpacks its files into `dest`,
 /// replacing what `dest` held: they are written into a folder beside it first, so a
 /// failure half way leaves the old install (or none) in place. Returns the files written.
 pub fn install(package: &Package, wheel: &[u8], dest: &Path) -> Result<Vec<PathBuf>, InstallError> {
@@ -113,27 +135,24 @@ pub fn install(package: &Package, wheel: &[u8], dest: &Path) -> Result<Vec<PathB
         std::process::id()
     ));
     let _ = std::fs::remove_dir_all(&staging);
-    let unpacked = unpack(package, &mut archive, &staging.join("lib"));
+    let unpacked = unpack(package, &mut archive, &staging);
     if unpacked.is_err() {
         let _ = std::fs::remove_dir_all(&staging);
     }
-    let written = unpacked?
-        .into_iter()
-        .map(|name| dest.join("lib").join(name))
-        .collect();
+    unpacked?;
     if dest.exists() {
         std::fs::remove_dir_all(dest).map_err(io(dest))?;
     }
     std::fs::rename(&staging, dest).map_err(io(dest))?;
-    Ok(written)
+    Ok(package.files.iter().map(|(_, to)| dest.join(to)).collect())
 }
 
-/// Unpacks `package`'s files from `archive` into `lib`; returns their file names.
+/// Unpacks `package`'s files from `archive` into `folder`.
 fn unpack(
     package: &Package,
     archive: &mut zip::ZipArchive<std::io::Cursor<&[u8]>>,
-    lib: &Path,
-) -> Result<Vec<std::ffi::OsString>, InstallError> {
+    folder: &Path,
+) -> Result<(), InstallError> {
     let archive_error = |detail: String| InstallError::Archive {
         name: package.name,
         detail,
@@ -142,9 +161,7 @@ fn unpack(
         let path = path.to_path_buf();
         move |source| InstallError::Io { path, source }
     };
-    std::fs::create_dir_all(lib).map_err(io(lib))?;
-    let mut written = Vec::new();
-    for &member in package.files {
+    for &(member, to) in package.files {
         let mut entry = archive
             .by_name(member)
             .map_err(|e| archive_error(format!("`{member}`: {e}")))?;
@@ -152,13 +169,13 @@ fn unpack(
         entry
             .read_to_end(&mut bytes)
             .map_err(|e| archive_error(format!("`{member}`: {e}")))?;
-        let name = Path::new(member).file_name().expect("members are files");
-        let path = lib.join(name);
+        let path = folder.join(to);
+        let parent = path.parent().unwrap_or(folder);
+        std::fs::create_dir_all(parent).map_err(io(parent))?;
         std::fs::write(&path, &bytes).map_err(io(&path))?;
         executable(&path).map_err(io(&path))?;
-        written.push(name.to_os_string());
     }
-    Ok(written)
+    Ok(())
 }
 
 #[cfg(unix)]
@@ -209,7 +226,10 @@ mod tests {
             name: "test package",
             url: "",
             sha256: digest,
-            files: &["a/lib/libx.so.1", "a/lib/liby.so"],
+            files: &[
+                ("a/lib/libx.so.1", "lib/libx.so.1"),
+                ("a/lib/liby.so", "bin/y"),
+            ],
             default_dir: PathBuf::new,
         };
         let dir = tempfile::tempdir().unwrap();
@@ -220,7 +240,7 @@ mod tests {
         let written = install(&package, &bytes, &dest).unwrap();
         assert_eq!(
             written,
-            vec![dest.join("lib/libx.so.1"), dest.join("lib/liby.so")]
+            vec![dest.join("lib/libx.so.1"), dest.join("bin/y")]
         );
         assert_eq!(std::fs::read(dest.join("lib/libx.so.1")).unwrap(), b"x one");
         assert!(!dest.join("lib/stale.so").exists());
@@ -240,7 +260,10 @@ mod tests {
             name: "test package",
             url: "",
             sha256: digest,
-            files: &["a/lib/libx.so.1", "a/lib/missing.so"],
+            files: &[
+                ("a/lib/libx.so.1", "lib/libx.so.1"),
+                ("a/lib/missing.so", "lib/missing.so"),
+            ],
             default_dir: PathBuf::new,
         };
         let dir = tempfile::tempdir().unwrap();

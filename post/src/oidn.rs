@@ -73,12 +73,18 @@ pub enum OidnError {
 /// The folder `tessera install oidn` installs into: `$XDG_DATA_HOME/tessera/oidn-2.5.1`,
 /// else `~/.local/share/tessera/oidn-2.5.1` (the libraries in its `lib/`).
 pub fn install_dir() -> PathBuf {
-    let data = std::env::var_os("XDG_DATA_HOME")
+    data_dir().join(format!("oidn-{OIDN_VERSION}"))
+}
+
+/// Where `tessera install` puts what it installs: `$XDG_DATA_HOME/tessera`, else
+/// `~/.local/share/tessera`.
+pub(crate) fn data_dir() -> PathBuf {
+    std::env::var_os("XDG_DATA_HOME")
         .filter(|d| !d.is_empty())
         .map(PathBuf::from)
         .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local/share")))
-        .unwrap_or_else(|| PathBuf::from("."));
-    data.join("tessera").join(format!("oidn-{OIDN_VERSION}"))
+        .unwrap_or_else(|| PathBuf::from("."))
+        .join("tessera")
 }
 
 // OIDN's C enums, as `oidn.h` numbers them.

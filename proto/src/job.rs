@@ -265,6 +265,10 @@ pub struct JobSpec {
     /// (default: off; on in the `preview` and `final` presets).
     #[serde(default)]
     pub denoise: bool,
+    /// When every frame is finished, encode them (their PNG previews) into an H.264 MP4
+    /// at `fps`, on a worker with FFmpeg (`GET /jobs/{id}/video`; default: off).
+    #[serde(default)]
+    pub video: bool,
 }
 
 impl JobSpec {
@@ -296,6 +300,7 @@ impl JobSpec {
             max_attempts: default_max_attempts(),
             layers: default_layers(),
             denoise: false,
+            video: false,
         }
     }
 }
@@ -413,6 +418,9 @@ pub struct JobStatus {
     /// itself once such a worker comes; absent while nothing waits.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub waiting: Option<String>,
+    /// Its MP4 is made (`GET /jobs/{id}/video`).
+    #[serde(default)]
+    pub video: bool,
 }
 
 /// Where a time-budget job's plan stands. The server plans again whenever a frame is

@@ -15,7 +15,7 @@ use crate::job::CameraSpec;
 use crate::log::LogLine;
 
 /// `POST /workers`: a worker introduces itself.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct WorkerRegistration {
@@ -43,6 +43,10 @@ pub struct WorkerRegistration {
     /// a worker is given denoise tasks.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub denoiser: Option<String>,
+    /// The video encoder it has (FFmpeg with libx264), if any: only such a worker is given
+    /// encode tasks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encoder: Option<String>,
 }
 
 /// The answer to a registration: the worker's id and the timing it must keep.
@@ -102,6 +106,9 @@ pub struct WorkerInfo {
     /// Its denoiser ([`WorkerRegistration::denoiser`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub denoiser: Option<String>,
+    /// Its video encoder ([`WorkerRegistration::encoder`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encoder: Option<String>,
     /// Camera samples per second over its last tasks (none done yet: absent).
     #[serde(default)]
     pub samples_per_second: Option<f64>,
@@ -195,17 +202,23 @@ pub enum TaskKind {
     /// whole frame as its tile); upload the denoised RGB as the beauty of an EXR of the
     /// whole frame, with 0 samples and 0 rays.
     Denoise,
+    /// Encode the job's finished frames (their PNG previews, `GET
+    /// /workers/{id}/tasks/{task}/frame?frame=F&file=png` for each frame of the lease's
+    /// `sequence`) into an H.264 MP4 at the job's fps; upload the MP4, with 0 samples and
+    /// 0 rays.
+    Encode,
 }
 
 impl TaskKind {
     /// Every kind.
-    pub const ALL: [TaskKind; 2] = [TaskKind::Render, TaskKind::Denoise];
+    pub const ALL: [TaskKind; 3] = [TaskKind::Render, TaskKind::Denoise, TaskKind::Encode];
 
     /// Its name on the wire (and in the server's database).
     pub fn as_str(self) -> &'static str {
         match self {
             TaskKind::Render => "render",
             TaskKind::Denoise => "denoise",
+            TaskKind::Encode => "encode",
         }
     }
 
@@ -260,6 +273,9 @@ pub struct Lease {
     pub tile: Rect,
     /// The samples to render.
     pub samples: SampleSpan,
+    /// For an encode lease, the job's frames, in the video's order.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequence: Option<crate::job::FrameRange>,
     /// The lease ends at this time unless a heartbeat extends it.
     pub deadline_ms: i64,
 }

@@ -134,7 +134,7 @@ function jobCard(job) {
     const failures = el("ul", "failures");
     failures.hidden = true;
     const panel = el("details", "frames-panel");
-    panel.append(el("summary", null, "Frames"), el("div", "frames"));
+    panel.append(el("summary", null, "Frames"), flipbook(job.id), el("div", "frames"));
     // Small jobs show their frames at once; a big one's grid is made when opened.
     panel.open = job.frames_total <= 100;
     panel.addEventListener("toggle", () => {
@@ -171,6 +171,9 @@ function jobCard(job) {
   stuck.hidden = !why;
   stuck.textContent = why;
   showFailures(card, job);
+  const video = card.querySelector(".flipbook .video");
+  video.hidden = !job.video;
+  if (job.video) video.href = withToken(`${API}/jobs/${job.id}/video`);
   notifyIfEnded(card, previous, job);
   document.getElementById("no-jobs").hidden = true;
   return card;
@@ -283,6 +286,81 @@ async function buildGrid(id) {
     frameCell(id, f);
   }
   strip.replaceChildren(fragment);
+  const scrub = cards.get(id).querySelector(".flipbook input");
+  scrub.max = Math.max(0, frames.length - 1);
+  showFlip(id);
+}
+
+// ---- flipbook: the job's previews as an animation, at its fps ----
+
+// The player above a job's frame grid: a picture, play/pause, a scrubber over the frames,
+// what the shown frame is, and the job's MP4 once it is encoded.
+function flipbook(jobId) {
+  const book = el("div", "flipbook");
+  const screen = el("div", "screen");
+  const img = el("img");
+  img.alt = "";
+  screen.append(img, el("p", "pending"));
+  const play = el("button", null, "Play");
+  play.dataset.flip = "play";
+  const scrub = el("input");
+  scrub.type = "range";
+  scrub.min = 0;
+  scrub.max = 0;
+  scrub.value = 0;
+  scrub.addEventListener("input", () => showFlip(jobId));
+  play.addEventListener("click", () => togglePlay(jobId));
+  const video = el("a", "video", "Download MP4");
+  video.hidden = true;
+  video.download = `job-${jobId}.mp4`;
+  book.append(screen, play, scrub, el("span", "flip-frame"), video);
+  return book;
+}
+
+const players = new Map();  // job id -> interval of a playing flipbook
+
+function togglePlay(jobId) {
+  const book = cards.get(jobId)?.querySelector(".flipbook");
+  if (!book) return;
+  const button = book.querySelector("button");
+  if (players.has(jobId)) {
+    clearInterval(players.get(jobId));
+    players.delete(jobId);
+    button.textContent = "Play";
+    return;
+  }
+  const fps = jobs.get(jobId)?.spec.fps || 24;
+  const scrub = book.querySelector("input");
+  players.set(jobId, setInterval(() => {
+    scrub.value = Number(scrub.value) >= Number(scrub.max) ? 0 : Number(scrub.value) + 1;
+    showFlip(jobId);
+  }, 1000 / Math.min(fps, 60)));
+  button.textContent = "Pause";
+}
+
+// Shows the scrubber's frame: its preview once it has one, else what it is waiting for.
+function showFlip(jobId) {
+  const book = cards.get(jobId)?.querySelector(".flipbook");
+  const cells = frameCells.get(jobId);
+  if (!book || !cells) return;
+  const figures = [...cells.values()];
+  const fig = figures[Number(book.querySelector("input").value)];
+  if (!fig) return;
+  const thumb = fig.querySelector("img");
+  const img = book.querySelector(".screen img");
+  const pending = book.querySelector(".pending");
+  const caption = `frame ${pad4(fig.dataset.frame)} · ${fig.dataset.state}`;
+  book.querySelector(".flip-frame").textContent = caption;
+  book.dataset.frame = fig.dataset.frame;
+  if (thumb) {
+    if (img.getAttribute("src") !== thumb.getAttribute("src")) img.src = thumb.getAttribute("src");
+    img.hidden = false;
+    pending.hidden = true;
+  } else {
+    img.hidden = true;
+    pending.hidden = false;
+    pending.textContent = `frame ${pad4(fig.dataset.frame)}: not rendered yet (${fig.dataset.state})`;
+  }
 }
 
 function frameCell(jobId, frame) {
@@ -305,6 +383,8 @@ function frameCell(jobId, frame) {
       `${API}/jobs/${jobId}/frames/${frame.frame}/png?v=${frame.tasks_done}-${frame.state}`);
     if (img.getAttribute("src") !== src) img.src = src;
   }
+  const book = cards.get(jobId)?.querySelector(".flipbook");
+  if (book && book.dataset.frame === String(frame.frame)) showFlip(jobId);
 }
 
 // ---- workers ----
@@ -332,8 +412,10 @@ function workerRow(w) {
   const cells = row.children;
   cells[0].textContent = w.name;
   cells[1].textContent = w.threads;
-  cells[2].textContent = w.denoiser ? `${w.version} · denoises` : w.version;
-  cells[2].title = w.denoiser || "";
+  // The steps after rendering it takes, after its version.
+  const steps = [w.denoiser && "denoises", w.encoder && "encodes"].filter(Boolean);
+  cells[2].textContent = [w.version, ...steps].join(" · ");
+  cells[2].title = [w.denoiser, w.encoder].filter(Boolean).join("; ");
   cells[3].textContent = w.current_task
     ? `job ${w.current_job} · frame ${w.current_frame} · task ${w.current_task.task_id}`
     : "idle";

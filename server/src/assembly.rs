@@ -40,6 +40,24 @@ pub fn check_checksum(bytes: &[u8], meta: &ResultMetadata) -> Result<()> {
     Ok(())
 }
 
+/// Checks the upload of a step after rendering (a denoise or encode task, which renders
+/// no samples): its checksum, and that it says 0 samples.
+pub fn check_step_upload(bytes: &[u8], meta: &ResultMetadata, task: &TaskRow) -> Result<()> {
+    check_checksum(bytes, meta)?;
+    if meta.samples != 0 {
+        return Err(Error::Invalid {
+            field: ResultMetadata::SAMPLES.into(),
+            message: format!(
+                "task {} is a {} step: it renders no samples, the upload says {}",
+                task.id,
+                task.kind.as_str(),
+                meta.samples
+            ),
+        });
+    }
+    Ok(())
+}
+
 /// Checks an uploaded tile against its task and returns its pixels.
 pub fn check_tile(
     bytes: &[u8],

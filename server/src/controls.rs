@@ -210,6 +210,11 @@ pub fn rerender(conn: &mut Connection, job: u64, frames: &[i32], now: i64) -> Re
         }
         frames::reset(&tx, job, frame, renders)?;
     }
+    // The video comes again once the frames are finished again.
+    if let Some(encode) = tasks::encode_of_job(&tx, job)? {
+        rerendered.push(encode.id);
+        tasks::delete(&tx, encode.id)?;
+    }
     let list: Vec<String> = frames.iter().map(i32::to_string).collect();
     log(
         &tx,

@@ -1,6 +1,6 @@
 //! A frame's denoise step. A job that denoises gets one denoise task per frame when the
 //! frame is assembled; a worker with a denoiser leases it, reads the frame's EXR
-//! ([`frame_for_worker`]), and uploads the denoised RGB as the beauty of an EXR of the
+//! (`GET /workers/{id}/tasks/{task}/frame`), and uploads the denoised RGB as the beauty of an EXR of the
 //! whole frame. [`receive`] checks that upload and writes it into the frame's EXR as its
 //! `denoised` layer, beside the noisy one, and redraws the PNG preview from it: band by
 //! band, like assembly, so the server never holds a whole frame.
@@ -16,8 +16,8 @@ use tracer::output::{
 
 use crate::app::{now_ms, App};
 use crate::assembly;
+use crate::db::frames;
 use crate::db::tasks::{self, NewTask, TaskRow};
-use crate::db::{frames, jobs};
 use crate::error::{Error, Result};
 use crate::intake::Received;
 use crate::scheduler::{self, Accepted};
@@ -40,23 +40,8 @@ pub fn max_upload_bytes(spec: &JobSpec) -> usize {
     pixels * 16 + spec.height as usize * 8 + (64 << 10)
 }
 
-/// The frame EXR a worker's denoise lease reads: `token` must be `worker`'s current lease
-/// on a denoise task.
-pub fn frame_for_worker(app: &App, worker: u64, token: TaskToken) -> Result<PathBuf> {
-    let (task, spec) = app.db.with(|c| -> Result<_> {
-        let task = scheduler::check_token(c, worker, token)?;
-        Ok((task.clone(), jobs::spec(c, task.job_id)?))
-    })?;
-    if task.kind != proto::TaskKind::Denoise {
-        return Err(Error::Invalid {
-            field: "task".into(),
-            message: format!("task {} renders a tile: it has no frame to read", task.id),
-        });
-    }
-    Ok(frame_exr(app, &task, &spec))
-}
-
-fn frame_exr(app: &App, task: &TaskRow, spec: &JobSpec) -> PathBuf {
+/// The assembled EXR of the frame a denoise `task` denoises.
+pub fn frame_exr(app: &App, task: &TaskRow, spec: &JobSpec) -> PathBuf {
     let last = spec.frames.map_or(task.frame, |f| f.last());
     app.store.frame(task.job_id, task.frame, last, "exr")
 }
@@ -73,16 +58,7 @@ pub fn receive(
     task: &TaskRow,
     spec: &JobSpec,
 ) -> Result<Received> {
-    assembly::check_checksum(bytes, meta)?;
-    if meta.samples != 0 {
-        return Err(Error::Invalid {
-            field: ResultMetadata::SAMPLES.into(),
-            message: format!(
-                "task {} denoises a frame: it renders no samples, the upload says {}",
-                task.id, meta.samples
-            ),
-        });
-    }
+    assembly::check_step_upload(bytes, meta, task)?;
     let upload = app.store.tile(task.job_id, token.task_id, token.attempt);
     write_atomic(&upload, bytes)?;
     let written = {

@@ -58,8 +58,14 @@ pub fn receive(
         });
     }
     let spec = app.db.with(|c| jobs::spec(c, task.job_id))?;
-    if task.kind == proto::TaskKind::Denoise {
-        return crate::denoising::receive(app, worker, token, meta, bytes, &task, &spec);
+    match task.kind {
+        proto::TaskKind::Render => {}
+        proto::TaskKind::Denoise => {
+            return crate::denoising::receive(app, worker, token, meta, bytes, &task, &spec)
+        }
+        proto::TaskKind::Encode => {
+            return crate::encoding::receive(app, worker, token, meta, bytes, &task)
+        }
     }
     let layers = match assembly::check_tile(bytes, meta, &task, (spec.width, spec.height)) {
         Ok(layers) => layers,
@@ -263,8 +269,8 @@ fn assemble(app: &App, job: u64, frame: i32) -> Result<()> {
     let (now, timing) = (now_ms(), app.timing());
     app.db
         .with(|c| mark_assembled(c, job, frame, now, &facts.reached, timing))?;
-    if spec.denoise {
-        // Its denoise task is waiting to be leased.
+    if spec.denoise || spec.video {
+        // Its denoise task, or the job's encode task, is waiting to be leased.
         app.work.notify_waiters();
     }
     app.metrics
@@ -297,7 +303,9 @@ pub fn mark_assembled(
     let tx = conn.transaction()?;
     frames::set_assembled(&tx, job, frame, now, reached)?;
     log(&tx, now, Some(job), "frame_assembled", &frame.to_string())?;
-    crate::denoising::queue(&tx, job, frame, &jobs::spec(&tx, job)?)?;
+    let spec = jobs::spec(&tx, job)?;
+    crate::denoising::queue(&tx, job, frame, &spec)?;
+    crate::encoding::queue_if_complete(&tx, job, &spec)?;
     budget::replan_with(&tx, job, now, timing)?;
     jobs::update_finished(&tx, job, now)?;
     tx.commit()?;
@@ -413,6 +421,7 @@ mod tests {
                     platform: None,
                     tags: &[],
                     denoiser: None,
+                    encoder: None,
                 },
                 credential: None,
             };

@@ -16,6 +16,7 @@
 //! | [`scene`] | scene uploads checked with the tracer's loader and summarised |
 //! | [`intake`], [`assembly`] | tile uploads checked and accepted; frames assembled |
 //! | [`denoising`] | a frame's denoise task: queued once assembled, its upload written in as the `denoised` layer |
+//! | [`encoding`] | a job's encode task: queued once every frame is finished, its MP4 kept beside the frames |
 //! | [`status`] | a job's status: state, progress, speed, ETA |
 //! | [`events`], [`metrics`] | the event hub; Prometheus metrics |
 //! | [`verify`] | bit-for-bit checks of tiles on a second worker; quarantine |
@@ -38,6 +39,7 @@ pub mod controls;
 pub mod dashboard;
 pub mod db;
 pub mod denoising;
+pub mod encoding;
 pub mod error;
 pub mod events;
 #[cfg(test)]

@@ -108,6 +108,9 @@ pub fn lease_keeping(
             start: task.samples.start,
             end: task.samples.end,
         },
+        sequence: (task.kind == TaskKind::Encode)
+            .then_some(spec.frames)
+            .flatten(),
         deadline_ms: deadline,
     }))
 }
@@ -230,9 +233,13 @@ pub fn accept(
     tasks::advance(&tx, &task, TaskEvent::Complete)?;
     tasks::set_done(&tx, task.id, now, rays, render_ms)?;
     workers::count_done(&tx, worker)?;
-    if task.kind == TaskKind::Denoise {
-        // Its frame's denoised layer is written: the frame is finished.
-        crate::denoising::mark_denoised(&tx, &task, now)?;
+    if task.kind != TaskKind::Render {
+        if task.kind == TaskKind::Denoise {
+            // Its frame's denoised layer is written: the frame is finished, and with it
+            // perhaps the job's last.
+            crate::denoising::mark_denoised(&tx, &task, now)?;
+            crate::encoding::queue_if_complete(&tx, task.job_id, &jobs::spec(&tx, task.job_id)?)?;
+        }
         jobs::update_finished(&tx, task.job_id, now)?;
         tx.commit()?;
         return Ok(Accepted::New {

@@ -5,11 +5,12 @@
 
 use proto::log::MAX_EVENTS_PER_PAGE;
 use proto::{
-    FailureList, JobEventList, JobState, JobStatus, Rect, SampleSpan, TaskInfo, TaskList, TaskLog,
+    FailureList, JobEventList, JobState, JobStatus, Rect, SampleSpan, TaskInfo, TaskKind, TaskList,
+    TaskLog,
 };
 use rusqlite::Connection;
 
-use crate::db::workers::Availability;
+use crate::db::workers::{Availability, Step};
 use crate::db::{events, failures, frames, jobs, logs, tasks, workers};
 use crate::error::{Error, Result};
 use crate::limits::{MAX_FAILURE_GROUPS, MAX_TASKS_PER_PAGE};
@@ -106,18 +107,11 @@ pub fn job_status(conn: &Connection, job: u64, now: i64, live_since: i64) -> Res
     } else {
         None
     };
-    let waiting = if control == JobControl::Active {
-        let frames = tasks::queued_denoise_count(conn, job)?;
-        (frames > 0 && !workers::denoiser_live_for_job(conn, job, live_since)?).then(|| {
-            format!(
-                "{frames} frame(s) wait to be denoised, and no live worker that may take this \
-                 job has Open Image Denoise: run `tessera install oidn` on a worker's machine \
-                 and restart its worker (it takes denoise tasks once it finds the library)"
-            )
-        })
-    } else {
-        None
+    let waiting = match control {
+        JobControl::Active => waiting_reason(conn, job, live_since)?,
+        JobControl::Paused | JobControl::Cancelled => None,
     };
+    let video = tasks::encode_of_job(conn, job)?.is_some_and(|t| t.state == TaskState::Done);
     Ok(JobStatus {
         id: job,
         name,
@@ -136,7 +130,30 @@ pub fn job_status(conn: &Connection, job: u64, now: i64, live_since: i64) -> Res
         attempts_failed,
         stuck,
         waiting,
+        video,
     })
+}
+
+/// What `job` waits for that no live worker offers: a denoiser for its queued frames, an
+/// encoder for its video.
+fn waiting_reason(conn: &Connection, job: u64, live_since: i64) -> Result<Option<String>> {
+    let frames = tasks::queued_count(conn, job, TaskKind::Denoise)?;
+    if frames > 0 && !workers::step_live_for_job(conn, job, Step::Denoise, live_since)? {
+        return Ok(Some(format!(
+            "{frames} frame(s) wait to be denoised, and no live worker that may take this job \
+             has Open Image Denoise: run `tessera install oidn` on a worker's machine and \
+             restart its worker (it takes denoise tasks once it finds the library)"
+        )));
+    }
+    let video = tasks::queued_count(conn, job, TaskKind::Encode)?;
+    if video > 0 && !workers::step_live_for_job(conn, job, Step::Encode, live_since)? {
+        return Ok(Some(
+            "its video waits to be encoded, and no live worker that may take this job has \
+             FFmpeg: run `tessera install ffmpeg` on a worker's machine and restart its worker"
+                .to_string(),
+        ));
+    }
+    Ok(None)
 }
 
 /// Why no live worker may take `job`'s tasks (it requires `tags`), with its most frequent

@@ -175,6 +175,7 @@ impl Rogue {
             platform: None,
             tags: vec![],
             denoiser: None,
+            encoder: None,
         };
         let mut rogue = Rogue {
             port: farm.port,

@@ -369,13 +369,20 @@ impl Api {
         }
     }
 
-    /// `GET /workers/{id}/tasks/{task}/frame`: the assembled frame a denoise lease
-    /// denoises, as EXR bytes; `None` when the lease is gone.
-    pub async fn frame(&self, worker: u64, token: TaskToken) -> Result<Option<Vec<u8>>, ApiError> {
+    /// `GET /workers/{id}/tasks/{task}/frame`: what a step after rendering reads, the
+    /// assembled EXR of a denoise lease's frame, or the PNG of `frame` for an encode
+    /// lease; `None` when the lease is gone.
+    pub async fn frame(
+        &self,
+        worker: u64,
+        token: TaskToken,
+        frame: Option<i32>,
+    ) -> Result<Option<Vec<u8>>, ApiError> {
+        let frame = frame.map_or(String::new(), |f| format!("&frame={f}"));
         let req = self.auth(
             self.http
                 .get(format!(
-                    "{}/workers/{worker}/tasks/{}/frame?attempt={}",
+                    "{}/workers/{worker}/tasks/{}/frame?attempt={}{frame}",
                     self.base, token.task_id, token.attempt
                 ))
                 .timeout(TRANSFER_TIMEOUT),

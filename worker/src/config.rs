@@ -37,6 +37,11 @@ pub struct WorkerConfig {
     /// Where Open Image Denoise is installed (`None`: where `tessera install oidn` puts
     /// it, then the system's library path).
     pub oidn: Option<PathBuf>,
+    /// Whether to take encode tasks when FFmpeg is found.
+    pub encode: bool,
+    /// The FFmpeg program, or the folder it is installed in (`None`: where `tessera
+    /// install ffmpeg` puts it, then `ffmpeg` on the PATH).
+    pub ffmpeg: Option<PathBuf>,
     /// A fault to inject, for testing how the farm copes with a bad worker; `None` for
     /// every real worker.
     pub fault: Option<Fault>,
@@ -200,6 +205,8 @@ mod tests {
             upload_compression: UploadCompression::Auto,
             denoise: true,
             oidn: None,
+            encode: true,
+            ffmpeg: None,
             fault: None,
         }
     }

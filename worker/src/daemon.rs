@@ -48,7 +48,7 @@ use crate::api::{
 use crate::backoff::{jitter, seconds, Backoff, IDLE_PAUSE};
 use crate::cache::{is_digest, sha256_hex, Cached, SceneCache};
 use crate::config::{Fault, WorkerConfig};
-use crate::denoise::{encode_denoised, Denoiser};
+use crate::denoise::{encode_denoised, step_upload, Denoiser, Encoder};
 use crate::identity;
 use crate::render::{encode_tile, frame_key, frame_options, render_lease};
 use crate::stop::Stop;
@@ -116,6 +116,7 @@ pub async fn run(
         config.upload_compression
     );
     let denoiser = config.denoise.then(|| load_denoiser(&config)).flatten();
+    let encoder = config.encode.then(|| find_encoder(&config)).flatten();
     let mut daemon = Daemon {
         api,
         fault: config.fault,
@@ -128,8 +129,10 @@ pub async fn run(
             platform: Some(crate::config::platform()),
             tags: config.tags.clone(),
             denoiser: denoiser.as_ref().map(|_| post::DENOISER_NAME.to_string()),
+            encoder: encoder.as_ref().map(|_| ENCODER_NAME.to_string()),
         },
         denoiser,
+        encoder,
         identity_dir: config.cache_dir.clone(),
         registered: None,
         stop,
@@ -169,10 +172,36 @@ fn load_denoiser(config: &WorkerConfig) -> Option<Denoiser> {
     }
 }
 
+/// What the worker registers as its encoder.
+const ENCODER_NAME: &str = "FFmpeg with libx264";
+
+/// FFmpeg where the config says to look, for encode tasks; `None` (said in the log) when
+/// it is not there.
+fn find_encoder(config: &WorkerConfig) -> Option<Encoder> {
+    match post::Ffmpeg::find(config.ffmpeg.as_deref()) {
+        Ok(ffmpeg) => {
+            tracing::info!(
+                "encode tasks taken: FFmpeg at {}",
+                ffmpeg.program().display()
+            );
+            Some(Encoder {
+                ffmpeg,
+                threads: config.threads.min(u32::MAX as usize) as u32,
+            })
+        }
+        Err(e) => {
+            tracing::info!("no encode tasks: {e}");
+            None
+        }
+    }
+}
+
 struct Daemon {
     api: Api,
     /// Open Image Denoise, when this worker takes denoise tasks.
     denoiser: Option<Denoiser>,
+    /// FFmpeg, when this worker takes encode tasks.
+    encoder: Option<Encoder>,
     /// Where the identity file is kept ([`identity`]).
     identity_dir: std::path::PathBuf,
     fault: Option<Fault>,
@@ -219,6 +248,8 @@ enum Product {
     Tile(TileBuffer),
     /// A frame's denoised RGB.
     Denoised(Vec<glam::Vec3>),
+    /// The job's MP4.
+    Video(Vec<u8>),
 }
 
 /// Why a task could not be rendered.
@@ -577,7 +608,66 @@ impl Daemon {
                 let (denoised, ms) = self.denoise(worker, lease).await?;
                 Ok((Product::Denoised(denoised), ms))
             }
+            TaskKind::Encode => {
+                let (mp4, ms) = self.encode(worker, lease).await?;
+                Ok((Product::Video(mp4), ms))
+            }
         }
+    }
+
+    /// What a step after rendering reads from the server (`frame` for an encode lease).
+    async fn step_input(
+        &self,
+        worker: u64,
+        token: TaskToken,
+        frame: Option<i32>,
+    ) -> Result<Vec<u8>, TaskError> {
+        match self
+            .api
+            .retry("frame download", &self.stop, InFlight::Drop, || {
+                self.api.frame(worker, token, frame)
+            })
+            .await
+        {
+            Ok(Some(Some(bytes))) => Ok(bytes),
+            Ok(Some(None)) => Err(TaskError::Failed(
+                "the lease was gone when the frame was asked for".into(),
+            )),
+            Ok(None) => Err(TaskError::Stopped),
+            Err(e @ ApiError::Unexpected { .. }) => Err(TaskError::Failed(e.to_string())),
+            Err(e) => Err(TaskError::Api(e)),
+        }
+    }
+
+    /// The frames of an encode lease, fetched, and their MP4.
+    async fn encode(&mut self, worker: u64, lease: &Lease) -> Result<(Vec<u8>, u64), TaskError> {
+        let Some(encoder) = self.encoder.clone() else {
+            return Err(TaskError::Failed(
+                "this worker registered no encoder, yet was given an encode task".into(),
+            ));
+        };
+        let Some(sequence) = lease.sequence else {
+            return Err(TaskError::Failed("the encode lease names no frames".into()));
+        };
+        let dir = tempfile::tempdir()
+            .map_err(|e| TaskError::Failed(format!("a temporary folder: {e}")))?;
+        let mut files = Vec::new();
+        for frame in sequence.frames() {
+            let png = self.step_input(worker, lease.token, Some(frame)).await?;
+            let path = dir.path().join(sequence.file_name(frame, "png"));
+            std::fs::write(&path, png)
+                .map_err(|e| TaskError::Failed(format!("{}: {e}", path.display())))?;
+            files.push(path);
+        }
+        let fps = lease.fps;
+        tokio::task::spawn_blocking(move || {
+            let encoded = encoder.encode(&files, fps);
+            drop(dir);
+            encoded
+        })
+        .await
+        .map_err(|e| TaskError::Failed(format!("encoding panicked: {e}")))?
+        .map_err(|e| TaskError::Failed(format!("encoding the video: {e}")))
     }
 
     /// The frame of a denoise lease, fetched and denoised.
@@ -591,24 +681,7 @@ impl Daemon {
                 "this worker registered no denoiser, yet was given a denoise task".into(),
             ));
         };
-        let token = lease.token;
-        let exr = match self
-            .api
-            .retry("frame download", &self.stop, InFlight::Drop, || {
-                self.api.frame(worker, token)
-            })
-            .await
-        {
-            Ok(Some(Some(bytes))) => bytes,
-            Ok(Some(None)) => {
-                return Err(TaskError::Failed(
-                    "the lease was gone when the frame was asked for".into(),
-                ))
-            }
-            Ok(None) => return Err(TaskError::Stopped),
-            Err(e @ ApiError::Unexpected { .. }) => return Err(TaskError::Failed(e.to_string())),
-            Err(e) => return Err(TaskError::Api(e)),
-        };
+        let exr = self.step_input(worker, lease.token, None).await?;
         let (pool, job) = (self.pool.clone(), lease.clone());
         tokio::task::spawn_blocking(move || pool.install(|| denoiser.denoise(&job, &exr)))
             .await
@@ -821,6 +894,7 @@ impl Courier {
                 encode_tile(&job, &tile, render_ms, compression).map_err(|e| e.to_string())
             }
             Product::Denoised(denoised) => encode_denoised(&job, &denoised, render_ms, compression),
+            Product::Video(mp4) => Ok(step_upload(&job, mp4, render_ms)),
         })
         .await
         .unwrap_or_else(|e| Err(format!("panicked: {e}")));
@@ -841,6 +915,14 @@ impl Courier {
             })
             .await;
         let (fate, result) = match answer {
+            Ok(Some(UploadAnswer::Stored(_))) if lease.kind == TaskKind::Encode => {
+                tracing::info!(
+                    "video uploaded: job {} encoded in {} ms",
+                    lease.job_id,
+                    meta.render_ms
+                );
+                (Fate::Done, Ok(()))
+            }
             Ok(Some(UploadAnswer::Stored(ack))) if lease.kind == TaskKind::Denoise => {
                 tracing::info!(
                     "denoised frame uploaded: job {} frame {} denoised in {} ms{}",

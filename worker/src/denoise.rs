@@ -1,5 +1,7 @@
-//! A denoise lease: the assembled frame is fetched, denoised with Open Image Denoise on
-//! the worker's threads, and uploaded as the beauty of an EXR of the whole frame.
+//! The steps after rendering. A denoise lease: the assembled frame is fetched, denoised
+//! with Open Image Denoise on the worker's threads, and uploaded as the beauty of an EXR
+//! of the whole frame. An encode lease: the frames' PNGs are fetched and FFmpeg makes the
+//! job's MP4 of them.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -72,12 +74,46 @@ pub fn encode_denoised(
         compression,
     )
     .map_err(|e| e.to_string())?;
+    Ok(step_upload(lease, exr, denoise_ms))
+}
+
+/// The worker's video encoder.
+#[derive(Clone, Debug)]
+pub struct Encoder {
+    /// FFmpeg with libx264.
+    pub ffmpeg: post::Ffmpeg,
+    /// Threads it may use.
+    pub threads: u32,
+}
+
+impl Encoder {
+    /// Encodes `frames` (PNG files, in order) at `fps`: the MP4's bytes and the
+    /// milliseconds it took. Blocking: call it off the async runtime.
+    pub fn encode(
+        &self,
+        frames: &[std::path::PathBuf],
+        fps: f64,
+    ) -> Result<(Vec<u8>, u64), String> {
+        let started = Instant::now();
+        let dir = tempfile::tempdir().map_err(|e| format!("a temporary folder: {e}"))?;
+        let out = dir.path().join("video.mp4");
+        self.ffmpeg
+            .encode(frames, fps, &out, self.threads)
+            .map_err(|e| e.to_string())?;
+        let bytes = std::fs::read(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+        Ok((bytes, started.elapsed().as_millis() as u64))
+    }
+}
+
+/// The upload of a step after rendering: `bytes` (the denoised frame's EXR, or the MP4)
+/// with 0 samples and 0 rays, and the step's time.
+pub fn step_upload(lease: &Lease, bytes: Vec<u8>, step_ms: u64) -> RenderedTile {
     let meta = ResultMetadata {
         attempt: lease.token.attempt,
-        sha256: sha256_hex(&exr),
+        sha256: sha256_hex(&bytes),
         samples: 0,
         rays: 0,
-        render_ms: denoise_ms,
+        render_ms: step_ms,
     };
-    Ok(RenderedTile { exr, meta })
+    RenderedTile { exr: bytes, meta }
 }

@@ -182,6 +182,7 @@ mod tests {
                 height: 16,
             },
             samples: SampleSpan { start: 4, end: 12 },
+            sequence: None,
             deadline_ms: 1000,
         }
     }

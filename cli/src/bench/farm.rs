@@ -729,6 +729,7 @@ async fn load(
                 platform: None,
                 tags: vec![],
                 denoiser: None,
+                encoder: None,
             };
             let id = api.register(&reg).await?.worker_id;
             Ok::<_, ApiError>((api, id))

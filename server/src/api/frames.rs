@@ -1,4 +1,4 @@
-//! Frames of a job: their states, the assembled EXR and the PNG preview.
+//! Frames of a job: their states, the assembled EXR and the PNG preview; the job's video.
 
 use axum::extract::State;
 use axum::http::header;
@@ -83,4 +83,40 @@ pub async fn png(
     PathParams((id, frame)): PathParams<(Id, i32)>,
 ) -> Result<Response> {
     file(&app, id.0, frame, "png", "image/png").await
+}
+
+/// The job's H.264 MP4, once encoded (a job with `video`, after every frame finished).
+#[utoipa::path(
+    get,
+    path = "/jobs/{id}/video",
+    tag = "frames",
+    params(("id" = u64, Path, description = "job id")),
+    responses((status = 200, content_type = "video/mp4", body = Vec<u8>), (status = 404, body = proto::ErrorBody)),
+    security(("client_token" = []))
+)]
+pub async fn video(
+    State(app): State<AppState>,
+    PathParams(Id(id)): PathParams<Id>,
+) -> Result<Response> {
+    let encode = app
+        .db
+        .run(move |c| {
+            let spec = db::jobs::spec(c, id)?;
+            Ok::<_, Error>((spec.video, db::tasks::encode_of_job(c, id)?))
+        })
+        .await?;
+    let why = match encode {
+        (false, _) => Some("it did not ask for one (`video` in its spec, `--video`)".to_string()),
+        (true, None) => Some("its frames are not all finished yet".to_string()),
+        (true, Some(t)) if t.state != crate::state::TaskState::Done => Some(format!(
+            "it is being encoded (its task is {})",
+            t.state.as_str()
+        )),
+        (true, Some(_)) => None,
+    };
+    if let Some(why) = why {
+        return Err(Error::NotFound(format!("job {id} has no video: {why}")));
+    }
+    let bytes = tokio::fs::read(crate::encoding::video_path(&app, id)).await?;
+    Ok(([(header::CONTENT_TYPE, "video/mp4")], bytes).into_response())
 }

@@ -7,7 +7,7 @@
 //! | `scenes.rs` | `POST /scenes`, `GET /scenes/{digest}`, `GET /scenes/{digest}/info` |
 //! | `jobs.rs` | `POST/GET /jobs`, `GET/DELETE /jobs/{id}`, `POST /jobs/{id}/{cancel,pause,resume,retry,rerender,priority}` |
 //! | `tasks.rs` | `GET /jobs/{id}/tasks`, `GET /jobs/{id}/failures`, `GET /jobs/{id}/tasks/{task}/log`, `GET /jobs/{id}/log` |
-//! | `frames.rs` | `GET /jobs/{id}/frames`, `GET /jobs/{id}/frames/{frame}/{exr,png}` |
+//! | `frames.rs` | `GET /jobs/{id}/frames`, `GET /jobs/{id}/frames/{frame}/{exr,png}`, `GET /jobs/{id}/video` |
 //! | `workers.rs` | `POST/GET /workers`, `POST /workers/{id}/{lease,heartbeat,leave,clear}`, `POST /workers/{id}/tasks/{task}/{result,failure}`, `GET /workers/{id}/tasks/{task}/frame` |
 //! | `events.rs` | `GET /events` (server-sent events) |
 //! | `gc.rs` | `POST /gc` (retention) |
@@ -86,6 +86,7 @@ pub fn api(app: AppState) -> (Router<AppState>, utoipa::openapi::OpenApi) {
         .routes(routes!(frames::list))
         .routes(routes!(frames::exr))
         .routes(routes!(frames::png))
+        .routes(routes!(frames::video))
         .routes(routes!(workers::list))
         .routes(routes!(workers::clear))
         .routes(routes!(events::events))

@@ -9,14 +9,15 @@ use axum::response::{IntoResponse, Response};
 use axum::Json;
 use proto::{
     FailureAck, FailureReport, Heartbeat, HeartbeatAck, Lease, LeaseRequest, ResultAck,
-    ResultMetadata, TaskToken, WorkerLeft, WorkerList, WorkerRegistered, WorkerRegistration,
+    ResultMetadata, TaskKind, TaskToken, WorkerLeft, WorkerList, WorkerRegistered,
+    WorkerRegistration,
 };
 
 use super::error::{read_body, Id, JsonBody, PathParams, QueryParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
 use crate::limits::{GONE_WORKER_LISTED_MS, MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
-use crate::{db, identity, intake, scheduler, verify};
+use crate::{db, denoising, encoding, identity, intake, scheduler, verify};
 
 /// Registers a worker with the join token (the server's worker token); the answer carries
 /// its id, its own credential for every later call, and the timing it must keep. A worker
@@ -42,10 +43,12 @@ pub async fn register(
 ) -> Result<(StatusCode, Json<WorkerRegistered>)> {
     let platform = reg.platform.iter().map(|p| ("platform", p));
     let denoiser = reg.denoiser.iter().map(|d| ("denoiser", d));
+    let encoder = reg.encoder.iter().map(|e| ("encoder", e));
     for (field, value) in [("name", &reg.name), ("version", &reg.version)]
         .into_iter()
         .chain(platform)
         .chain(denoiser)
+        .chain(encoder)
     {
         if value.is_empty() || value.len() > MAX_WORKER_TEXT_BYTES {
             return Err(Error::Invalid {
@@ -80,6 +83,7 @@ pub async fn register(
                     platform: reg.platform.as_deref(),
                     tags: &reg.tags,
                     denoiser: reg.denoiser.as_deref(),
+                    encoder: reg.encoder.as_deref(),
                 },
                 credential: reg.credential.as_deref(),
             };
@@ -334,9 +338,13 @@ pub async fn result(
 pub struct FrameQuery {
     /// The lease's attempt.
     attempt: u32,
+    /// For an encode lease, the frame whose PNG to read (one of its `sequence`).
+    #[serde(default)]
+    frame: Option<i32>,
 }
 
-/// The assembled EXR of the frame a denoise lease denoises (the lease must be current).
+/// What a step after rendering reads: for a denoise lease the assembled EXR of its frame,
+/// for an encode lease the PNG of `frame`. The lease must be current.
 #[utoipa::path(
     get,
     path = "/workers/{id}/tasks/{task}/frame",
@@ -349,7 +357,7 @@ pub struct FrameQuery {
     responses(
         (status = 200, content_type = "image/x-exr", body = Vec<u8>),
         (status = 409, description = "lease gone", body = proto::ErrorBody),
-        (status = 422, description = "the task renders a tile", body = proto::ErrorBody),
+        (status = 422, description = "the task renders a tile, or the frame is not the task's", body = proto::ErrorBody),
     ),
     security(("worker_credential" = []))
 )]
@@ -364,13 +372,44 @@ pub async fn frame(
         attempt: q.attempt,
     };
     let a = app.clone();
-    let path = tokio::task::spawn_blocking(move || {
-        crate::denoising::frame_for_worker(&a, worker.0, token)
+    let (path, content_type) = tokio::task::spawn_blocking(move || {
+        let (task, spec) = a.db.with(|c| -> Result<_> {
+            let task = scheduler::check_token(c, worker.0, token)?;
+            let spec = db::jobs::spec(c, task.job_id)?;
+            Ok((task, spec))
+        })?;
+        let wrong = |message: String| Error::Invalid {
+            field: "frame".into(),
+            message,
+        };
+        match (task.kind, q.frame) {
+            (TaskKind::Denoise, None) => {
+                Ok((denoising::frame_exr(&a, &task, &spec), "image/x-exr"))
+            }
+            (TaskKind::Denoise, Some(f)) if f == task.frame => {
+                Ok((denoising::frame_exr(&a, &task, &spec), "image/x-exr"))
+            }
+            (TaskKind::Denoise, Some(f)) => Err(wrong(format!(
+                "task {} denoises frame {}, not frame {f}",
+                task.id, task.frame
+            ))),
+            (TaskKind::Encode, Some(f)) => {
+                Ok((encoding::frame_png_for(&a, &task, &spec, f)?, "image/png"))
+            }
+            (TaskKind::Encode, None) => Err(wrong(format!(
+                "task {} encodes the job's frames: name one with ?frame=",
+                task.id
+            ))),
+            (TaskKind::Render, _) => Err(wrong(format!(
+                "task {} renders a tile: it has no frame to read",
+                task.id
+            ))),
+        }
     })
     .await
     .map_err(|e| Error::Internal(format!("finding the frame panicked: {e}")))??;
     let bytes = tokio::fs::read(&path).await?;
-    Ok(([(axum::http::header::CONTENT_TYPE, "image/x-exr")], bytes).into_response())
+    Ok(([(axum::http::header::CONTENT_TYPE, content_type)], bytes).into_response())
 }
 
 /// Reports that a lease could not be rendered: the task goes back to the queue (or fails

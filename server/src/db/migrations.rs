@@ -167,14 +167,16 @@ const MIGRATIONS: &[&str] = &[
     DROP INDEX tasks_queue;
     CREATE INDEX tasks_queue ON tasks (state, job_id, round, frame, pass, tile);
     "#,
-    // 15: denoising. A frame of a job that denoises gets a denoise task once assembled
-    // (not counted in its tasks_total: those are its render tasks); only a worker that
-    // registered a denoiser leases one.
+    // 15: denoising and video. A frame of a job that denoises gets a denoise task once
+    // assembled, a job that wants a video an encode task once every frame is finished
+    // (neither counted in a frame's tasks_total: those are its render tasks); only a
+    // worker that registered a denoiser, or an encoder, leases one.
     r#"
     ALTER TABLE tasks ADD COLUMN kind TEXT NOT NULL DEFAULT 'render'
-        CHECK (kind IN ('render', 'denoise'));
+        CHECK (kind IN ('render', 'denoise', 'encode'));
     ALTER TABLE frames ADD COLUMN denoised_ms INTEGER;
     ALTER TABLE workers ADD COLUMN denoiser TEXT;
+    ALTER TABLE workers ADD COLUMN encoder TEXT;
     "#,
 ];
 

@@ -154,6 +154,15 @@ impl NewTask {
         }
     }
 
+    /// The encode task of a job whose frames are all finished: the first frame as its
+    /// frame, the whole frame size, no samples.
+    pub fn encode(job: u64, first_frame: i32, size: (u32, u32)) -> NewTask {
+        NewTask {
+            kind: TaskKind::Encode,
+            ..NewTask::denoise(job, first_frame, size)
+        }
+    }
+
     /// The denoise task of an assembled frame of `size`: the whole frame, no samples,
     /// leased before the later frames' tiles (round 0), so that frames finish in order.
     pub fn denoise(job: u64, frame: i32, size: (u32, u32)) -> NewTask {
@@ -196,12 +205,21 @@ pub fn insert(tx: &Transaction, t: &NewTask) -> Result<()> {
     Ok(())
 }
 
-/// A task `t` that the worker `?N` can do: a render task, or a denoise task when it has a
-/// denoiser.
+/// A task `t` that the worker `?N` can do: a render task, a denoise task when it has a
+/// denoiser, an encode task when it has an encoder.
 fn can_take(worker: &str) -> String {
     format!(
-        "(t.kind = 'render' OR EXISTS (SELECT 1 FROM workers d
-                                       WHERE d.id = {worker} AND d.denoiser IS NOT NULL))"
+        "(t.kind = 'render' OR EXISTS (SELECT 1 FROM workers d WHERE d.id = {worker}
+           AND {}))",
+        has_step("d")
+    )
+}
+
+/// The worker `w` has what the task `t` needs beyond rendering.
+fn has_step(w: &str) -> String {
+    format!(
+        "((t.kind = 'denoise' AND {w}.denoiser IS NOT NULL)
+          OR (t.kind = 'encode' AND {w}.encoder IS NOT NULL))"
     )
 }
 
@@ -265,14 +283,15 @@ pub fn next_for(
                    SELECT 1 FROM workers w
                    WHERE w.id != ?2 AND w.last_seen_ms >= ?3 AND w.left_ms IS NULL
                      AND w.quarantined_ms IS NULL
-                     AND (t.kind = 'render' OR w.denoiser IS NOT NULL)
+                     AND (t.kind = 'render' OR {})
                      AND {tagged}
                      AND NOT EXISTS (SELECT 1 FROM task_failures f
                                      WHERE f.task_id = t.id AND f.worker_id = w.id)
                      AND NOT EXISTS (SELECT 1 FROM job_blocks b
                                      WHERE b.job_id = t.job_id AND b.worker_id = w.id))
              ORDER BY {order} LIMIT 1",
-                can_take("?2")
+                can_take("?2"),
+                has_step("w")
             ),
             params![job, worker, live_since],
             |r| r.get(0),
@@ -574,24 +593,32 @@ pub fn denoise_of_frame(conn: &Connection, job: u64, frame: i32) -> Result<Optio
         .optional()?)
 }
 
-/// The upload limit of a denoise task (its whole frame, see
-/// [`crate::denoising::max_upload_bytes`]); `None` for a render task or an unknown one.
+/// The upload limit of a denoise or encode task (its frame, or its video); `None` for a
+/// render task or an unknown one.
 pub fn upload_limit(conn: &Connection, task: u64) -> Result<Option<usize>> {
     let Some(row) = load(conn, task)? else {
         return Ok(None);
     };
-    if row.kind != TaskKind::Denoise {
-        return Ok(None);
-    }
     let spec = super::jobs::spec(conn, row.job_id)?;
-    Ok(Some(crate::denoising::max_upload_bytes(&spec)))
+    Ok(match row.kind {
+        TaskKind::Render => None,
+        TaskKind::Denoise => Some(crate::denoising::max_upload_bytes(&spec)),
+        TaskKind::Encode => Some(crate::encoding::max_upload_bytes(&spec)),
+    })
 }
 
-/// How many denoise tasks of `job` are queued.
-pub fn queued_denoise_count(conn: &Connection, job: u64) -> Result<u64> {
+/// The encode task of a job, if it has one.
+pub fn encode_of_job(conn: &Connection, job: u64) -> Result<Option<TaskRow>> {
+    Ok(select(conn, "t.job_id = ?1 AND t.kind = 'encode'", [job])?
+        .into_iter()
+        .next())
+}
+
+/// How many tasks of `kind` of `job` are queued.
+pub fn queued_count(conn: &Connection, job: u64, kind: TaskKind) -> Result<u64> {
     Ok(conn.row(
-        "SELECT count(*) FROM tasks WHERE job_id = ?1 AND state = 'queued' AND kind = 'denoise'",
-        [job],
+        "SELECT count(*) FROM tasks WHERE job_id = ?1 AND state = 'queued' AND kind = ?2",
+        params![job, kind.as_str()],
         |r| r.get(0),
     )?)
 }

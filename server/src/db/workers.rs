@@ -23,14 +23,16 @@ pub struct Profile<'a> {
     pub tags: &'a [String],
     /// The denoiser it loaded, if any: only then is it given denoise tasks.
     pub denoiser: Option<&'a str>,
+    /// The video encoder it has, if any: only then is it given encode tasks.
+    pub encoder: Option<&'a str>,
 }
 
 /// Stores a new worker with its credential's hash; returns its id.
 pub fn insert(tx: &Transaction, p: &Profile, credential_hash: &str, now: i64) -> Result<u64> {
     tx.exec(
         "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms,
-                              credential, platform, tags, denoiser)
-         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6, ?7, ?8)",
+                              credential, platform, tags, denoiser, encoder)
+         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6, ?7, ?8, ?9)",
         params![
             p.name,
             p.threads,
@@ -39,7 +41,8 @@ pub fn insert(tx: &Transaction, p: &Profile, credential_hash: &str, now: i64) ->
             credential_hash,
             p.platform,
             serde_json::to_string(p.tags)?,
-            p.denoiser
+            p.denoiser,
+            p.encoder
         ],
     )?;
     Ok(tx.last_insert_rowid() as u64)
@@ -55,7 +58,8 @@ pub fn set_returned(
 ) -> Result<()> {
     tx.exec(
         "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
-                left_ms = NULL, credential = ?6, platform = ?7, tags = ?8, denoiser = ?9
+                left_ms = NULL, credential = ?6, platform = ?7, tags = ?8, denoiser = ?9,
+                encoder = ?10
          WHERE id = ?1",
         params![
             id,
@@ -66,7 +70,8 @@ pub fn set_returned(
             credential_hash,
             p.platform,
             serde_json::to_string(p.tags)?,
-            p.denoiser
+            p.denoiser,
+            p.encoder
         ],
     )?;
     Ok(())
@@ -169,14 +174,27 @@ pub fn live_for_job(conn: &Connection, job: u64, live_since: i64) -> Result<Vec<
     Ok(rows.collect::<rusqlite::Result<_>>()?)
 }
 
+/// What a worker may have beyond rendering, for the steps after it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Step {
+    /// A denoiser, for denoise tasks.
+    Denoise,
+    /// A video encoder, for encode tasks.
+    Encode,
+}
+
 /// Whether a live worker (seen since `live_since`, not left, not quarantined) with the
-/// tags `job` requires and not blocked from it has a denoiser.
-pub fn denoiser_live_for_job(conn: &Connection, job: u64, live_since: i64) -> Result<bool> {
+/// tags `job` requires and not blocked from it can do `step`.
+pub fn step_live_for_job(conn: &Connection, job: u64, step: Step, live_since: i64) -> Result<bool> {
+    let column = match step {
+        Step::Denoise => "denoiser",
+        Step::Encode => "encoder",
+    };
     Ok(conn.row(
         &format!(
             "SELECT EXISTS (SELECT 1 FROM workers w
                WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL AND w.quarantined_ms IS NULL
-                 AND w.denoiser IS NOT NULL AND {}
+                 AND w.{column} IS NOT NULL AND {}
                  AND NOT EXISTS (SELECT 1 FROM job_blocks b
                                  WHERE b.job_id = ?1 AND b.worker_id = w.id))",
             has_required_tags("(SELECT spec FROM jobs WHERE id = ?1)", "w.tags")
@@ -306,7 +324,7 @@ pub fn counts(conn: &Connection, live_since: i64) -> Result<(u64, u64)> {
 
 const INFO_QUERY: &str = "SELECT w.id, w.name, w.threads, w.version, w.last_seen_ms, w.tasks_done,
         t.id, t.attempt, t.job_id, t.frame, w.left_ms, w.suspect_ms, w.quarantine_reason,
-        w.platform, w.tags, w.denoiser
+        w.platform, w.tags, w.denoiser, w.encoder
      FROM workers w
      LEFT JOIN tasks t ON t.id = (SELECT id FROM tasks WHERE worker_id = w.id AND state = 'leased'
                                   ORDER BY leased_ms DESC LIMIT 1)";
@@ -338,6 +356,7 @@ fn info_from_row(r: &rusqlite::Row, live_since: i64) -> rusqlite::Result<WorkerI
             rusqlite::Error::FromSqlConversionFailure(14, rusqlite::types::Type::Text, e.into())
         })?,
         denoiser: r.get(15)?,
+        encoder: r.get(16)?,
         samples_per_second: None,
         recent_failures: 0,
         last_failure: None,

@@ -10,6 +10,7 @@ mod identity;
 mod leases;
 mod retention;
 mod tags;
+mod video;
 
 use proto::{
     FailureAck, FrameRange, JobSpec, JobState, Lease, Rect, SampleSpan, SceneInfo, TaskToken,
@@ -103,6 +104,7 @@ pub(super) fn joining<'a>(name: &'a str, credential: Option<&'a str>) -> Joining
             platform: None,
             tags: &[],
             denoiser: None,
+            encoder: None,
         },
         credential,
     }

@@ -355,6 +355,7 @@ async fn worker_calls_with_bad_ids_or_fields_are_refused() {
                 platform: None,
                 tags: vec![],
                 denoiser: None,
+                encoder: None,
             })
             .send()
             .await

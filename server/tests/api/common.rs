@@ -107,29 +107,40 @@ impl SimWorker {
     }
 
     pub async fn register_with(s: &TestServer, name: &str, token: Option<&str>) -> SimWorker {
-        Self::join(s, name, token, None).await
+        Self::join(s, name, token, WorkerRegistration::default()).await
     }
 
     /// A worker that says it has `denoiser`: it is given denoise tasks.
     pub async fn register_denoiser(s: &TestServer, name: &str, denoiser: &str) -> SimWorker {
-        Self::join(s, name, None, Some(denoiser.to_string())).await
+        let steps = WorkerRegistration {
+            denoiser: Some(denoiser.to_string()),
+            ..WorkerRegistration::default()
+        };
+        Self::join(s, name, None, steps).await
     }
 
+    /// A worker that says it has `encoder`: it is given encode tasks.
+    pub async fn register_encoder(s: &TestServer, name: &str, encoder: &str) -> SimWorker {
+        let steps = WorkerRegistration {
+            encoder: Some(encoder.to_string()),
+            ..WorkerRegistration::default()
+        };
+        Self::join(s, name, None, steps).await
+    }
+
+    /// Registers as `name` with the steps (denoiser, encoder) of `steps`.
     async fn join(
         s: &TestServer,
         name: &str,
         token: Option<&str>,
-        denoiser: Option<String>,
+        steps: WorkerRegistration,
     ) -> SimWorker {
         let client = client();
         let mut req = client.post(s.url("/workers")).json(&WorkerRegistration {
             name: name.into(),
             threads: 2,
             version: "test".into(),
-            credential: None,
-            platform: None,
-            tags: vec![],
-            denoiser,
+            ..steps
         });
         if let Some(t) = token {
             req = req.bearer_auth(t);

@@ -131,13 +131,14 @@ impl Browser {
         }
     }
 
-    /// Evaluates `expr` in the page and returns its JSON value.
+    /// Evaluates `expr` in the page and returns its JSON value (a promise's, once it
+    /// settles).
     fn eval(&mut self, expr: &str) -> Value {
         let session = self.session.clone();
         let r = self.call(
             Some(&session),
             "Runtime.evaluate",
-            json!({"expression": expr, "returnByValue": true}),
+            json!({"expression": expr, "returnByValue": true, "awaitPromise": true}),
         );
         r["result"]["value"].clone()
     }
@@ -198,6 +199,34 @@ fn summary(b: &mut Browser) -> Value {
     serde_json::from_str(b.eval(SUMMARY).as_str().unwrap()).unwrap()
 }
 
+/// What the job's flipbook shows, as JSON.
+const FLIPBOOK: &str = r#"JSON.stringify((() => {
+  const b = document.querySelector('.flipbook');
+  const img = b.querySelector('.screen img');
+  const pending = b.querySelector('.pending');
+  return {
+    frame: b.dataset.frame,
+    caption: b.querySelector('.flip-frame').textContent,
+    pending: pending.hidden ? null : pending.textContent,
+    picture: img.hidden ? 0 : (img.complete ? img.naturalWidth : -1),
+    last: Number(b.querySelector('input').max),
+    playing: b.querySelector('button').textContent,
+    video: b.querySelector('.video').hidden ? null : b.querySelector('.video').getAttribute('href'),
+  };
+})())"#;
+
+fn flipbook(b: &mut Browser) -> Value {
+    serde_json::from_str(b.eval(FLIPBOOK).as_str().unwrap()).unwrap()
+}
+
+/// Moves the flipbook's scrubber to the `index`th frame, as a drag would.
+fn scrub(b: &mut Browser, index: u32) {
+    b.eval(&format!(
+        "(() => {{ const s = document.querySelector('.flipbook input'); s.value = {index}; \
+         s.dispatchEvent(new Event('input')); return true; }})()"
+    ));
+}
+
 /// The reason a worker gives for a failed attempt.
 const REASON: &str = "preparing frame 1: texture 2 <img> cannot be decoded";
 
@@ -215,6 +244,7 @@ async fn dashboard_shows_jobs_frames_failures_and_workers_live_in_chromium() {
         step: 1,
     });
     (spec.width, spec.height, spec.tile_size, spec.spp) = (64, 48, Some(32), 4);
+    spec.video = true;
     let job = create_job(&s, &c, &spec).await;
     let mut w = SimWorker::register(&s, "render-node-7").await;
     // One attempt fails, with a reason the page must show word for word (the task is
@@ -241,10 +271,46 @@ async fn dashboard_shows_jobs_frames_failures_and_workers_live_in_chromium() {
         b.wait_for("document.querySelectorAll('.frames img').length === 1 && [...document.querySelectorAll('.frames img')].every(i => i.complete && i.naturalWidth > 0)", "the thumbnail");
         b.wait_for("document.querySelectorAll('.failures li').length === 1", "the failure");
         let before = summary(&mut b);
-        (b, before)
+        // The flipbook: frame 1's preview, frame 2 said to be still rendering.
+        b.wait_for("document.querySelector('.flipbook .screen img').naturalWidth === 64", "the flipbook's first frame");
+        let first = flipbook(&mut b);
+        scrub(&mut b, 1);
+        let second = flipbook(&mut b);
+        scrub(&mut b, 0);
+        (b, (before, first, second))
     })
     .await
     .unwrap();
+    let (before, first, second) = before;
+    assert_eq!(
+        (
+            &first["frame"],
+            &first["caption"],
+            &first["picture"],
+            &first["last"]
+        ),
+        (
+            &json!("1"),
+            &json!("frame 0001 · done"),
+            &json!(64),
+            &json!(1)
+        ),
+        "{first}"
+    );
+    assert_eq!(
+        first["video"],
+        json!(null),
+        "no video before the frames are in"
+    );
+    assert_eq!(
+        (&second["frame"], &second["pending"], &second["picture"]),
+        (
+            &json!("2"),
+            &json!("frame 0002: not rendered yet (rendering)"),
+            &json!(0)
+        ),
+        "{second}"
+    );
     assert_eq!(before["state"], json!("running"), "{before}");
     assert_eq!(before["name"], json!(format!("#{} hallway", job.id)));
     assert_eq!(before["bar"], json!("50%"), "{before}");
@@ -276,19 +342,52 @@ async fn dashboard_shows_jobs_frames_failures_and_workers_live_in_chromium() {
         "{before}"
     );
 
-    // Finish the job while the page is open: only the event stream can tell it.
+    // Finish the job while the page is open: only the event stream can tell it. Its
+    // video comes from a worker with an encoder (a stand-in MP4: an `ftyp` box).
     for (lease, exr) in held {
         assert_eq!(w.upload(&s, &lease, exr).await.status(), StatusCode::OK);
     }
-    let (after, png) = tokio::task::spawn_blocking(move || {
+    let encoder = SimWorker::register_encoder(&s, "encoder", "FFmpeg with libx264").await;
+    let encode = encoder.lease(&s).await.expect("the encode task");
+    let mut mp4 = vec![0, 0, 0, 16];
+    mp4.extend_from_slice(b"ftypisom\0\0\x02\0");
+    let meta = proto::ResultMetadata {
+        attempt: encode.token.attempt,
+        sha256: server::store::sha256_hex(&mp4),
+        samples: 0,
+        rays: 0,
+        render_ms: 5,
+    };
+    let res = encoder.upload_with(&s, &encode, mp4, &meta).await;
+    assert_eq!(res.status(), StatusCode::OK);
+    let results = tokio::task::spawn_blocking(move || {
         browser.wait_for("document.querySelector('.job').dataset.state === 'done'", "the job done");
         browser.wait_for("document.querySelectorAll('.frames img').length === 2 && [...document.querySelectorAll('.frames img')].every(i => i.complete && i.naturalWidth > 0)", "both thumbnails");
         browser.wait_for("document.querySelector('#workers tbody tr').children[3].textContent === 'idle'", "the worker idle");
         let after = summary(&mut browser);
-        (after, browser.screenshot())
+        // The video is offered, and it plays: the frames follow each other at the job's fps.
+        browser.wait_for("!document.querySelector('.flipbook .video').hidden", "the MP4 link");
+        let book = flipbook(&mut browser);
+        browser.eval("document.querySelector('.flipbook button').click()");
+        browser.wait_for("document.querySelector('.flipbook').dataset.frame === '2'", "the flipbook playing on");
+        browser.wait_for("document.querySelector('.flipbook').dataset.frame === '1'", "the flipbook looping");
+        let playing = flipbook(&mut browser);
+        browser.eval("document.querySelector('.flipbook button').click()");
+        let fetched = browser.eval(
+            "fetch(document.querySelector('.flipbook .video').href).then(r => r.status)",
+        );
+        (after, (book, playing, fetched), browser.screenshot())
     })
     .await
     .unwrap();
+    let (after, (book, playing, fetched), png) = results;
+    assert_eq!(
+        book["video"],
+        json!(format!("/api/v1/jobs/{}/video", job.id)),
+        "{book}"
+    );
+    assert_eq!(playing["playing"], json!("Pause"), "{playing}");
+    assert_eq!(fetched, json!(200));
     assert_eq!(after["bar"], json!("100%"), "{after}");
     assert_eq!(
         after["frames"],

@@ -10,4 +10,5 @@ mod denoise;
 mod farm;
 mod faults;
 mod openapi;
+mod video;
 mod webhooks;

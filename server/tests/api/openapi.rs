@@ -51,6 +51,7 @@ async fn served_document_matches_the_code_and_every_operation_is_routed() {
         ("GET", "/api/v1/jobs/{id}/frames"),
         ("GET", "/api/v1/jobs/{id}/frames/{frame}/exr"),
         ("GET", "/api/v1/jobs/{id}/frames/{frame}/png"),
+        ("GET", "/api/v1/jobs/{id}/video"),
         ("POST", "/api/v1/workers"),
         ("GET", "/api/v1/workers"),
         ("POST", "/api/v1/workers/{id}/lease"),

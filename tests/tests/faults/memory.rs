@@ -58,6 +58,7 @@ impl Painter {
             platform: None,
             tags: vec![],
             denoiser: None,
+            encoder: None,
         };
         let answer = post_json(port, "/api/v1/workers", &reg, None);
         assert_eq!(answer.status, 201, "{}", answer.text());

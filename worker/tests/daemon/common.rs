@@ -48,6 +48,8 @@ pub fn worker_config(server: &str, cache: &Path) -> WorkerConfig {
         upload_compression: UploadCompression::Auto,
         denoise: true,
         oidn: None,
+        encode: true,
+        ffmpeg: None,
         fault: None,
     }
 }
