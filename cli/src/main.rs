@@ -102,6 +102,7 @@ fn run() -> anyhow::Result<()> {
             Some(bench::BenchCommand::Rays(r)) => bench::rays::run(r),
             Some(bench::BenchCommand::Features(f)) => bench::features::run(f),
             Some(bench::BenchCommand::Spectral(s)) => bench::spectral::run(s),
+            Some(bench::BenchCommand::Denoise(d)) => bench::denoise::run(d),
             None => bench::run(args),
         },
         Command::Server(args) => server::run(args, layers),

@@ -99,6 +99,11 @@ pub struct RenderArgs {
     /// Seed mixed into every random number.
     #[arg(long, default_value_t = 0)]
     seed: u32,
+    /// The same sampling pattern on every frame (the frame number leaves the random
+    /// numbers' key): the noise stays in place across a sequence, so denoised frames do
+    /// not flicker.
+    #[arg(long)]
+    fixed_pattern: bool,
     /// Carry light at four sampled wavelengths even where the scene needs no spectral
     /// feature (dispersion, fluorescence, light spectra take that path by themselves): to
     /// compare with the RGB path, which converges to nearly the same image with less
@@ -221,6 +226,7 @@ fn sampling(args: &RenderArgs) -> anyhow::Result<(u32, RenderSettings)> {
         max_depth,
         seed: args.seed,
         spectral: args.spectral,
+        fixed_pattern: args.fixed_pattern,
         ..RenderSettings::DEFAULT
     };
     Ok((spp, settings))
@@ -355,6 +361,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             )
             .with("tessera/motion-steps", frame.motion_steps.to_string())
             .with("tessera/seed", args.seed.to_string())
+            .with("tessera/fixed-pattern", args.fixed_pattern.to_string())
             .with(ExrMetadata::FEATURES, frame.features.names().join(","))
             .with(
                 "tessera/path",

@@ -99,6 +99,10 @@ pub struct JobArgs {
     /// Seed mixed into every random number [default: 0].
     #[arg(long)]
     pub seed: Option<u32>,
+    /// The same sampling pattern on every frame: the noise stays in place across the
+    /// animation, so denoised frames do not flicker [default: each frame its own].
+    #[arg(long)]
+    pub fixed_pattern: bool,
     /// Motion steps across an open shutter [default: the tracer decides].
     #[arg(long)]
     pub motion_steps: Option<u32>,
@@ -179,6 +183,9 @@ impl JobArgs {
         }
         if let Some(seed) = self.seed {
             spec.seed = seed;
+        }
+        if self.fixed_pattern {
+            spec.fixed_pattern = true;
         }
         if let Some(s) = self.shutter {
             spec.shutter = [s.open, s.close];

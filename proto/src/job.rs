@@ -221,6 +221,11 @@ pub struct JobSpec {
     /// Seed mixed into every random number (default 0).
     #[serde(default)]
     pub seed: u32,
+    /// The same sampling pattern on every frame (the frame number leaves the random
+    /// numbers' key): the noise stays in place across the animation, so denoised frames
+    /// do not flicker (default: off, each frame its own pattern).
+    #[serde(default)]
+    pub fixed_pattern: bool,
     /// Shutter open and close, in frames relative to each frame (default `[0, 0]`: no
     /// motion blur).
     #[serde(default)]
@@ -288,6 +293,7 @@ impl JobSpec {
             min_spp: None,
             time_budget: None,
             seed: 0,
+            fixed_pattern: false,
             shutter: [0.0, 0.0],
             motion_steps: None,
             animation: None,

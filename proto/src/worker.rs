@@ -263,6 +263,9 @@ pub struct Lease {
     pub max_depth: u32,
     /// Seed.
     pub seed: u32,
+    /// The same sampling pattern on every frame.
+    #[serde(default)]
+    pub fixed_pattern: bool,
     /// Adaptive sampling's error target, if the job set one.
     #[serde(default)]
     pub noise_threshold: Option<f64>,

@@ -63,11 +63,16 @@ pub fn receive(
     write_atomic(&upload, bytes)?;
     let written = {
         let _guard = app.assembly.lock().unwrap_or_else(|p| p.into_inner());
-        write_denoised(app, task, spec, &upload, meta.render_ms).and_then(|()| {
-            let (now, timing) = (now_ms(), app.timing());
-            app.db
-                .with(|c| scheduler::accept(c, worker, token, 0, meta.render_ms, None, now, timing))
-        })
+        // A stale lease writes nothing into the frame.
+        app.db
+            .with(|c| scheduler::check_token(c, worker, token))
+            .and_then(|_| write_denoised(app, task, spec, &upload, meta.render_ms))
+            .and_then(|()| {
+                let (now, timing) = (now_ms(), app.timing());
+                app.db.with(|c| {
+                    scheduler::accept(c, worker, token, 0, meta.render_ms, None, now, timing)
+                })
+            })
     };
     let _ = std::fs::remove_file(&upload);
     let accepted = matches!(written?, Accepted::New { .. });

@@ -96,6 +96,7 @@ pub fn lease_keeping(
         animation: spec.animation,
         max_depth: spec.max_depth,
         seed: spec.seed,
+        fixed_pattern: spec.fixed_pattern,
         noise_threshold: spec.noise_threshold,
         min_spp: spec.min_spp.unwrap_or(0),
         tile: Rect {

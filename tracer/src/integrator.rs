@@ -257,7 +257,12 @@ fn trace_sample_with<W: Carrier>(
     index: u32,
     carrier: impl FnOnce(&mut PixelSampler) -> W,
 ) -> SampleValue {
-    let mut sampler = PixelSampler::new(x, y, index, frame.frame, settings.seed);
+    let pattern = if settings.fixed_pattern {
+        0
+    } else {
+        frame.frame
+    };
+    let mut sampler = PixelSampler::new(x, y, index, pattern, settings.seed);
     let jitter = sampler.next_2d();
     let film = Vec2::new(
         (x as f32 + jitter.x) / frame.width as f32,

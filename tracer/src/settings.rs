@@ -106,6 +106,12 @@ pub struct RenderSettings {
     /// takes it whatever this says; any other converges to the same image with more
     /// colour noise, which lets the two paths be compared.
     pub spectral: bool,
+    /// The same sampling pattern on every frame: the frame number leaves the random
+    /// numbers' key (the seed stays in it), so an animation's noise stays in place from
+    /// frame to frame instead of changing, which a per-frame denoiser turns into a steady
+    /// image rather than flicker (production's fix; Blender's "animated seed" off). Each
+    /// frame's own pattern by default.
+    pub fixed_pattern: bool,
 }
 
 impl RenderSettings {
@@ -117,6 +123,7 @@ impl RenderSettings {
         noise: None,
         russian_roulette: Some(3),
         spectral: false,
+        fixed_pattern: false,
     };
 }
 

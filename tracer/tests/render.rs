@@ -239,6 +239,37 @@ fn any_tile_split_is_bit_identical_to_the_whole_frame() {
     assert_eq!(whole.dropped, 0);
 }
 
+/// The Cornell box (nothing moves) as frame `number`.
+fn cornell_frame(number: i32) -> PreparedFrame {
+    let options = FrameOptions {
+        frame: number,
+        width: 24,
+        height: 24,
+        ..Default::default()
+    };
+    prepare_frame(Arc::new(tracer::demo::cornell_box()), &options).expect("scene prepares")
+}
+
+#[test]
+fn a_fixed_pattern_gives_a_still_scene_the_same_noise_on_every_frame() {
+    let own = RenderSettings::default();
+    let fixed = RenderSettings {
+        fixed_pattern: true,
+        ..own
+    };
+    let frames: Vec<PreparedFrame> = [0, 1, 7].into_iter().map(cornell_frame).collect();
+    let image = |f: &PreparedFrame, s: &RenderSettings| render(f, s, 2).resolve();
+    // Each frame its own pattern: the same still scene, other noise.
+    assert!(image(&frames[1], &own) != image(&frames[2], &own));
+    // A fixed pattern: every frame is the noise of frame 0's.
+    let zero = image(&frames[0], &own);
+    assert!(image(&frames[1], &fixed) == zero);
+    assert!(image(&frames[2], &fixed) == zero);
+    // The seed still changes it.
+    let reseeded = RenderSettings { seed: 3, ..fixed };
+    assert!(image(&frames[1], &reseeded) != zero);
+}
+
 #[test]
 fn a_cancellable_render_finishes_identically_or_stops_when_cancelled() {
     let f = demo_frame();

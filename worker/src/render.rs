@@ -53,6 +53,7 @@ pub fn settings(lease: &Lease) -> RenderSettings {
         }),
         max_depth: lease.max_depth,
         seed: lease.seed,
+        fixed_pattern: lease.fixed_pattern,
         ..RenderSettings::DEFAULT
     }
 }
@@ -173,6 +174,7 @@ mod tests {
             animation: Some("Walk".into()),
             max_depth: 5,
             seed: 9,
+            fixed_pattern: true,
             noise_threshold: Some(0.02),
             min_spp: 6,
             tile: Rect {
@@ -205,6 +207,7 @@ mod tests {
                 }),
                 max_depth: 5,
                 seed: 9,
+                fixed_pattern: true,
                 ..RenderSettings::DEFAULT
             }
         );

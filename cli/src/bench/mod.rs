@@ -6,6 +6,9 @@
 //! Errors are measured against a reference of the same scene rendered with many more
 //! samples, another seed and the deepest preset's bounces, so no setting is measured
 //! against light the reference lacks or against its own samples.
+//!
+//! Sections that run alone, one file each: `farm`, `overhead` (scaling.rs), `cornell`,
+//! `rays`, `features`, `spectral`, `denoise`.
 
 use std::path::{Path, PathBuf};
 
@@ -23,6 +26,7 @@ use rays::BigMesh;
 use scaling::{FarmCosts, Work};
 
 pub mod cornell;
+pub mod denoise;
 #[cfg(feature = "embree")]
 mod embree;
 pub mod farm;
@@ -80,6 +84,10 @@ pub enum BenchCommand {
     /// second, and each one's MSE against its own reference per spp (the colour noise of
     /// hero wavelengths).
     Spectral(spectral::SpectralArgs),
+    /// What Open Image Denoise buys: its time per megapixel, the spp a denoised frame
+    /// needs to match an undenoised 256- or 1024-spp frame, and the flicker of denoised
+    /// animation with and without the same sampling pattern on every frame.
+    Denoise(denoise::DenoiseArgs),
 }
 
 /// The generated mesh is a grid of this many quads a side: 1,002,528 triangles.

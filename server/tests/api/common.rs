@@ -356,6 +356,7 @@ pub fn settings(lease: &Lease) -> RenderSettings {
         }),
         max_depth: lease.max_depth,
         seed: lease.seed,
+        fixed_pattern: lease.fixed_pattern,
         ..RenderSettings::DEFAULT
     }
 }

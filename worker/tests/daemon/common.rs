@@ -310,6 +310,7 @@ pub fn direct_frame(glb: &[u8], spec: &JobSpec, frame: i32) -> Layers {
         noise: None,
         max_depth: spec.max_depth,
         seed: spec.seed,
+        fixed_pattern: spec.fixed_pattern,
         ..RenderSettings::DEFAULT
     };
     render_tile(
