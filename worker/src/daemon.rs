@@ -42,17 +42,21 @@ use tracer::render::{prepare_frame, PreparedFrame};
 use tracer::scene::Scene;
 use tracing::Instrument;
 
-use crate::api::{
-    Api, ApiError, FailureAnswer, HeartbeatAnswer, InFlight, LeaseAnswer, UploadAnswer,
-};
+use crate::api::{Api, ApiError, HeartbeatAnswer, InFlight, LeaseAnswer};
 use crate::backoff::{jitter, seconds, Backoff, IDLE_PAUSE};
 use crate::cache::{is_digest, sha256_hex, Cached, SceneCache};
 use crate::config::{Fault, WorkerConfig};
-use crate::denoise::{encode_denoised, step_upload, Denoiser, Encoder};
+use crate::finishing::{Denoiser, Encoder};
 use crate::identity;
-use crate::render::{encode_tile, frame_key, frame_options, render_lease};
+use crate::render::{frame_key, frame_options, render_lease};
 use crate::stop::Stop;
 use crate::task_log::{self, TaskLog};
+
+mod courier;
+mod steps;
+
+use self::courier::Courier;
+use self::steps::{find_encoder, load_denoiser, ENCODER_NAME};
 
 /// How long the goodbye (`leave`) may take in all before the worker exits anyway; its
 /// leases then expire on the server after one lease period.
@@ -149,51 +153,6 @@ pub async fn run(
     let result = daemon.main_loop().await;
     watcher.abort();
     result.map(|()| daemon.summary)
-}
-
-/// Open Image Denoise where the config says to look, for denoise tasks; `None` (said in
-/// the log) when it is not there.
-fn load_denoiser(config: &WorkerConfig) -> Option<Denoiser> {
-    match post::Oidn::load(config.oidn.as_deref()) {
-        Ok(oidn) => {
-            tracing::info!(
-                "denoise tasks taken: Open Image Denoise from {}",
-                oidn.path().display()
-            );
-            Some(Denoiser {
-                oidn: Arc::new(oidn),
-                threads: config.threads.min(u32::MAX as usize) as u32,
-            })
-        }
-        Err(e) => {
-            tracing::info!("no denoise tasks: {e}");
-            None
-        }
-    }
-}
-
-/// What the worker registers as its encoder.
-const ENCODER_NAME: &str = "FFmpeg with libx264";
-
-/// FFmpeg where the config says to look, for encode tasks; `None` (said in the log) when
-/// it is not there.
-fn find_encoder(config: &WorkerConfig) -> Option<Encoder> {
-    match post::Ffmpeg::find(config.ffmpeg.as_deref()) {
-        Ok(ffmpeg) => {
-            tracing::info!(
-                "encode tasks taken: FFmpeg at {}",
-                ffmpeg.program().display()
-            );
-            Some(Encoder {
-                ffmpeg,
-                threads: config.threads.min(u32::MAX as usize) as u32,
-            })
-        }
-        Err(e) => {
-            tracing::info!("no encode tasks: {e}");
-            None
-        }
-    }
 }
 
 struct Daemon {
@@ -615,80 +574,6 @@ impl Daemon {
         }
     }
 
-    /// What a step after rendering reads from the server (`frame` for an encode lease).
-    async fn step_input(
-        &self,
-        worker: u64,
-        token: TaskToken,
-        frame: Option<i32>,
-    ) -> Result<Vec<u8>, TaskError> {
-        match self
-            .api
-            .retry("frame download", &self.stop, InFlight::Drop, || {
-                self.api.frame(worker, token, frame)
-            })
-            .await
-        {
-            Ok(Some(Some(bytes))) => Ok(bytes),
-            Ok(Some(None)) => Err(TaskError::Failed(
-                "the lease was gone when the frame was asked for".into(),
-            )),
-            Ok(None) => Err(TaskError::Stopped),
-            Err(e @ ApiError::Unexpected { .. }) => Err(TaskError::Failed(e.to_string())),
-            Err(e) => Err(TaskError::Api(e)),
-        }
-    }
-
-    /// The frames of an encode lease, fetched, and their MP4.
-    async fn encode(&mut self, worker: u64, lease: &Lease) -> Result<(Vec<u8>, u64), TaskError> {
-        let Some(encoder) = self.encoder.clone() else {
-            return Err(TaskError::Failed(
-                "this worker registered no encoder, yet was given an encode task".into(),
-            ));
-        };
-        let Some(sequence) = lease.sequence else {
-            return Err(TaskError::Failed("the encode lease names no frames".into()));
-        };
-        let dir = tempfile::tempdir()
-            .map_err(|e| TaskError::Failed(format!("a temporary folder: {e}")))?;
-        let mut files = Vec::new();
-        for frame in sequence.frames() {
-            let png = self.step_input(worker, lease.token, Some(frame)).await?;
-            let path = dir.path().join(sequence.file_name(frame, "png"));
-            std::fs::write(&path, png)
-                .map_err(|e| TaskError::Failed(format!("{}: {e}", path.display())))?;
-            files.push(path);
-        }
-        let fps = lease.fps;
-        tokio::task::spawn_blocking(move || {
-            let encoded = encoder.encode(&files, fps);
-            drop(dir);
-            encoded
-        })
-        .await
-        .map_err(|e| TaskError::Failed(format!("encoding panicked: {e}")))?
-        .map_err(|e| TaskError::Failed(format!("encoding the video: {e}")))
-    }
-
-    /// The frame of a denoise lease, fetched and denoised.
-    async fn denoise(
-        &mut self,
-        worker: u64,
-        lease: &Lease,
-    ) -> Result<(Vec<glam::Vec3>, u64), TaskError> {
-        let Some(denoiser) = self.denoiser.clone() else {
-            return Err(TaskError::Failed(
-                "this worker registered no denoiser, yet was given a denoise task".into(),
-            ));
-        };
-        let exr = self.step_input(worker, lease.token, None).await?;
-        let (pool, job) = (self.pool.clone(), lease.clone());
-        tokio::task::spawn_blocking(move || pool.install(|| denoiser.denoise(&job, &exr)))
-            .await
-            .map_err(|e| TaskError::Failed(format!("denoising panicked: {e}")))?
-            .map_err(|e| TaskError::Failed(format!("denoising frame {}: {e}", lease.frame)))
-    }
-
     /// Scene, frame, render: `Ok` with the tile and its render time in milliseconds.
     async fn render(
         &mut self,
@@ -867,158 +752,6 @@ impl Daemon {
             _ => {}
         }
         Ok(bytes)
-    }
-}
-
-/// Uploads tiles and reports failures for one registration; cheap to clone into the task
-/// that uploads a tile while the next renders.
-struct Courier {
-    api: Api,
-    stop: Stop,
-    worker: u64,
-}
-
-impl Courier {
-    /// Encodes `tile` and uploads it; a tile that cannot be encoded, or that the server
-    /// refuses, is reported as a failure.
-    async fn deliver(
-        self,
-        lease: Lease,
-        product: Product,
-        render_ms: u64,
-        compression: ExrCompression,
-    ) -> Delivered {
-        let job = lease.clone();
-        let encoded = tokio::task::spawn_blocking(move || match product {
-            Product::Tile(tile) => {
-                encode_tile(&job, &tile, render_ms, compression).map_err(|e| e.to_string())
-            }
-            Product::Denoised(denoised) => encode_denoised(&job, &denoised, render_ms, compression),
-            Product::Video(mp4) => Ok(step_upload(&job, mp4, render_ms)),
-        })
-        .await
-        .unwrap_or_else(|e| Err(format!("panicked: {e}")));
-        let (exr, meta) = match encoded {
-            Ok(t) => (t.exr, t.meta),
-            Err(e) => {
-                return self
-                    .failed(&lease, &format!("encoding the tile: {e}"))
-                    .await
-            }
-        };
-        let task = lease.token.task_id;
-        // Uploads are idempotent: a repeat after a lost answer is stored once.
-        let answer = self
-            .api
-            .retry("upload", &self.stop, InFlight::Finish, || {
-                self.api.upload(self.worker, task, &meta, exr.clone())
-            })
-            .await;
-        let (fate, result) = match answer {
-            Ok(Some(UploadAnswer::Stored(_))) if lease.kind == TaskKind::Encode => {
-                tracing::info!(
-                    "video uploaded: job {} encoded in {} ms",
-                    lease.job_id,
-                    meta.render_ms
-                );
-                (Fate::Done, Ok(()))
-            }
-            Ok(Some(UploadAnswer::Stored(ack))) if lease.kind == TaskKind::Denoise => {
-                tracing::info!(
-                    "denoised frame uploaded: job {} frame {} denoised in {} ms{}",
-                    lease.job_id,
-                    lease.frame,
-                    meta.render_ms,
-                    if ack.accepted {
-                        ""
-                    } else {
-                        " (a repeat: ignored)"
-                    },
-                );
-                (Fate::Done, Ok(()))
-            }
-            Ok(Some(UploadAnswer::Stored(ack))) => {
-                tracing::info!(
-                    "tile uploaded: job {} frame {} tile ({}, {}) samples {}..{} rendered in \
-                     {} ms, {} rays{}{}",
-                    lease.job_id,
-                    lease.frame,
-                    lease.tile.x,
-                    lease.tile.y,
-                    lease.samples.start,
-                    lease.samples.end,
-                    meta.render_ms,
-                    meta.rays,
-                    if ack.accepted {
-                        ""
-                    } else {
-                        " (a repeat: ignored)"
-                    },
-                    if ack.frame_done {
-                        "; frame complete"
-                    } else {
-                        ""
-                    }
-                );
-                (Fate::Done, Ok(()))
-            }
-            Ok(Some(UploadAnswer::LeaseGone(why))) => {
-                tracing::warn!("tile of task {task} dropped: lease gone ({why})");
-                (Fate::Abandoned, Ok(()))
-            }
-            Ok(Some(UploadAnswer::Refused(why))) => {
-                let message = format!("the server refused the tile: {why}");
-                return self.failed(&lease, &message).await;
-            }
-            Ok(None) => {
-                tracing::info!("shutdown: upload of task {task} abandoned");
-                (Fate::Interrupted, Ok(()))
-            }
-            Err(e) => (Fate::Abandoned, Err(e)),
-        };
-        Delivered { fate, result }
-    }
-
-    /// [`Courier::report_failure`] as a delivery's end.
-    async fn failed(&self, lease: &Lease, message: &str) -> Delivered {
-        Delivered {
-            fate: Fate::Failed,
-            result: self.report_failure(lease, message).await,
-        }
-    }
-
-    async fn report_failure(&self, lease: &Lease, message: &str) -> Result<(), ApiError> {
-        let task = lease.token.task_id;
-        tracing::warn!(
-            "task {task} (job {} frame {}) failed: {message}",
-            lease.job_id,
-            lease.frame
-        );
-        let log = task_log::take(task);
-        let answer = self
-            .api
-            .retry("failure report", &self.stop, InFlight::Finish, || {
-                self.api
-                    .failure(self.worker, lease.token, message, log.clone())
-            })
-            .await?;
-        match answer {
-            Some(FailureAnswer::Recorded(ack)) => {
-                if ack.task_failed {
-                    tracing::warn!(
-                        "task {task} is out of attempts: job {} failed",
-                        lease.job_id
-                    );
-                } else if ack.blocked_from_job {
-                    tracing::warn!(
-                        "this worker failed too many tasks of job {} and gets no more of it",
-                        lease.job_id
-                    );
-                }
-            }
-            Some(FailureAnswer::LeaseGone(_)) | None => {}
-        }
-        Ok(())
     }
 }
 

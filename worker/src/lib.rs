@@ -11,10 +11,10 @@
 //! | [`cache`] | scenes on disk as `<digest>.glb`: verified on read, written atomically |
 //! | [`identity`] | the credential a registration answered, kept for the next start |
 //! | [`render`] | a [`proto::Lease`] into tracer frame options, a tile render, its EXR bytes |
-//! | [`denoise`] | a denoise lease: the frame denoised with Open Image Denoise, its upload |
+//! | [`finishing`] | the steps after rendering: a frame denoised with Open Image Denoise, a job's MP4 made with FFmpeg, their uploads |
 //! | [`task_log`] | the lines logged per task, sent with its heartbeats, failure report or the next lease request |
 //! | `stop` | the shutdown signal every wait listens to |
-//! | `daemon` | [`run`]: the register / lease / render / upload loop |
+//! | `daemon` | [`run`]: the register / lease / render / upload loop; `daemon/courier.rs` the uploads, `daemon/steps.rs` a denoise or encode lease |
 //!
 //! A binary (or a test) calls [`run`] with a config and a shutdown future; it returns a
 //! [`RunSummary`] when the future completes and the server has been told.
@@ -24,7 +24,7 @@ pub mod backoff;
 pub mod cache;
 pub mod config;
 mod daemon;
-pub mod denoise;
+pub mod finishing;
 pub mod identity;
 pub mod render;
 mod stop;
