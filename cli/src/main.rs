@@ -73,7 +73,8 @@ enum Command {
     Workers(control::WorkersArgs),
     /// A job's event log, or what the workers logged for one of its tasks (`--task N`).
     Logs(history::LogsArgs),
-    /// Install an optional part: `oidn` (Intel Open Image Denoise, for denoising).
+    /// Install an optional part: `oidn` (Intel Open Image Denoise, for denoising) or
+    /// `ffmpeg` (FFmpeg, for a job's video).
     Install(install::InstallArgs),
 }
 

@@ -100,8 +100,8 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 0)]
     seed: u32,
     /// The same sampling pattern on every frame (the frame number leaves the random
-    /// numbers' key): the noise stays in place across a sequence, so denoised frames do
-    /// not flicker.
+    /// numbers' key): the noise stays in place across a sequence, so denoised frames
+    /// flicker less.
     #[arg(long)]
     fixed_pattern: bool,
     /// Carry light at four sampled wavelengths even where the scene needs no spectral

@@ -100,7 +100,7 @@ pub struct JobArgs {
     #[arg(long)]
     pub seed: Option<u32>,
     /// The same sampling pattern on every frame: the noise stays in place across the
-    /// animation, so denoised frames do not flicker [default: each frame its own].
+    /// animation, so denoised frames flicker less [default: each frame its own].
     #[arg(long)]
     pub fixed_pattern: bool,
     /// Motion steps across an open shutter [default: the tracer decides].

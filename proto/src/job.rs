@@ -223,7 +223,7 @@ pub struct JobSpec {
     pub seed: u32,
     /// The same sampling pattern on every frame (the frame number leaves the random
     /// numbers' key): the noise stays in place across the animation, so denoised frames
-    /// do not flicker (default: off, each frame its own pattern).
+    /// flicker less (default: off, each frame its own pattern).
     #[serde(default)]
     pub fixed_pattern: bool,
     /// Shutter open and close, in frames relative to each frame (default `[0, 0]`: no
