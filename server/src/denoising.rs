@@ -14,13 +14,13 @@ use tracer::output::{
     BLOCK_ROWS,
 };
 
-use crate::app::{now_ms, App};
+use crate::app::App;
 use crate::assembly;
 use crate::db::frames;
 use crate::db::tasks::{self, NewTask, TaskRow};
 use crate::error::{Error, Result};
-use crate::intake::Received;
-use crate::scheduler::{self, Accepted};
+use crate::intake::{self, Received};
+use crate::scheduler;
 use crate::store::write_atomic;
 
 /// Queues the denoise task of an assembled frame, in the transaction that marks it
@@ -67,24 +67,10 @@ pub fn receive(
         app.db
             .with(|c| scheduler::check_token(c, worker, token))
             .and_then(|_| write_denoised(app, task, spec, &upload, meta.render_ms))
-            .and_then(|()| {
-                let (now, timing) = (now_ms(), app.timing());
-                app.db.with(|c| {
-                    scheduler::accept(c, worker, token, 0, meta.render_ms, None, now, timing)
-                })
-            })
+            .and_then(|()| intake::accept_step(app, worker, token, meta, task, bytes.len()))
     };
     let _ = std::fs::remove_file(&upload);
-    let accepted = matches!(written?, Accepted::New { .. });
-    if accepted {
-        app.metrics.tile_accepted(bytes.len());
-    }
-    Ok(Received {
-        accepted,
-        job: task.job_id,
-        frame: task.frame,
-        frame_done: accepted,
-    })
+    written
 }
 
 /// Writes the frame's EXR again with the upload's beauty as its `denoised` layer (and

@@ -8,13 +8,13 @@ use std::path::PathBuf;
 use proto::{JobSpec, ResultMetadata, TaskToken};
 use rusqlite::Transaction;
 
-use crate::app::{now_ms, App};
+use crate::app::App;
 use crate::assembly;
 use crate::db::frames;
 use crate::db::tasks::{self, NewTask, TaskRow};
 use crate::error::{Error, Result};
-use crate::intake::Received;
-use crate::scheduler::{self, Accepted};
+use crate::intake::{self, Received};
+use crate::scheduler;
 use crate::store::write_atomic;
 
 /// The video's file name in the job's output folder.
@@ -83,18 +83,5 @@ pub fn receive(
     // Checked before the file is written: a stale lease writes nothing.
     app.db.with(|c| scheduler::check_token(c, worker, token))?;
     write_atomic(&video_path(app, task.job_id), bytes)?;
-    let (now, timing) = (now_ms(), app.timing());
-    let accepted = app
-        .db
-        .with(|c| scheduler::accept(c, worker, token, 0, meta.render_ms, None, now, timing))?;
-    let accepted = matches!(accepted, Accepted::New { .. });
-    if accepted {
-        app.metrics.tile_accepted(bytes.len());
-    }
-    Ok(Received {
-        accepted,
-        job: task.job_id,
-        frame: task.frame,
-        frame_done: false,
-    })
+    intake::accept_step(app, worker, token, meta, task, bytes.len())
 }

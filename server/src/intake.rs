@@ -116,6 +116,32 @@ pub fn receive(
     }
 }
 
+/// Commits the upload of a step after rendering (denoise or encode), its result already
+/// written, under the fencing token: the task is done, and a denoise task's frame with it.
+pub fn accept_step(
+    app: &App,
+    worker: u64,
+    token: TaskToken,
+    meta: &ResultMetadata,
+    task: &TaskRow,
+    upload_bytes: usize,
+) -> Result<Received> {
+    let (now, timing) = (now_ms(), app.timing());
+    let accepted = app
+        .db
+        .with(|c| scheduler::accept(c, worker, token, 0, meta.render_ms, None, now, timing))?;
+    let accepted = matches!(accepted, Accepted::New { .. });
+    if accepted {
+        app.metrics.tile_accepted(upload_bytes);
+    }
+    Ok(Received {
+        accepted,
+        job: task.job_id,
+        frame: task.frame,
+        frame_done: accepted && task.kind == proto::TaskKind::Denoise,
+    })
+}
+
 /// Writes the tile to its attempt's own file, then commits it under the fencing token.
 /// The file comes first, so a crash in between leaves a done task with its tile; the
 /// attempt in its name means a stale upload racing the current one writes beside the
