@@ -24,6 +24,13 @@ pub fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
 }
 
 /// `X,Y,W,H`.
+/// `--clamp-indirect`: a finite number above 0 (as the tracer checks it).
+pub fn parse_clamp(s: &str) -> anyhow::Result<f32> {
+    let limit: f32 = s.trim().parse().context("expected a number")?;
+    tracer::settings::check_clamp(limit).map_err(anyhow::Error::msg)?;
+    Ok(limit)
+}
+
 pub fn parse_region(s: &str) -> anyhow::Result<TileRect> {
     let v: Vec<u32> = s
         .split(',')
@@ -155,6 +162,10 @@ mod tests {
         assert!(parse_size("12").is_err());
         assert_eq!(parse_region("1,2,3,4").unwrap(), TileRect::new(1, 2, 3, 4));
         assert!(parse_region("1,2,3").is_err());
+        assert_eq!(parse_clamp("2.5").unwrap(), 2.5);
+        for bad in ["0", "-1", "inf", "NaN", "x"] {
+            assert!(parse_clamp(bad).is_err(), "{bad}");
+        }
         assert!(parse_region("1,2,0,4").is_err());
         assert_eq!(parse_camera("2").unwrap(), CameraChoice::Index(2));
         assert_eq!(

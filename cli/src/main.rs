@@ -104,6 +104,7 @@ fn run() -> anyhow::Result<()> {
             Some(bench::BenchCommand::Features(f)) => bench::features::run(f),
             Some(bench::BenchCommand::Spectral(s)) => bench::spectral::run(s),
             Some(bench::BenchCommand::Denoise(d)) => bench::denoise::run(d),
+            Some(bench::BenchCommand::Clamp(c)) => bench::clamp::run(c),
             None => bench::run(args),
         },
         Command::Server(args) => server::run(args, layers),

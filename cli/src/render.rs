@@ -104,6 +104,12 @@ pub struct RenderArgs {
     /// flicker less.
     #[arg(long)]
     fixed_pattern: bool,
+    /// Clamp light that reaches the camera after two or more surfaces to at most this in
+    /// its largest RGB channel (Cycles' "clamp indirect"): fewer fireflies (the caustics on
+    /// the demo's walls), a little less light; `tessera bench clamp` measures both
+    /// [default: off].
+    #[arg(long, value_parser = crate::args::parse_clamp)]
+    clamp_indirect: Option<f32>,
     /// Carry light at four sampled wavelengths even where the scene needs no spectral
     /// feature (dispersion, fluorescence, light spectra take that path by themselves): to
     /// compare with the RGB path, which converges to nearly the same image with less
@@ -227,6 +233,7 @@ fn sampling(args: &RenderArgs) -> anyhow::Result<(u32, RenderSettings)> {
         seed: args.seed,
         spectral: args.spectral,
         fixed_pattern: args.fixed_pattern,
+        clamp_indirect: args.clamp_indirect,
         ..RenderSettings::DEFAULT
     };
     Ok((spp, settings))
@@ -377,6 +384,9 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
         if let Some(seconds) = denoise_time {
             meta.set(ExrMetadata::DENOISER, post::DENOISER_NAME);
             meta.set(ExrMetadata::DENOISE_SECONDS, format!("{seconds:.3}"));
+        }
+        if let Some(limit) = settings.clamp_indirect {
+            meta.set("tessera/clamp-indirect", limit.to_string());
         }
         if let Some(t) = settings.noise {
             meta.set("tessera/noise-threshold", t.threshold.to_string());

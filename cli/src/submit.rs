@@ -103,6 +103,10 @@ pub struct JobArgs {
     /// animation, so denoised frames flicker less [default: each frame its own].
     #[arg(long)]
     pub fixed_pattern: bool,
+    /// Clamp light that reaches the camera after two or more surfaces to at most this in
+    /// its largest RGB channel: fewer fireflies, a little less light [default: off].
+    #[arg(long, value_parser = crate::args::parse_clamp)]
+    pub clamp_indirect: Option<f32>,
     /// Motion steps across an open shutter [default: the tracer decides].
     #[arg(long)]
     pub motion_steps: Option<u32>,
@@ -186,6 +190,9 @@ impl JobArgs {
         }
         if self.fixed_pattern {
             spec.fixed_pattern = true;
+        }
+        if self.clamp_indirect.is_some() {
+            spec.clamp_indirect = self.clamp_indirect;
         }
         if let Some(s) = self.shutter {
             spec.shutter = [s.open, s.close];

@@ -155,17 +155,25 @@ pub enum OutputLayer {
     /// Estimated relative error per pixel (`noise`; 1e10 where a pixel had too few
     /// samples to tell).
     Noise,
+    /// Screen-space motion over the shutter in pixels, x right and y down (`motion.X Y`;
+    /// zero where nothing moves or the shutter is closed).
+    Motion,
+    /// Estimated variance of each pixel's value, the square of its standard error
+    /// (`variance.R G B`; 1e10 where a pixel had too few samples to tell).
+    Variance,
 }
 
 impl OutputLayer {
     /// Every layer, in file order.
-    pub const ALL: [OutputLayer; 6] = [
+    pub const ALL: [OutputLayer; 8] = [
         OutputLayer::Beauty,
         OutputLayer::Albedo,
         OutputLayer::Normal,
         OutputLayer::Depth,
         OutputLayer::Samples,
         OutputLayer::Noise,
+        OutputLayer::Motion,
+        OutputLayer::Variance,
     ];
 }
 
@@ -226,6 +234,11 @@ pub struct JobSpec {
     /// flicker less (default: off, each frame its own pattern).
     #[serde(default)]
     pub fixed_pattern: bool,
+    /// Clamp light that reaches the camera after two or more surfaces to at most this in
+    /// its largest RGB channel (Cycles' "clamp indirect"): fewer fireflies, a little less
+    /// light; a finite number above 0 (default: off).
+    #[serde(default)]
+    pub clamp_indirect: Option<f32>,
     /// Shutter open and close, in frames relative to each frame (default `[0, 0]`: no
     /// motion blur).
     #[serde(default)]
@@ -294,6 +307,7 @@ impl JobSpec {
             time_budget: None,
             seed: 0,
             fixed_pattern: false,
+            clamp_indirect: None,
             shutter: [0.0, 0.0],
             motion_steps: None,
             animation: None,

@@ -266,6 +266,9 @@ pub struct Lease {
     /// The same sampling pattern on every frame.
     #[serde(default)]
     pub fixed_pattern: bool,
+    /// The clamp on indirect light, if the job set one.
+    #[serde(default)]
+    pub clamp_indirect: Option<f32>,
     /// Adaptive sampling's error target, if the job set one.
     #[serde(default)]
     pub noise_threshold: Option<f64>,

@@ -13,7 +13,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::{Vec3, Vec4};
+use glam::{Vec2, Vec3, Vec4};
 use proto::{JobSpec, OutputLayer, ResultMetadata};
 use tracer::film::{
     Layers, SamplingSummary, SamplingTally, TileRect, NO_HIT_DEPTH, NO_NOISE_ESTIMATE,
@@ -84,10 +84,11 @@ pub fn check_tile(
 
 /// Sample-weighted average of the passes of one tile, pixel by pixel (each pass's
 /// `samples` layer says how many samples each of its pixels holds). Beauty and albedo
-/// average by samples; normals are summed by weight and renormalised; depth averages over
-/// the passes that hit something; samples add up. The noise estimates combine as the
-/// standard errors of a weighted mean do: `sqrt(Σ (n_k e_k)²) / Σ n_k` over the passes
-/// that have one (a pass of a single sample has none).
+/// average by samples, and so do motion vectors; normals are summed by weight and
+/// renormalised; depth averages over the passes that hit something; samples add up. The
+/// noise estimates combine as the standard errors of a weighted mean do:
+/// `sqrt(Σ (n_k e_k)²) / Σ n_k` over the passes that have one (a pass of a single sample
+/// has none), and the variances as its variance does: `Σ n_k² v_k / (Σ n_k)²`.
 pub fn merge_passes(parts: &[Layers]) -> Layers {
     let mut merge = PassMerge::default();
     for part in parts {
@@ -113,6 +114,8 @@ struct PassSums {
     normal: Vec<Vec3>,
     depth: Vec<(f32, f32)>,
     noise: Vec<(f64, f64)>,
+    motion: Vec<Vec2>,
+    variance: Vec<(Vec3, f32)>,
 }
 
 impl PassMerge {
@@ -150,6 +153,8 @@ impl PassSums {
             normal: vec![Vec3::ZERO; n],
             depth: vec![(0.0, 0.0); n],
             noise: vec![(0.0, 0.0); n],
+            motion: vec![Vec2::ZERO; n],
+            variance: vec![(Vec3::ZERO, 0.0); n],
         }
     }
 
@@ -164,6 +169,11 @@ impl PassSums {
             self.beauty[i] += layers.beauty[i] * w;
             self.albedo[i] += layers.albedo[i] * w;
             self.normal[i] += layers.normal[i] * w;
+            self.motion[i] += layers.motion[i] * w;
+            if layers.variance[i].x < NO_NOISE_ESTIMATE {
+                self.variance[i].0 += layers.variance[i] * (w * w);
+                self.variance[i].1 += w;
+            }
             if layers.depth[i] < NO_HIT_DEPTH {
                 self.depth[i].0 += layers.depth[i] * w;
                 self.depth[i].1 += w;
@@ -190,6 +200,13 @@ impl PassSums {
             };
             out.beauty[i] = self.beauty[i] * inv;
             out.albedo[i] = self.albedo[i] * inv;
+            out.motion[i] = self.motion[i] * inv;
+            let (variance, variance_weight) = self.variance[i];
+            out.variance[i] = if variance_weight > 0.0 {
+                variance / (variance_weight * variance_weight)
+            } else {
+                Vec3::splat(NO_NOISE_ESTIMATE)
+            };
             out.normal[i] = self.normal[i].normalize_or_zero();
             out.depth[i] = if depth_weight > 0.0 {
                 depth / depth_weight
@@ -517,6 +534,8 @@ pub fn image_layers(wanted: &[OutputLayer]) -> Vec<ImageLayer> {
             OutputLayer::Depth => ImageLayer::Depth,
             OutputLayer::Samples => ImageLayer::Samples,
             OutputLayer::Noise => ImageLayer::Noise,
+            OutputLayer::Motion => ImageLayer::Motion,
+            OutputLayer::Variance => ImageLayer::Variance,
         })
         .collect()
 }
@@ -536,6 +555,10 @@ mod tests {
         l.albedo.iter_mut().for_each(|a| *a = Vec3::splat(v));
         l.normal.iter_mut().for_each(|n| *n = Vec3::Z);
         l.depth.iter_mut().for_each(|d| *d = depth);
+        l.motion.iter_mut().for_each(|m| *m = Vec2::new(v, -v));
+        if samples >= 2.0 {
+            l.variance.iter_mut().for_each(|e| *e = Vec3::splat(0.01));
+        }
         l
     }
 
@@ -550,6 +573,9 @@ mod tests {
         assert_eq!(merged.beauty[0], Vec4::new(2.5, 5.0, 7.5, 1.0));
         assert_eq!(merged.albedo[1], Vec3::splat(2.5));
         assert_eq!(merged.normal[0], Vec3::Z);
+        assert_eq!(merged.motion[0], Vec2::new(2.5, -2.5));
+        // Only the second pass (3 samples) has a variance: 3² · 0.01 / 3².
+        assert_eq!(merged.variance[0], Vec3::splat(0.01));
         // Only the first pass hit: its depth stands.
         assert_eq!(merged.depth[0], 4.0);
         assert_eq!(merged.samples[0], 4.0);
@@ -562,6 +588,8 @@ mod tests {
         assert_eq!(none.depth[1], NO_HIT_DEPTH);
         // Two halves of equal error make an error 1/√2 of it.
         assert!((none.noise[0] - 0.1 / 2f32.sqrt()).abs() < 1e-7);
+        // And a variance of half of it: (2² · 0.01 + 2² · 0.01) / 4².
+        assert_eq!(none.variance[1], Vec3::splat(0.005));
     }
 
     fn task(id: u64, tile: u32, pass: u32, rect: TileRect) -> TaskRow {

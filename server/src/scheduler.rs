@@ -97,6 +97,7 @@ pub fn lease_keeping(
         max_depth: spec.max_depth,
         seed: spec.seed,
         fixed_pattern: spec.fixed_pattern,
+        clamp_indirect: spec.clamp_indirect,
         noise_threshold: spec.noise_threshold,
         min_spp: spec.min_spp.unwrap_or(0),
         tile: Rect {

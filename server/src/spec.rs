@@ -360,6 +360,11 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
             None => spec.min_spp = Some(proto::job::DEFAULT_BUDGET_MIN_SPP.min(spec.spp)),
         }
     }
+    if let Some(limit) = spec.clamp_indirect {
+        if let Err(e) = tracer::settings::check_clamp(limit) {
+            return bad("clamp_indirect", e);
+        }
+    }
     match (spec.noise_threshold, spec.min_spp) {
         (Some(t), _) if !(t.is_finite() && t > 0.0 && t <= 1.0) => {
             return bad(
@@ -470,6 +475,8 @@ pub fn layer_name(l: OutputLayer) -> &'static str {
         OutputLayer::Depth => "depth",
         OutputLayer::Samples => "samples",
         OutputLayer::Noise => "noise",
+        OutputLayer::Motion => "motion",
+        OutputLayer::Variance => "variance",
     }
 }
 
@@ -594,6 +601,11 @@ mod tests {
             ("fps", Box::new(|s| s.fps = f64::NAN)),
             ("fps", Box::new(|s| s.fps = MAX_FPS * 2.0)),
             ("max_depth", Box::new(|s| s.max_depth = MAX_DEPTH + 1)),
+            ("clamp_indirect", Box::new(|s| s.clamp_indirect = Some(0.0))),
+            (
+                "clamp_indirect",
+                Box::new(|s| s.clamp_indirect = Some(f32::INFINITY)),
+            ),
             (
                 "noise_threshold",
                 Box::new(|s| s.noise_threshold = Some(0.0)),

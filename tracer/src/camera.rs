@@ -104,4 +104,85 @@ impl Camera {
         let dir = to_world.transform_vector3(dir).normalize();
         Ray { origin, dir, time }
     }
+
+    /// Where the camera at shutter time `time` sees the point `p` of the prepared frame,
+    /// as a film position (the inverse of [`Camera::generate_ray`]); `None` behind a
+    /// perspective camera.
+    pub fn film_position(&self, p: Vec3, time: f32) -> Option<Vec2> {
+        let local = self.to_world_at(time).inverse().transform_point3(p);
+        self.film_of(local, false)
+    }
+
+    /// Where a perspective camera at shutter time `time` sees the direction `dir` (a point
+    /// at infinity, as the environment is); `None` behind it, and for an orthographic
+    /// camera, whose film holds no directions.
+    pub fn film_direction(&self, dir: Vec3, time: f32) -> Option<Vec2> {
+        let local = self.to_world_at(time).inverse().transform_vector3(dir);
+        self.film_of(local, true)
+    }
+
+    /// The film position of camera-space `local`, a point or (`direction`) a direction.
+    fn film_of(&self, local: Vec3, direction: bool) -> Option<Vec2> {
+        let ndc = match self.projection {
+            Projection::Perspective { yfov, .. } => {
+                if local.z >= 0.0 {
+                    return None;
+                }
+                let h = math::tan(0.5 * yfov);
+                Vec2::new(local.x / (h * self.aspect), local.y / h) / -local.z
+            }
+            Projection::Orthographic { .. } if direction => return None,
+            Projection::Orthographic { ymag, .. } => {
+                Vec2::new(local.x / (ymag * self.aspect), local.y / ymag)
+            }
+        };
+        Some(Vec2::new(0.5 * (ndc.x + 1.0), 0.5 * (1.0 - ndc.y)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera(projection: Projection) -> Camera {
+        Camera {
+            projection,
+            to_world: Affine3A::from_rotation_translation(
+                Quat::from_rotation_y(0.3),
+                Vec3::new(0.1, -0.2, 0.3),
+            ),
+            aspect: 1.5,
+            motion: None,
+        }
+    }
+
+    #[test]
+    fn film_position_inverts_generate_ray() {
+        let perspective = Projection::Perspective {
+            yfov: 0.8,
+            aspect_ratio: None,
+            znear: 0.01,
+        };
+        let orthographic = Projection::Orthographic {
+            xmag: 1.0,
+            ymag: 2.0,
+            znear: 0.01,
+        };
+        for projection in [perspective, orthographic] {
+            let cam = camera(projection);
+            for film in [Vec2::new(0.25, 0.75), Vec2::new(0.9, 0.1)] {
+                let ray = cam.generate_ray(film, 0.0);
+                let p = ray.origin + ray.dir * 7.0;
+                let back = cam.film_position(p, 0.0).unwrap();
+                assert!((back - film).abs().max_element() < 1e-5, "{back} {film}");
+                if matches!(projection, Projection::Perspective { .. }) {
+                    let back = cam.film_direction(ray.dir, 0.0).unwrap();
+                    assert!((back - film).abs().max_element() < 1e-5, "{back} {film}");
+                    assert_eq!(cam.film_position(ray.origin - ray.dir, 0.0), None);
+                } else {
+                    assert_eq!(cam.film_direction(ray.dir, 0.0), None);
+                }
+            }
+        }
+    }
 }

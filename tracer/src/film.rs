@@ -4,9 +4,10 @@
 //!
 //! Each pixel also sums its odd-numbered samples apart (a "half buffer"): the difference
 //! between the mean of all samples and the mean of that half estimates the pixel's error,
-//! which adaptive sampling stops on and the `noise` layer reports.
+//! which adaptive sampling stops on and the `noise` layer reports. It sums the squares of
+//! its samples too, for the `variance` layer.
 
-use glam::{Vec3, Vec4};
+use glam::{Vec2, Vec3, Vec4};
 
 /// A rectangle of pixels in a frame; `x`, `y` from the top-left corner.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -97,6 +98,9 @@ pub struct SampleValue {
     pub normal: Vec3,
     /// Distance along the camera's view axis to the first hit; `None` on a miss.
     pub depth: Option<f32>,
+    /// Screen-space motion of what the camera ray saw over the shutter, in pixels (zero
+    /// where nothing in the frame moves).
+    pub motion: Vec2,
     /// Rays traced for this sample (camera, bounce and shadow rays).
     pub rays: u32,
 }
@@ -120,6 +124,10 @@ pub struct TileBuffer {
     pub depth: Vec<f32>,
     /// Number of samples that hit, per pixel.
     pub hits: Vec<u32>,
+    /// Sum of screen-space motions.
+    pub motion: Vec<Vec2>,
+    /// Sum of the squares of RGB radiance.
+    pub square: Vec<Vec3>,
     /// Number of samples kept, per pixel (samples with NaN or infinity are dropped).
     pub samples: Vec<u32>,
     /// Sum of RGB radiance over the kept samples whose index is odd.
@@ -143,6 +151,8 @@ impl TileBuffer {
             normal: vec![Vec3::ZERO; n],
             depth: vec![0.0; n],
             hits: vec![0; n],
+            motion: vec![Vec2::ZERO; n],
+            square: vec![Vec3::ZERO; n],
             samples: vec![0; n],
             half: vec![Vec3::ZERO; n],
             half_samples: vec![0; n],
@@ -159,7 +169,8 @@ impl TileBuffer {
             && s.alpha.is_finite()
             && s.albedo.is_finite()
             && s.normal.is_finite()
-            && s.depth.is_none_or(f32::is_finite);
+            && s.depth.is_none_or(f32::is_finite)
+            && s.motion.is_finite();
         if !finite {
             self.dropped += 1;
             return;
@@ -167,6 +178,8 @@ impl TileBuffer {
         self.beauty[index] += s.radiance.extend(s.alpha);
         self.albedo[index] += s.albedo;
         self.normal[index] += s.normal;
+        self.motion[index] += s.motion;
+        self.square[index] += s.radiance * s.radiance;
         if let Some(d) = s.depth {
             self.depth[index] += d;
             self.hits[index] += 1;
@@ -190,6 +203,20 @@ impl TileBuffer {
         )
     }
 
+    /// The estimated variance of pixel `index`'s mean radiance (the square of its
+    /// standard error), per channel: the samples' unbiased variance over their count;
+    /// [`NO_NOISE_ESTIMATE`] with fewer than two samples.
+    pub fn variance(&self, index: usize) -> Vec3 {
+        let n = self.samples[index];
+        if n < 2 {
+            return Vec3::splat(NO_NOISE_ESTIMATE);
+        }
+        let n = n as f32;
+        let mean = self.beauty[index].truncate() / n;
+        // Rounding can take the difference of two close sums below zero.
+        ((self.square[index] / n - mean * mean) / (n - 1.0)).max(Vec3::ZERO)
+    }
+
     /// Adds another buffer of the same rectangle (another sample range).
     ///
     /// # Panics
@@ -205,6 +232,8 @@ impl TileBuffer {
             self.normal[i] += other.normal[i];
             self.depth[i] += other.depth[i];
             self.hits[i] += other.hits[i];
+            self.motion[i] += other.motion[i];
+            self.square[i] += other.square[i];
             self.samples[i] += other.samples[i];
             self.half[i] += other.half[i];
             self.half_samples[i] += other.half_samples[i];
@@ -224,6 +253,8 @@ impl TileBuffer {
             self.normal[dst..dst + w].copy_from_slice(&tile.normal[src..src + w]);
             self.depth[dst..dst + w].copy_from_slice(&tile.depth[src..src + w]);
             self.hits[dst..dst + w].copy_from_slice(&tile.hits[src..src + w]);
+            self.motion[dst..dst + w].copy_from_slice(&tile.motion[src..src + w]);
+            self.square[dst..dst + w].copy_from_slice(&tile.square[src..src + w]);
             self.samples[dst..dst + w].copy_from_slice(&tile.samples[src..src + w]);
             self.half[dst..dst + w].copy_from_slice(&tile.half[src..src + w]);
             self.half_samples[dst..dst + w].copy_from_slice(&tile.half_samples[src..src + w]);
@@ -244,6 +275,8 @@ impl TileBuffer {
             };
             out.beauty[i] = self.beauty[i] * inv;
             out.albedo[i] = self.albedo[i] * inv;
+            out.motion[i] = self.motion[i] * inv;
+            out.variance[i] = self.variance(i);
             let nrm = self.normal[i];
             out.normal[i] = if nrm.length_squared() > 0.0 {
                 nrm.normalize()
@@ -350,14 +383,20 @@ pub struct Layers {
     /// Estimated relative error per pixel (see [`noise_estimate`];
     /// [`NO_NOISE_ESTIMATE`] where there were too few samples).
     pub noise: Vec<f32>,
+    /// Screen-space motion over the shutter in pixels, x right and y down, averaged over
+    /// the samples (zero where nothing moves).
+    pub motion: Vec<Vec2>,
+    /// Estimated variance of each pixel's RGB (see [`TileBuffer::variance`];
+    /// [`NO_NOISE_ESTIMATE`] where there were too few samples).
+    pub variance: Vec<Vec3>,
     /// The beauty's RGB after a denoiser ran over the whole frame; empty where none did
     /// (the tracer never makes it: tiles and direct renders have none).
     pub denoised: Vec<Vec3>,
 }
 
 impl Layers {
-    /// Black layers for `rect`: depth at [`NO_HIT_DEPTH`], no samples, noise at
-    /// [`NO_NOISE_ESTIMATE`].
+    /// Black layers for `rect`: depth at [`NO_HIT_DEPTH`], no samples, noise and variance
+    /// at [`NO_NOISE_ESTIMATE`].
     pub fn new(rect: TileRect) -> Self {
         let n = rect.area();
         Self {
@@ -368,6 +407,8 @@ impl Layers {
             depth: vec![NO_HIT_DEPTH; n],
             samples: vec![0.0; n],
             noise: vec![NO_NOISE_ESTIMATE; n],
+            motion: vec![Vec2::ZERO; n],
+            variance: vec![Vec3::splat(NO_NOISE_ESTIMATE); n],
             denoised: Vec::new(),
         }
     }
@@ -391,6 +432,8 @@ impl Layers {
             self.depth[dst..dst + w].copy_from_slice(&tile.depth[src..src + w]);
             self.samples[dst..dst + w].copy_from_slice(&tile.samples[src..src + w]);
             self.noise[dst..dst + w].copy_from_slice(&tile.noise[src..src + w]);
+            self.motion[dst..dst + w].copy_from_slice(&tile.motion[src..src + w]);
+            self.variance[dst..dst + w].copy_from_slice(&tile.variance[src..src + w]);
         }
     }
 
@@ -420,6 +463,8 @@ impl Layers {
             out.depth[dst..dst + w].copy_from_slice(&self.depth[src..src + w]);
             out.samples[dst..dst + w].copy_from_slice(&self.samples[src..src + w]);
             out.noise[dst..dst + w].copy_from_slice(&self.noise[src..src + w]);
+            out.motion[dst..dst + w].copy_from_slice(&self.motion[src..src + w]);
+            out.variance[dst..dst + w].copy_from_slice(&self.variance[src..src + w]);
         }
         out
     }
@@ -518,6 +563,31 @@ mod tests {
         assert_eq!(s.mean_noise, Some(f64::from(expected)));
         // Equal halves: no difference, no error.
         assert_eq!(noise_estimate(Vec3::ONE, Vec3::ONE), 0.0);
+    }
+
+    #[test]
+    fn the_variance_is_the_samples_variance_over_their_count() {
+        let mut b = TileBuffer::new(TileRect::new(0, 0, 2, 1));
+        for (i, v) in [1.0, 3.0, 1.0, 3.0].into_iter().enumerate() {
+            let s = SampleValue {
+                radiance: Vec3::new(v, 2.0, -v),
+                motion: Vec2::new(v, 0.5),
+                ..Default::default()
+            };
+            b.add(0, i as u32, &s);
+        }
+        b.add(1, 0, &SampleValue::default());
+        // Mean 2, unbiased variance 4/3 of the samples, 1/3 of their mean; none for a
+        // constant channel; no estimate from one sample.
+        let layers = b.resolve();
+        assert!(
+            (layers.variance[0] - Vec3::new(1.0, 0.0, 1.0) / 3.0)
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        assert_eq!(layers.variance[1], Vec3::splat(NO_NOISE_ESTIMATE));
+        assert_eq!(layers.motion[0], Vec2::new(2.0, 0.5));
     }
 
     #[test]

@@ -5,9 +5,11 @@
 use glam::{Vec2, Vec3};
 
 mod carrier;
+mod screen_motion;
 mod surface;
 
 use carrier::{Carrier, Colour, Rgb};
+use screen_motion::screen_motion;
 use surface::{surface_point, SurfacePoint};
 
 use crate::bsdf::{Bsdf, BsdfAt, SurfaceParams};
@@ -62,6 +64,25 @@ fn hero_alone<W: Carrier>(
 }
 
 /// The power heuristic with exponent 2 (Veach 1997).
+/// Light `c` reaching the camera, clamped to `limit` in its largest RGB channel where it is
+/// `indirect` (it left the light and met at least two surfaces before the camera) and the
+/// settings ask for it: Cycles' "clamp indirect", which trades bias for the fireflies of
+/// rare bright paths.
+#[inline(always)]
+fn clamped<W: Carrier>(carrier: &W, c: W::Colour, indirect: bool, limit: Option<f32>) -> W::Colour {
+    match limit {
+        Some(limit) if indirect => {
+            let largest = carrier.to_rgb(c).max_element();
+            if largest > limit {
+                c * (limit / largest)
+            } else {
+                c
+            }
+        }
+        _ => c,
+    }
+}
+
 fn power_heuristic(a: f32, b: f32) -> f32 {
     let (a2, b2) = (a * a, b * b);
     if a2.is_infinite() {
@@ -337,10 +358,14 @@ fn trace_path<W: Carrier>(
                 } else {
                     power_heuristic(s.prev_pdf, frame.lights.pdf_environment(ray.dir))
                 };
-                *radiance += s.throughput * s.carrier.light(le, None) * w;
+                let c = s.throughput * s.carrier.light(le, None) * w;
+                *radiance += clamped(&s.carrier, c, depth >= 2, settings.clamp_indirect);
             }
             if !walk.albedo_done {
                 out.albedo = le;
+            }
+            if depth == 0 && frame.motion {
+                out.motion = screen_motion(frame, &ray, None);
             }
             return;
         };
@@ -357,6 +382,9 @@ fn trace_path<W: Carrier>(
             out.alpha = 1.0;
             out.normal = sp.frame.z;
             out.depth = Some((sp.p - ray.origin).dot(view_axis).abs());
+            if frame.motion {
+                out.motion = screen_motion(frame, &ray, Some(&hit));
+            }
         }
 
         let prepared = &frame.materials[sp.material_index as usize];
@@ -374,7 +402,8 @@ fn trace_path<W: Carrier>(
                 power_heuristic(s.prev_pdf, light_pdf)
             };
             let spectrum = light_spectrum(frame, prepared.emission_spectrum);
-            *radiance += s.throughput * s.carrier.light(le, spectrum) * w;
+            let c = s.throughput * s.carrier.light(le, spectrum) * w;
+            *radiance += clamped(&s.carrier, c, depth >= 2, settings.clamp_indirect);
         }
 
         // The material's own BSDF where textures and vertex colour leave it as it is.
@@ -480,7 +509,9 @@ fn trace_path<W: Carrier>(
                             } else {
                                 power_heuristic(ls.pdf, bsdf_pdf)
                             };
-                            *radiance += s.throughput * s.carrier.weight(f) * le * (w / ls.pdf);
+                            let c = s.throughput * s.carrier.weight(f) * le * (w / ls.pdf);
+                            *radiance +=
+                                clamped(&s.carrier, c, depth >= 1, settings.clamp_indirect);
                         }
                     }
                 }

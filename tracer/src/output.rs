@@ -188,6 +188,8 @@ fn check_lengths(layers: &Layers) -> Result<(), OutputError> {
         ("depth", layers.depth.len()),
         ("samples", layers.samples.len()),
         ("noise", layers.noise.len()),
+        ("motion", layers.motion.len()),
+        ("variance", layers.variance.len()),
     ];
     let denoised = match layers.denoised.len() {
         0 => None,

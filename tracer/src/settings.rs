@@ -112,6 +112,13 @@ pub struct RenderSettings {
     /// image rather than flicker (production's fix; Blender's "animated seed" off). Each
     /// frame's own pattern by default.
     pub fixed_pattern: bool,
+    /// Clamps light that reaches the camera after two or more surfaces (every bounce's
+    /// light but the first surface's direct light) to at most this in its largest RGB
+    /// channel, per path contribution: Cycles' "clamp indirect". It darkens what it
+    /// clamps (bias) to remove the fireflies of rare bright paths, such as caustics seen
+    /// on a diffuse wall; `tessera bench clamp` measures both. `None` (the default)
+    /// clamps nothing.
+    pub clamp_indirect: Option<f32>,
 }
 
 impl RenderSettings {
@@ -124,12 +131,23 @@ impl RenderSettings {
         russian_roulette: Some(3),
         spectral: false,
         fixed_pattern: false,
+        clamp_indirect: None,
     };
 }
 
 impl Default for RenderSettings {
     fn default() -> Self {
         Self::DEFAULT
+    }
+}
+
+/// Checks a [`RenderSettings::clamp_indirect`]: a finite number above zero (zero would
+/// drop every bounce's light; use a smaller `max_depth` for that).
+pub fn check_clamp(limit: f32) -> Result<(), String> {
+    if limit.is_finite() && limit > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("clamp {limit} must be a finite number above 0"))
     }
 }
 

@@ -321,6 +321,49 @@ fn camera_motion_morphing_and_skinning_blur_like_rigid_motion() {
     }
 }
 
+/// The mean motion vector over the pixels the slab covers for the whole shutter
+/// (columns 28 to 35: it covers 20-35 at shutter open and 28-43 at close).
+fn slab_motion(layers: &Layers) -> (f32, f32, f32) {
+    let pixels: Vec<_> = (0..HEIGHT as usize)
+        .flat_map(|y| (28..36).map(move |x| y * WIDTH as usize + x))
+        .collect();
+    let mean = pixels.iter().map(|&i| layers.motion[i]).sum::<glam::Vec2>() / pixels.len() as f32;
+    let spread = pixels
+        .iter()
+        .map(|&i| (layers.motion[i] - mean).abs().max_element())
+        .fold(0.0, f32::max);
+    (mean.x, mean.y, spread)
+}
+
+#[test]
+fn motion_vectors_give_the_pixels_moved_over_the_shutter() {
+    // The slab moves 0.5 units = 8 pixels to the right while the shutter is open, however
+    // it is made to move; the black environment behind an orthographic camera stays put.
+    let moved = (SPEED / FPS / PIXEL) as f32;
+    for (name, scene) in [
+        ("rigid", rigid()),
+        ("moving camera", moving_camera()),
+        ("morph target", morphed()),
+        ("skin", skinned()),
+    ] {
+        let layers = render(&prepare(scene, HALF_OPEN), 4);
+        let (x, y, spread) = slab_motion(&layers);
+        println!("{name}: motion ({x:.4}, {y:.4}) px, spread {spread:.2e}");
+        assert!(
+            (x - moved).abs() < 1e-3 && y.abs() < 1e-3 && spread < 1e-3,
+            "{name}: ({x}, {y}) ± {spread}, expected ({moved}, 0)"
+        );
+        assert_eq!(
+            layers.motion[0],
+            glam::Vec2::ZERO,
+            "{name}: the environment"
+        );
+    }
+    // A closed shutter sees no motion.
+    let still = render(&prepare(rigid(), Shutter::default()), 4);
+    assert!(still.motion.iter().all(|m| *m == glam::Vec2::ZERO));
+}
+
 #[test]
 fn explicit_motion_steps_are_used_and_checked() {
     let options = |steps| FrameOptions {

@@ -497,6 +497,106 @@ fn adaptive_sampling_meets_its_noise_threshold_on_average() {
 }
 
 #[test]
+fn the_variance_layer_bounds_the_squared_error_of_the_pixels() {
+    let f = cornell_frame(1);
+    let reference = render(&f, &RenderSettings::default(), 4096).resolve();
+    for spp in [4, 16, 64] {
+        let noisy = render(&f, &RenderSettings::default(), spp).resolve();
+        // Per channel, summed over every pixel: the squared error against the reference
+        // and the layer's estimate of it.
+        let (mut squared, mut estimated) = (0.0, 0.0);
+        for i in 0..noisy.beauty.len() {
+            let error = noisy.beauty[i].truncate() - reference.beauty[i].truncate();
+            squared += f64::from((error * error).element_sum());
+            estimated += f64::from(noisy.variance[i].element_sum());
+        }
+        let ratio = estimated / squared;
+        println!("{spp} spp: estimated variance {estimated:.3}, squared error {squared:.3}, ratio {ratio:.1}");
+        // Independent samples would make the ratio 1; the stratified sampler's error is
+        // lower (and falls faster with spp), so the layer bounds it from above.
+        assert!(ratio > 1.0, "{spp} spp: ratio {ratio:.2}");
+    }
+}
+
+#[test]
+fn clamp_indirect_darkens_only_indirect_light_and_removes_fireflies() {
+    use tracer::integrator::trace_sample;
+
+    let f = frame(tracer::demo::demo_scene(), 32, 24);
+    let free = RenderSettings::default();
+    let clamped = RenderSettings {
+        clamp_indirect: Some(1.0),
+        ..free
+    };
+    // Direct light alone (one bounce) is never clamped, and a limit above every path's
+    // light changes nothing, to the bit.
+    let direct = RenderSettings {
+        max_depth: 1,
+        ..free
+    };
+    let direct_clamped = RenderSettings {
+        clamp_indirect: Some(1e-3),
+        ..direct
+    };
+    assert_eq!(render(&f, &direct, 4), render(&f, &direct_clamped, 4));
+    let huge = RenderSettings {
+        clamp_indirect: Some(f32::MAX),
+        ..free
+    };
+    assert_eq!(render(&f, &free, 4), render(&f, &huge, 4));
+
+    // Sample by sample, clamping only takes light away.
+    let mut brightest = (0.0f32, 0.0f32);
+    let mut fewer = 0;
+    for (x, y, i) in (0..32)
+        .flat_map(|x| (0..24).map(move |y| (x, y, 0..16)))
+        .flat_map(|(x, y, r)| r.map(move |i| (x, y, i)))
+    {
+        let a = trace_sample(&f, &free, x, y, i).radiance;
+        let b = trace_sample(&f, &clamped, x, y, i).radiance;
+        assert!(
+            b.cmple(a + 1e-6).all(),
+            "pixel {x},{y} sample {i}: {b} above {a}"
+        );
+        fewer += usize::from(b != a);
+        brightest = (
+            brightest.0.max(a.max_element()),
+            brightest.1.max(b.max_element()),
+        );
+    }
+    println!(
+        "clamped {fewer} of {} samples; brightest {brightest:?}",
+        32 * 24 * 16
+    );
+    assert!(fewer > 0 && brightest.1 < brightest.0);
+
+    // The fireflies go: fewer noisy pixels (the rest are the lamp's edges, seen directly),
+    // for a few percent of the light (the caustics the clamped paths carried).
+    let (a, b) = (
+        render(&f, &free, 16).resolve(),
+        render(&f, &clamped, 16).resolve(),
+    );
+    let noisy = |l: &Layers| l.variance.iter().filter(|v| v.max_element() > 0.01).count();
+    let light = |l: &Layers| {
+        l.beauty
+            .iter()
+            .map(|b| f64::from(b.truncate().element_sum()))
+            .sum::<f64>()
+    };
+    let kept = light(&b) / light(&a);
+    println!(
+        "noisy pixels {} -> {}; clamp 1 keeps {:.1}% of the light",
+        noisy(&a),
+        noisy(&b),
+        kept * 100.0
+    );
+    assert!(
+        noisy(&b) < noisy(&a) && kept > 0.9 && kept < 1.0,
+        "kept {kept}"
+    );
+}
+
+#[test]
 fn adaptive_sampling_is_bit_identical_under_any_tile_split() {
     let f = demo_frame();
     let settings = RenderSettings {

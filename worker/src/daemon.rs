@@ -204,7 +204,7 @@ enum Fate {
 /// What a lease produced, to upload.
 enum Product {
     /// A rendered tile.
-    Tile(TileBuffer),
+    Tile(Box<TileBuffer>),
     /// A frame's denoised RGB.
     Denoised(Vec<glam::Vec3>),
     /// The job's MP4.
@@ -561,7 +561,7 @@ impl Daemon {
         match lease.kind {
             TaskKind::Render => {
                 let (tile, ms) = self.render(lease, cancel).await?;
-                Ok((Product::Tile(tile), ms))
+                Ok((Product::Tile(Box::new(tile)), ms))
             }
             TaskKind::Denoise => {
                 let (denoised, ms) = self.denoise(worker, lease).await?;

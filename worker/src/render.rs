@@ -54,6 +54,7 @@ pub fn settings(lease: &Lease) -> RenderSettings {
         max_depth: lease.max_depth,
         seed: lease.seed,
         fixed_pattern: lease.fixed_pattern,
+        clamp_indirect: lease.clamp_indirect,
         ..RenderSettings::DEFAULT
     }
 }
@@ -175,6 +176,7 @@ mod tests {
             max_depth: 5,
             seed: 9,
             fixed_pattern: true,
+            clamp_indirect: Some(4.0),
             noise_threshold: Some(0.02),
             min_spp: 6,
             tile: Rect {
@@ -208,6 +210,7 @@ mod tests {
                 max_depth: 5,
                 seed: 9,
                 fixed_pattern: true,
+                clamp_indirect: Some(4.0),
                 ..RenderSettings::DEFAULT
             }
         );

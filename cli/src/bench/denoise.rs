@@ -15,7 +15,7 @@ use tracer::output::{aces_filmic, srgb_oetf};
 use tracer::render::{prepare_frame, FrameOptions, PreparedFrame, RenderSettings};
 use tracer::scene::Scene;
 
-use super::scenes::{mse, rel_mse, render};
+use super::scenes::{display_mse, mse, rel_mse, render};
 use super::{REFERENCE_SEED, SEED};
 use crate::args::parse_size;
 
@@ -134,7 +134,7 @@ fn demo_frame(
 }
 
 /// `layers` with the denoiser's output as its beauty.
-fn denoised(oidn: &post::Oidn, layers: &Layers) -> anyhow::Result<(Layers, f64)> {
+pub(super) fn denoised(oidn: &post::Oidn, layers: &Layers) -> anyhow::Result<(Layers, f64)> {
     let t = Instant::now();
     let rgb = post::denoise_layers(oidn, layers, 0)?;
     let seconds = t.elapsed().as_secs_f64();
@@ -143,27 +143,6 @@ fn denoised(oidn: &post::Oidn, layers: &Layers) -> anyhow::Result<(Layers, f64)>
         *b = d.extend(b.w);
     }
     Ok((out, seconds))
-}
-
-/// MSE of what the previews show (ACES filmic, then sRGB, 0 to 1): the error a viewer
-/// sees. Plain MSE is decided by a few fireflies hundreds of times the walls' radiance,
-/// relative MSE by the noise of dark pixels; a denoised frame trades the two differently
-/// (it spreads fireflies, and smooths dark noise away), so neither alone compares it
-/// fairly with an undenoised one.
-fn display_mse(a: &Layers, reference: &Layers) -> f64 {
-    let show = |v: f32| f64::from(srgb_oetf(aces_filmic(v)));
-    let sum: f64 = a
-        .beauty
-        .iter()
-        .zip(&reference.beauty)
-        .map(|(x, r)| {
-            (0..3)
-                .map(|c| (show(x[c]) - show(r[c])).powi(2))
-                .sum::<f64>()
-                / 3.0
-        })
-        .sum();
-    sum / a.beauty.len() as f64
 }
 
 /// For each target spp, the fewest tried spp whose denoised frame's display MSE is at

@@ -427,6 +427,7 @@ fn tile_pixels(rect: TileRect, noise: bool) -> TileBuffer {
             albedo: v3(),
             normal: (v3() - 0.5).normalize_or_zero(),
             depth: Some(1.0 + v3().x * 10.0),
+            motion: (v3().truncate() - 0.5) * 8.0,
             rays: 1,
         };
         tile.add(i, 0, &sample);

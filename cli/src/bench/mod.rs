@@ -8,7 +8,7 @@
 //! against light the reference lacks or against its own samples.
 //!
 //! Sections that run alone, one file each: `farm`, `overhead` (scaling.rs), `cornell`,
-//! `rays`, `features`, `spectral`, `denoise`.
+//! `rays`, `features`, `spectral`, `denoise`, `clamp`.
 
 use std::path::{Path, PathBuf};
 
@@ -25,6 +25,7 @@ use features::FeatureCost;
 use rays::BigMesh;
 use scaling::{FarmCosts, Work};
 
+pub mod clamp;
 pub mod cornell;
 pub mod denoise;
 #[cfg(feature = "embree")]
@@ -88,6 +89,9 @@ pub enum BenchCommand {
     /// needs to match an undenoised 256- or 1024-spp frame, and the flicker of denoised
     /// animation with and without the same sampling pattern on every frame.
     Denoise(denoise::DenoiseArgs),
+    /// What `--clamp-indirect` buys on the demo: for each limit, the light it keeps (its
+    /// bias), the noise left at the demo's 16 spp, and both before and after denoising.
+    Clamp(clamp::ClampArgs),
 }
 
 /// The generated mesh is a grid of this many quads a side: 1,002,528 triangles.
@@ -356,6 +360,14 @@ pub fn markdown(r: &Report) -> String {
             RR_HEAD,
             &s.rr_sweep,
         );
+        out += &format!(
+            "\nClamping indirect light (`--clamp-indirect`, {} spp, depth {SWEEP_DEPTH}): the \
+             light each limit keeps and the bias it leaves (its image at {} spp against the \
+             reference), the noise left (against that image) and both together:\n\n{}",
+            s.fixed_spp,
+            s.clamp_converged_spp,
+            clamp::table(&s.clamp_sweep, s.fixed_spp, s.clamp_converged_spp)
+        );
         table(
             &mut out,
             &format!(
@@ -437,6 +449,7 @@ mod tests {
         assert_eq!(s.spp_sweep.len(), 4);
         assert_eq!(s.depth_sweep.len(), 6);
         assert_eq!(s.rr_sweep.len(), 5);
+        assert_eq!(s.clamp_sweep.len(), clamp::LIMITS.len());
         assert_eq!(s.motion_sweep.len(), 6);
         assert_eq!(s.presets.len(), 3);
         let first = s.spp_sweep[0].rmse;
@@ -457,6 +470,7 @@ mod tests {
         assert!(text.contains("### motion-blur (8x8)"), "{text}");
         assert!(text.contains("| final | 1024 | 12 | 0.01 |"), "{text}");
         assert!(text.contains("| never | "), "{text}");
+        assert!(text.contains("| 0.25 | "), "{text}");
         let json: serde_json::Value = serde_json::to_value(&report).unwrap();
         assert_eq!(json["scenes"][0]["spp_sweep"][3]["value"], 64);
         assert!(text

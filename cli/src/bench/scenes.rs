@@ -11,11 +11,13 @@ use serde::Serialize;
 use proto::job::Quality;
 use tracer::film::{Layers, SampleRange, TileRect};
 use tracer::motion::Shutter;
+use tracer::output::{aces_filmic, srgb_oetf};
 use tracer::render::{
     prepare_frame, render_region, FrameOptions, NoiseTarget, PreparedFrame, RenderSettings,
 };
 use tracer::scene::Scene;
 
+use super::clamp::{clamp_sweep, ClampPoint};
 use super::rays::{self, RayRate};
 use super::{REFERENCE_SEED, RR_NEVER, SEED, SWEEP_DEPTH, TARGET_RMSE};
 
@@ -54,6 +56,10 @@ pub struct SceneReport {
     /// The first bounce at which Russian roulette may end a path against time and error,
     /// at `fixed_spp` and the sweep's depth; [`RR_NEVER`] never plays it.
     pub rr_sweep: Vec<Point>,
+    /// The clamp on indirect light against its bias and noise, at `fixed_spp`.
+    pub clamp_sweep: Vec<ClampPoint>,
+    /// The spp of the clamped images that measure the clamp's bias.
+    pub clamp_converged_spp: u32,
     /// Motion steps against blur error, where the scene moves.
     pub motion_sweep: Vec<Point>,
     /// The quality presets.
@@ -106,6 +112,27 @@ pub(super) fn mse(a: &Layers, reference: &Layers) -> f64 {
         .iter()
         .zip(&reference.beauty)
         .map(|(x, r)| (x.truncate() - r.truncate()).as_dvec3().length_squared() / 3.0)
+        .sum();
+    sum / a.beauty.len() as f64
+}
+
+/// MSE of what the previews show (ACES filmic, then sRGB, 0 to 1): the error a viewer
+/// sees. Plain MSE is decided by a few fireflies hundreds of times the walls' radiance,
+/// relative MSE by the noise of dark pixels; a denoised frame trades the two differently
+/// (it spreads fireflies, and smooths dark noise away), so neither alone compares it
+/// fairly with an undenoised one.
+pub(super) fn display_mse(a: &Layers, reference: &Layers) -> f64 {
+    let show = |v: f32| f64::from(srgb_oetf(aces_filmic(v)));
+    let sum: f64 = a
+        .beauty
+        .iter()
+        .zip(&reference.beauty)
+        .map(|(x, r)| {
+            (0..3)
+                .map(|c| (show(x[c]) - show(r[c])).powi(2))
+                .sum::<f64>()
+                / 3.0
+        })
         .sum();
     sum / a.beauty.len() as f64
 }
@@ -316,6 +343,16 @@ pub(super) fn measure_scene(
         })
         .collect();
 
+    let clamp_converged_spp = (reference_spp / 4).max(fixed_spp);
+    let clamp_sweep = clamp_sweep(
+        &frame,
+        settings,
+        &reference,
+        fixed_spp,
+        clamp_converged_spp,
+        None,
+    )?;
+
     // Motion steps: every render uses the same seed and spp as one with many steps, so
     // their difference is the interpolation's error more than noise.
     let moves = subject.options.shutter.open != subject.options.shutter.close;
@@ -385,6 +422,8 @@ pub(super) fn measure_scene(
         fixed_spp,
         depth_sweep,
         rr_sweep,
+        clamp_sweep,
+        clamp_converged_spp,
         motion_sweep,
         presets,
     })

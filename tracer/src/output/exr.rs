@@ -27,10 +27,27 @@ use crate::film::{Layers, TileRect};
 
 /// The channels of a Tessera EXR, in the order of [`Layers`]' fields: beauty `R G B A`
 /// (linear Rec.709, alpha is coverage), albedo, world-space shading normal, depth `Z`,
-/// samples taken per pixel and the estimated relative error `noise`.
-pub const CHANNEL_NAMES: [&str; 13] = [
-    "R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z", "samples",
+/// samples taken per pixel, the estimated relative error `noise`, the screen-space motion
+/// over the shutter in pixels (x right, y down) and each pixel's estimated variance.
+pub const CHANNEL_NAMES: [&str; 18] = [
+    "R",
+    "G",
+    "B",
+    "A",
+    "albedo.R",
+    "albedo.G",
+    "albedo.B",
+    "N.X",
+    "N.Y",
+    "N.Z",
+    "Z",
+    "samples",
     "noise",
+    "motion.X",
+    "motion.Y",
+    "variance.R",
+    "variance.G",
+    "variance.B",
 ];
 
 /// The channels of the denoised beauty, which only a whole frame can have (a denoiser
@@ -38,7 +55,7 @@ pub const CHANNEL_NAMES: [&str; 13] = [
 pub const DENOISED_CHANNELS: [&str; 3] = ["denoised.R", "denoised.G", "denoised.B"];
 
 /// Where each of [`CHANNEL_NAMES`] lives in [`Layers`].
-const SLOTS: [Slot; 13] = [
+const SLOTS: [Slot; 18] = [
     Slot::Beauty(0),
     Slot::Beauty(1),
     Slot::Beauty(2),
@@ -52,6 +69,11 @@ const SLOTS: [Slot; 13] = [
     Slot::Depth,
     Slot::Samples,
     Slot::Noise,
+    Slot::Motion(0),
+    Slot::Motion(1),
+    Slot::Variance(0),
+    Slot::Variance(1),
+    Slot::Variance(2),
 ];
 
 /// A layer of a Tessera EXR: the channels of one of [`Layers`]' fields.
@@ -69,29 +91,37 @@ pub enum ImageLayer {
     Samples,
     /// `noise`.
     Noise,
+    /// `motion.X motion.Y`.
+    Motion,
+    /// `variance.R variance.G variance.B`.
+    Variance,
     /// `denoised.R denoised.G denoised.B`: written where the [`Layers`] have it.
     Denoised,
 }
 
 impl ImageLayer {
     /// The layers the tracer renders, in file order: every tile has them.
-    pub const RENDERED: [ImageLayer; 6] = [
+    pub const RENDERED: [ImageLayer; 8] = [
         ImageLayer::Beauty,
         ImageLayer::Albedo,
         ImageLayer::Normal,
         ImageLayer::Depth,
         ImageLayer::Samples,
         ImageLayer::Noise,
+        ImageLayer::Motion,
+        ImageLayer::Variance,
     ];
 
     /// Every layer, in file order.
-    pub const ALL: [ImageLayer; 7] = [
+    pub const ALL: [ImageLayer; 9] = [
         ImageLayer::Beauty,
         ImageLayer::Albedo,
         ImageLayer::Normal,
         ImageLayer::Depth,
         ImageLayer::Samples,
         ImageLayer::Noise,
+        ImageLayer::Motion,
+        ImageLayer::Variance,
         ImageLayer::Denoised,
     ];
 }
@@ -105,6 +135,8 @@ pub(super) enum Slot {
     Depth,
     Samples,
     Noise,
+    Motion(usize),
+    Variance(usize),
     Denoised(usize),
 }
 
@@ -127,6 +159,8 @@ impl Slot {
             Slot::Depth => ImageLayer::Depth,
             Slot::Samples => ImageLayer::Samples,
             Slot::Noise => ImageLayer::Noise,
+            Slot::Motion(_) => ImageLayer::Motion,
+            Slot::Variance(_) => ImageLayer::Variance,
             Slot::Denoised(_) => ImageLayer::Denoised,
         }
     }
@@ -140,6 +174,8 @@ impl Slot {
             Slot::Depth => layers.depth[i],
             Slot::Samples => layers.samples[i],
             Slot::Noise => layers.noise[i],
+            Slot::Motion(c) => layers.motion[i][c],
+            Slot::Variance(c) => layers.variance[i][c],
             Slot::Denoised(c) => layers.denoised[i][c],
         }
     }
@@ -159,6 +195,8 @@ impl Slot {
             Slot::Depth => layers.depth[i] = v,
             Slot::Samples => layers.samples[i] = v,
             Slot::Noise => layers.noise[i] = v,
+            Slot::Motion(c) => layers.motion[i][c] = v,
+            Slot::Variance(c) => layers.variance[i][c] = v,
             Slot::Denoised(c) => layers.denoised[i][c] = v,
         }
     }

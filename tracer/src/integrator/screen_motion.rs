@@ -1,0 +1,32 @@
+//! Motion vectors: how far the first thing a camera sample sees moves across the image
+//! over the shutter, for compositors (vector motion blur) and temporal denoisers.
+
+use glam::Vec2;
+
+use crate::frame::PreparedFrame;
+use crate::geometry::{barycentric, Hit, Ray};
+
+/// The screen-space motion, in pixels (x to the right, y down: the image's rows), from
+/// shutter open to shutter close of the point the camera ray `ray` hit (`hit`), or of the
+/// environment's direction where it hit nothing. The hit point keeps its barycentric
+/// place on its triangle, which moves and deforms as the frame says; the camera moves
+/// too. Zero where the point is behind the camera at either end of the shutter, and for
+/// the environment seen by an orthographic camera.
+pub(crate) fn screen_motion(frame: &PreparedFrame, ray: &Ray, hit: Option<&Hit>) -> Vec2 {
+    let camera = &frame.camera;
+    let film_at = |time: f32| match hit {
+        Some(hit) => {
+            let tri = frame.triangle_at(hit.instance, hit.triangle, time);
+            let [a, b, c] = tri.positions;
+            let p = barycentric(a, b, c, hit.b1, hit.b2);
+            camera.film_position(tri.to_world().transform_point3(p), time)
+        }
+        None => camera.film_direction(ray.dir, time),
+    };
+    match (film_at(0.0), film_at(1.0)) {
+        (Some(open), Some(close)) => {
+            (close - open) * Vec2::new(frame.width as f32, frame.height as f32)
+        }
+        _ => Vec2::ZERO,
+    }
+}
