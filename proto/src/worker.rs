@@ -47,6 +47,14 @@ pub struct WorkerRegistration {
     /// encode tasks.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub encoder: Option<String>,
+    /// What its denoiser took per megapixel of frame when it started (milliseconds): the
+    /// time-budget planner's figure for the denoise step until the worker has denoised.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub denoise_ms_per_megapixel: Option<u64>,
+    /// What its encoder took per megapixel of frames when it started (milliseconds), the
+    /// same for the encode step.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encode_ms_per_megapixel: Option<u64>,
 }
 
 /// The answer to a registration: the worker's id and the timing it must keep.

@@ -9,6 +9,12 @@
 //! most doubles the frame's samples, so each pass buys about the same relative error, and
 //! it takes at most the frame's share of the time left, so late passes stay small enough to
 //! go round the frames.
+//!
+//! The steps after rendering come last: once no pass fits and every frame is assembled
+//! with all of its passes, the job finishes (denoises every frame, then encodes its video,
+//! where it asks for them) and takes no more passes. The plan keeps their time free before
+//! the deadline, from what the steps take on the live workers that can take them
+//! ([`workers::step_ms_per_mp`]).
 
 use proto::{BudgetPlan, JobSpec};
 use rusqlite::{Connection, Transaction};
@@ -16,7 +22,8 @@ use tracer::film::SampleRange;
 
 use crate::config::Timing;
 use crate::db::plans::{self, Open};
-use crate::db::{jobs, workers};
+use crate::db::workers::{self, Step};
+use crate::db::{frames, jobs, tasks};
 use crate::error::Result;
 use crate::state::JobControl;
 
@@ -75,6 +82,35 @@ fn seconds_to_finish(open: &Open, speed: &Speed) -> f64 {
     open.samples / speed.total + open.largest / speed.slowest
 }
 
+/// Seconds the steps after rendering will take at the end of `spec`'s job: every frame
+/// denoised, shared among the live workers that denoise (the last frame on the slowest),
+/// then the video on the slowest encoder. A step no live worker can take counts nothing
+/// (the job waits for one, and says so in its status).
+fn finishing_seconds(tx: &Transaction, job: u64, spec: &JobSpec, live_since: i64) -> Result<f64> {
+    let frame_mp = f64::from(spec.width) * f64::from(spec.height) / 1e6;
+    let frames = frames::counts(tx, job)?.0 as f64;
+    let mut ms = 0.0;
+    if spec.denoise {
+        let each = workers::step_ms_per_mp(tx, job, Step::Denoise, live_since)?;
+        if !each.is_empty() {
+            let shared = each.iter().map(|m| 1.0 / m).sum::<f64>();
+            let slowest = each.iter().copied().fold(0.0, f64::max);
+            ms += (frames - 1.0).max(0.0) * frame_mp / shared + frame_mp * slowest;
+        }
+    }
+    if spec.video {
+        let each = workers::step_ms_per_mp(tx, job, Step::Encode, live_since)?;
+        ms += frames * frame_mp * each.iter().copied().fold(0.0, f64::max);
+    }
+    Ok(ms / 1000.0 / SPEED_MARGIN)
+}
+
+/// Whether a time-budget job has started its steps after rendering (see the module
+/// documentation): it has a denoise or an encode task.
+fn finishing(tx: &Transaction, job: u64) -> Result<bool> {
+    Ok(tasks::steps_count(tx, job)? > 0)
+}
+
 /// Plans a time-budget job again at `now` (see the module documentation): adds the passes
 /// that fit and stores the plan for the job's status. Workers seen since `live_since` count
 /// as live; the job holds at most `max_tasks` tasks. Does nothing for other jobs.
@@ -94,8 +130,10 @@ pub fn replan(
     let deadline_ms = created_ms + (budget * 1000.0).round() as i64;
     // The last frames are assembled after their last tiles come in: plan to end a little
     // before the deadline.
-    let plan_end_ms =
-        deadline_ms - (budget * RESERVE_FRACTION * 1000.0).clamp(250.0, 30_000.0) as i64;
+    let finish_s = finishing_seconds(tx, job, spec, live_since)?;
+    let plan_end_ms = deadline_ms
+        - (budget * RESERVE_FRACTION * 1000.0).clamp(250.0, 30_000.0) as i64
+        - (finish_s * 1000.0).round() as i64;
     let speed = measure(tx, job, live_since)?;
     let mut open = plans::open_work(tx, job)?;
     let first_spp = spec.min_spp.unwrap_or(1).max(1);
@@ -103,6 +141,8 @@ pub fn replan(
 
     let stage = if control != JobControl::Active {
         format!("{}: no passes added", control.as_str())
+    } else if finishing(tx, job)? {
+        finish(tx, job, spec)?
     } else if open.first_pass_queued > 0 {
         format!("first pass: every frame at {first_spp} spp")
     } else if speed.measured == 0 {
@@ -156,7 +196,9 @@ pub fn replan(
         // The farm slowed (a worker left): passes nobody started that would end after
         // the deadline go, newest first.
         let mut withdrawn = 0;
-        while now as f64 + seconds_to_finish(&open, &speed) * 1000.0 > deadline_ms as f64 {
+        while now as f64 + (seconds_to_finish(&open, &speed) + finish_s) * 1000.0
+            > deadline_ms as f64
+        {
             if !plans::withdraw_unstarted_pass(tx, job, frame_pixels)? {
                 break;
             }
@@ -166,11 +208,18 @@ pub fn replan(
         if withdrawn > 0 {
             stage = format!("slowed down: {withdrawn} pass(es) nobody started were withdrawn");
         }
+        // Nothing more fits, nothing is open and every frame has all of its passes: the
+        // steps after rendering begin.
+        let ended = stage.starts_with("stopped") || stage.starts_with("done");
+        let idle = open.queued == 0 && open.samples == 0.0;
+        if (spec.denoise || spec.video) && ended && idle && !frames::any_needs_assembly(tx, job)? {
+            stage = finish(tx, job, spec)?;
+        }
         stage
     };
     let passes_added = plans::passes_added(tx, job)?;
     let predicted_end_ms = (speed.measured > 0)
-        .then(|| now + (seconds_to_finish(&open, &speed) * 1000.0).round() as i64);
+        .then(|| now + ((seconds_to_finish(&open, &speed) + finish_s) * 1000.0).round() as i64);
     let plan = BudgetPlan {
         budget_seconds: budget,
         deadline_ms,
@@ -182,6 +231,24 @@ pub fn replan(
         stage,
     };
     jobs::set_budget_plan(tx, job, &plan)
+}
+
+/// The steps after rendering of a job whose passes are over: a denoise task for every
+/// assembled frame that has none (a frame assembled later gets its own at the next
+/// plan), then the encode task once every frame is finished; what it does, for the plan.
+fn finish(tx: &Transaction, job: u64, spec: &JobSpec) -> Result<String> {
+    for frame in frames::assembled(tx, job)? {
+        crate::denoising::queue(tx, job, frame, spec)?;
+    }
+    crate::encoding::queue_if_complete(tx, job, spec)?;
+    let steps: Vec<&str> = [
+        (spec.denoise, "denoising every frame"),
+        (spec.video, "the video"),
+    ]
+    .into_iter()
+    .filter_map(|(on, what)| on.then_some(what))
+    .collect();
+    Ok(format!("finishing: {}", steps.join(", then ")))
 }
 
 /// [`replan`] with the scheduler's settings.

@@ -330,8 +330,12 @@ pub fn mark_assembled(
     frames::set_assembled(&tx, job, frame, now, reached)?;
     log(&tx, now, Some(job), "frame_assembled", &frame.to_string())?;
     let spec = jobs::spec(&tx, job)?;
-    crate::denoising::queue(&tx, job, frame, &spec)?;
-    crate::encoding::queue_if_complete(&tx, job, &spec)?;
+    if spec.time_budget.is_none() {
+        crate::denoising::queue(&tx, job, frame, &spec)?;
+        crate::encoding::queue_if_complete(&tx, job, &spec)?;
+    }
+    // A time-budget job's frames get more passes: its planner starts the steps after
+    // rendering once they are over.
     budget::replan_with(&tx, job, now, timing)?;
     jobs::update_finished(&tx, job, now)?;
     tx.commit()?;
@@ -448,6 +452,7 @@ mod tests {
                     tags: &[],
                     denoiser: None,
                     encoder: None,
+                    step_ms_per_mp: [None; 2],
                 },
                 credential: None,
             };

@@ -340,15 +340,6 @@ pub fn plan(mut spec: JobSpec, scene: &SceneInfo, max_tasks: u64) -> Result<Plan
                 ),
             );
         }
-        if spec.denoise {
-            // A budget frame is assembled again after each pass it gets; the planner does
-            // not yet count a denoise step per frame (issue 29).
-            return bad(
-                "denoise",
-                "cannot be combined with a time_budget yet: denoise the frames afterwards \
-                 (`tessera render --denoise`, or a job without a budget)",
-            );
-        }
         match spec.min_spp {
             Some(m) if m == 0 || m > spec.spp => {
                 return bad(
@@ -676,13 +667,6 @@ mod tests {
                 Box::new(|s| {
                     s.time_budget = Some(60.0);
                     s.min_spp = Some(s.spp + 1);
-                }),
-            ),
-            (
-                "denoise",
-                Box::new(|s| {
-                    s.time_budget = Some(60.0);
-                    s.denoise = true;
                 }),
             ),
             ("shutter", Box::new(|s| s.shutter = [0.5, 0.0])),

@@ -171,11 +171,7 @@ impl Rogue {
             name: "rogue".into(),
             threads: 1,
             version: "test".into(),
-            credential: None,
-            platform: None,
-            tags: vec![],
-            denoiser: None,
-            encoder: None,
+            ..Default::default()
         };
         let mut rogue = Rogue {
             port: farm.port,

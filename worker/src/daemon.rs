@@ -56,7 +56,7 @@ mod courier;
 mod steps;
 
 use self::courier::Courier;
-use self::steps::{find_encoder, load_denoiser, ENCODER_NAME};
+use self::steps::{find_encoder, load_denoiser, time_steps, ENCODER_NAME};
 
 /// How long the goodbye (`leave`) may take in all before the worker exits anyway; its
 /// leases then expire on the server after one lease period.
@@ -121,6 +121,7 @@ pub async fn run(
     );
     let denoiser = config.denoise.then(|| load_denoiser(&config)).flatten();
     let encoder = config.encode.then(|| find_encoder(&config)).flatten();
+    let step_ms_per_mp = time_steps(denoiser.clone(), encoder.clone()).await;
     let mut daemon = Daemon {
         api,
         fault: config.fault,
@@ -134,6 +135,8 @@ pub async fn run(
             tags: config.tags.clone(),
             denoiser: denoiser.as_ref().map(|_| post::DENOISER_NAME.to_string()),
             encoder: encoder.as_ref().map(|_| ENCODER_NAME.to_string()),
+            denoise_ms_per_megapixel: step_ms_per_mp[0],
+            encode_ms_per_megapixel: step_ms_per_mp[1],
         },
         denoiser,
         encoder,

@@ -105,6 +105,71 @@ impl Encoder {
     }
 }
 
+/// The side of the square frames a worker times its steps on when it starts.
+const PROBE_SIDE: u32 = 256;
+/// Frames of the video it times its encoder on.
+const PROBE_FRAMES: i32 = 8;
+
+/// A `PROBE_SIDE`² frame of frame `seed` whose every layer is noise (the denoiser's and
+/// the encoder's hardest case: nothing in it is smooth).
+fn probe_frame(seed: i32) -> Layers {
+    let mut layers = Layers::new(TileRect::new(0, 0, PROBE_SIDE, PROBE_SIDE));
+    let noise = |i: usize, k: u32| {
+        let h = tracer::sampler::hash_combine(i as u32 ^ (seed as u32).rotate_left(20), k);
+        (h >> 8) as f32 / (1u32 << 24) as f32
+    };
+    for i in 0..layers.beauty.len() {
+        layers.beauty[i] = glam::Vec4::new(noise(i, 0), noise(i, 1), noise(i, 2), 1.0);
+        layers.albedo[i] = Vec3::new(noise(i, 3), noise(i, 4), noise(i, 5));
+        layers.normal[i] =
+            (Vec3::new(noise(i, 6), noise(i, 7), noise(i, 8)) - 0.5).normalize_or_zero();
+    }
+    layers
+}
+
+/// Milliseconds per megapixel of a step that took `ms` on `frames` probe frames.
+fn per_megapixel(ms: u128, frames: i32) -> u64 {
+    let megapixels = f64::from(PROBE_SIDE * PROBE_SIDE) * f64::from(frames) / 1e6;
+    (ms as f64 / megapixels).ceil() as u64
+}
+
+impl Denoiser {
+    /// What denoising takes per megapixel on this worker (milliseconds), timed once at
+    /// start on a small frame of noise: the time-budget planner's figure for its denoise
+    /// steps until it has done real ones. The library's set-up counts in it, as it does in
+    /// every task, so it is high for large frames. `None` if the denoiser fails.
+    pub fn time_per_megapixel(&self) -> Option<u64> {
+        let started = Instant::now();
+        post::denoise_layers(&self.oidn, &probe_frame(0), self.threads).ok()?;
+        Some(per_megapixel(started.elapsed().as_millis(), 1))
+    }
+}
+
+impl Encoder {
+    /// What encoding takes per megapixel of frames on this worker (milliseconds), timed
+    /// once at start on a few small frames of noise (FFmpeg's start counts in it, as it
+    /// does in every task). `None` if it fails.
+    pub fn time_per_megapixel(&self) -> Option<u64> {
+        let dir = tempfile::tempdir().ok()?;
+        let frames: Vec<std::path::PathBuf> = (0..PROBE_FRAMES)
+            .map(|k| {
+                let png = dir.path().join(format!("{k}.png"));
+                tracer::output::write_preview_png(
+                    &png,
+                    (PROBE_SIDE, PROBE_SIDE),
+                    &probe_frame(k),
+                    1.0,
+                )
+                .ok()
+                .map(|()| png)
+            })
+            .collect::<Option<_>>()?;
+        let started = Instant::now();
+        self.encode(&frames, 24.0).ok()?;
+        Some(per_megapixel(started.elapsed().as_millis(), PROBE_FRAMES))
+    }
+}
+
 /// The upload of a step after rendering: `bytes` (the denoised frame's EXR, or the MP4)
 /// with 0 samples and 0 rays, and the step's time.
 pub fn step_upload(lease: &Lease, bytes: Vec<u8>, step_ms: u64) -> RenderedTile {

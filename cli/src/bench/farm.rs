@@ -726,11 +726,7 @@ async fn load(
                 name: format!("bench-{k}"),
                 threads: 1,
                 version: env!("CARGO_PKG_VERSION").into(),
-                credential: None,
-                platform: None,
-                tags: vec![],
-                denoiser: None,
-                encoder: None,
+                ..Default::default()
             };
             let id = api.register(&reg).await?.worker_id;
             Ok::<_, ApiError>((api, id))

@@ -84,6 +84,7 @@ pub async fn register(
                     tags: &reg.tags,
                     denoiser: reg.denoiser.as_deref(),
                     encoder: reg.encoder.as_deref(),
+                    step_ms_per_mp: [reg.denoise_ms_per_megapixel, reg.encode_ms_per_megapixel],
                 },
                 credential: reg.credential.as_deref(),
             };

@@ -85,6 +85,25 @@ pub fn exists(conn: &Connection, job: u64, frame: i32) -> Result<bool> {
     )?)
 }
 
+/// Whether a frame of `job` has every task done but is not assembled from them yet.
+pub fn any_needs_assembly(conn: &Connection, job: u64) -> Result<bool> {
+    Ok(conn.row(
+        &format!("SELECT EXISTS (SELECT 1 FROM frames WHERE job_id = ?1 AND {NEEDS_ASSEMBLY})"),
+        [job],
+        |r| r.get(0),
+    )?)
+}
+
+/// The frames of `job` assembled from every task they have, in order.
+pub fn assembled(conn: &Connection, job: u64) -> Result<Vec<i32>> {
+    let mut stmt = conn.prepare(
+        "SELECT frame FROM frames WHERE job_id = ?1 AND assembled_ms IS NOT NULL
+           AND assembled_tasks = tasks_total ORDER BY frame",
+    )?;
+    let rows = stmt.query_map([job], |r| r.get(0))?;
+    Ok(rows.collect::<rusqlite::Result<_>>()?)
+}
+
 /// Whether every task of a frame is done but the frame is not assembled from them yet.
 pub fn needs_assembly(conn: &Connection, job: u64, frame: i32) -> Result<bool> {
     Ok(conn.row(

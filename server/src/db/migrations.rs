@@ -178,6 +178,12 @@ const MIGRATIONS: &[&str] = &[
     ALTER TABLE workers ADD COLUMN denoiser TEXT;
     ALTER TABLE workers ADD COLUMN encoder TEXT;
     "#,
+    // 16: what a worker's denoise and encode steps took per megapixel when it started,
+    // for the time-budget planner.
+    r#"
+    ALTER TABLE workers ADD COLUMN denoise_ms_per_mp INTEGER;
+    ALTER TABLE workers ADD COLUMN encode_ms_per_mp INTEGER;
+    "#,
 ];
 
 /// The schema version this build writes.

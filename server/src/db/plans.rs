@@ -21,7 +21,7 @@ pub fn recent_speed(
     let (samples, ms): (Option<i64>, Option<i64>) = conn.row(
         "SELECT sum(w * h * (sample_end - sample_start)), sum(max(done_ms - leased_ms, 1))
          FROM (SELECT w, h, sample_start, sample_end, done_ms, leased_ms FROM tasks
-               WHERE job_id = ?1 AND worker_id = ?2 AND state = 'done'
+               WHERE job_id = ?1 AND worker_id = ?2 AND state = 'done' AND kind = 'render'
                ORDER BY done_ms DESC LIMIT ?3)",
         params![job, worker, window],
         |r| Ok((r.get(0)?, r.get(1)?)),

@@ -607,6 +607,15 @@ pub fn upload_limit(conn: &Connection, task: u64) -> Result<Option<usize>> {
     })
 }
 
+/// How many denoise and encode tasks `job` has.
+pub fn steps_count(conn: &Connection, job: u64) -> Result<u64> {
+    Ok(conn.row(
+        "SELECT count(*) FROM tasks WHERE job_id = ?1 AND kind != 'render'",
+        [job],
+        |r| r.get(0),
+    )?)
+}
+
 /// The encode task of a job, if it has one.
 pub fn encode_of_job(conn: &Connection, job: u64) -> Result<Option<TaskRow>> {
     Ok(select(conn, "t.job_id = ?1 AND t.kind = 'encode'", [job])?

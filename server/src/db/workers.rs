@@ -25,14 +25,17 @@ pub struct Profile<'a> {
     pub denoiser: Option<&'a str>,
     /// The video encoder it has, if any: only then is it given encode tasks.
     pub encoder: Option<&'a str>,
+    /// What its denoiser and its encoder took per megapixel when it started.
+    pub step_ms_per_mp: [Option<u64>; 2],
 }
 
 /// Stores a new worker with its credential's hash; returns its id.
 pub fn insert(tx: &Transaction, p: &Profile, credential_hash: &str, now: i64) -> Result<u64> {
     tx.exec(
         "INSERT INTO workers (name, threads, version, registered_ms, last_seen_ms,
-                              credential, platform, tags, denoiser, encoder)
-         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6, ?7, ?8, ?9)",
+                              credential, platform, tags, denoiser, encoder,
+                              denoise_ms_per_mp, encode_ms_per_mp)
+         VALUES (?1, ?2, ?3, ?4, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
         params![
             p.name,
             p.threads,
@@ -42,7 +45,9 @@ pub fn insert(tx: &Transaction, p: &Profile, credential_hash: &str, now: i64) ->
             p.platform,
             serde_json::to_string(p.tags)?,
             p.denoiser,
-            p.encoder
+            p.encoder,
+            p.step_ms_per_mp[0],
+            p.step_ms_per_mp[1]
         ],
     )?;
     Ok(tx.last_insert_rowid() as u64)
@@ -59,7 +64,7 @@ pub fn set_returned(
     tx.exec(
         "UPDATE workers SET name = ?2, threads = ?3, version = ?4, last_seen_ms = ?5,
                 left_ms = NULL, credential = ?6, platform = ?7, tags = ?8, denoiser = ?9,
-                encoder = ?10
+                encoder = ?10, denoise_ms_per_mp = ?11, encode_ms_per_mp = ?12
          WHERE id = ?1",
         params![
             id,
@@ -71,7 +76,9 @@ pub fn set_returned(
             p.platform,
             serde_json::to_string(p.tags)?,
             p.denoiser,
-            p.encoder
+            p.encoder,
+            p.step_ms_per_mp[0],
+            p.step_ms_per_mp[1]
         ],
     )?;
     Ok(())
@@ -183,25 +190,82 @@ pub enum Step {
     Encode,
 }
 
-/// Whether a live worker (seen since `live_since`, not left, not quarantined) with the
-/// tags `job` requires and not blocked from it can do `step`.
+impl Step {
+    /// Its task kind.
+    fn kind(self) -> &'static str {
+        match self {
+            Step::Denoise => "denoise",
+            Step::Encode => "encode",
+        }
+    }
+
+    /// The condition on a worker `w` (with `?1` the job, `?2` `live_since`) that it is
+    /// live (seen since then, not left, not quarantined), has the tags the job requires,
+    /// is not blocked from it, and can do this step.
+    fn can_take(self) -> String {
+        let column = match self {
+            Step::Denoise => "denoiser",
+            Step::Encode => "encoder",
+        };
+        format!(
+            "w.last_seen_ms >= ?2 AND w.left_ms IS NULL AND w.quarantined_ms IS NULL
+             AND w.{column} IS NOT NULL AND {}
+             AND NOT EXISTS (SELECT 1 FROM job_blocks b WHERE b.job_id = ?1 AND b.worker_id = w.id)",
+            has_required_tags("(SELECT spec FROM jobs WHERE id = ?1)", "w.tags")
+        )
+    }
+}
+
+/// Whether a live worker that may work on `job` can do `step` (see [`Step::can_take`]).
 pub fn step_live_for_job(conn: &Connection, job: u64, step: Step, live_since: i64) -> Result<bool> {
-    let column = match step {
-        Step::Denoise => "denoiser",
-        Step::Encode => "encoder",
-    };
     Ok(conn.row(
         &format!(
-            "SELECT EXISTS (SELECT 1 FROM workers w
-               WHERE w.last_seen_ms >= ?2 AND w.left_ms IS NULL AND w.quarantined_ms IS NULL
-                 AND w.{column} IS NOT NULL AND {}
-                 AND NOT EXISTS (SELECT 1 FROM job_blocks b
-                                 WHERE b.job_id = ?1 AND b.worker_id = w.id))",
-            has_required_tags("(SELECT spec FROM jobs WHERE id = ?1)", "w.tags")
+            "SELECT EXISTS (SELECT 1 FROM workers w WHERE {})",
+            step.can_take()
         ),
         params![job, live_since],
         |r| r.get(0),
     )?)
+}
+
+/// Tasks of a step over which a worker's time for it is measured, newest first.
+const STEP_WINDOW: u32 = 8;
+
+/// What `step` takes per megapixel (milliseconds) on each live worker that could do it
+/// for `job`: from lease to upload over the megapixels (an encode task's are all its
+/// job's frames) of its last [`STEP_WINDOW`] such tasks of any job, and where it has done
+/// none, the figure it timed when it started; workers with neither are left out.
+pub fn step_ms_per_mp(
+    conn: &Connection,
+    job: u64,
+    step: Step,
+    live_since: i64,
+) -> Result<Vec<f64>> {
+    let registered = match step {
+        Step::Denoise => "w.denoise_ms_per_mp",
+        Step::Encode => "w.encode_ms_per_mp",
+    };
+    let mut stmt = conn.prepare(&format!(
+        "SELECT coalesce(
+                  (SELECT avg(max(done_ms - leased_ms, 1) * 1e6 / (w * h * n)) FROM
+                     (SELECT t.done_ms, t.leased_ms, t.w, t.h,
+                             CASE t.kind WHEN 'encode'
+                               THEN (SELECT count(*) FROM frames f WHERE f.job_id = t.job_id)
+                               ELSE 1 END AS n
+                      FROM tasks t WHERE t.worker_id = w.id AND t.kind = ?3 AND t.state = 'done'
+                      ORDER BY t.done_ms DESC LIMIT ?4)),
+                  {registered})
+         FROM workers w WHERE {}",
+        step.can_take()
+    ))?;
+    let rows = stmt.query_map(params![job, live_since, step.kind(), STEP_WINDOW], |r| {
+        r.get::<_, Option<f64>>(0)
+    })?;
+    Ok(rows
+        .collect::<rusqlite::Result<Vec<_>>>()?
+        .into_iter()
+        .flatten()
+        .collect())
 }
 
 /// Who could work on `job` now: the live workers (seen since `live_since`, not left), and

@@ -166,6 +166,91 @@ fn a_time_budgets_passes_are_leased_in_plan_order() {
     assert_eq!(frames, [3, 1]);
 }
 
+/// A time budget that denoises and makes a video: no step before the passes are over,
+/// then every frame denoised and the video, on a worker that timed both when it started;
+/// the passes end early enough to leave the steps' time free before the deadline.
+#[test]
+fn a_time_budget_keeps_time_for_denoising_and_the_video_after_its_last_pass() {
+    // Rendering, the same farm and budget with the steps and without them.
+    let run = |steps: bool| {
+        let mut c = db();
+        let mut spec = JobSpec::new(scene().digest);
+        (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 16, Some(8), 64);
+        spec.frames = Some(FrameRange {
+            start: 1,
+            end: 3,
+            step: 1,
+        });
+        (spec.time_budget, spec.denoise, spec.video) = (Some(10.0), steps, steps);
+        let plan = crate::spec::plan(spec, &scene(), 1_000).unwrap();
+        let j = submit(&mut c, &plan, 0).unwrap();
+        // Its denoiser took 4e6 ms per megapixel, 1.024 s a 16x16 frame; its encoder 1e6.
+        let mut joining = joining("both", None);
+        joining.profile.denoiser = Some("Open Image Denoise 2.5.1");
+        joining.profile.encoder = Some("FFmpeg with libx264");
+        joining.profile.step_ms_per_mp = [Some(4_000_000), Some(1_000_000)];
+        let w = join(&mut c, &joining, 0, TIMING.live_since(0)).unwrap().id;
+        let mut t = 0;
+        let (mut first_step, mut steps_before) = (None, 0);
+        let error = |frame: i32, spp: u32| 0.1 * f64::from(frame) / f64::from(spp).sqrt();
+        while let Some(l) = render_one(&mut c, w, &mut t, 100, &error) {
+            if l.kind == proto::TaskKind::Render {
+                steps_before += usize::from(first_step.is_some());
+            } else {
+                first_step.get_or_insert(t);
+            }
+        }
+        let status = job_status(&c, j, t, TIMING.live_since(t)).unwrap();
+        let spp: u32 = (1..=3).map(|f| reached(&c, j, f)).sum();
+        (c, j, status, spp, first_step, steps_before)
+    };
+    let (_, _, plain, plain_spp, none, _) = run(false);
+    assert_eq!((plain.state, none), (JobState::Done, None));
+    let (c, j, status, spp, first_step, renders_after) = run(true);
+    assert_eq!((status.state, status.frames_done), (JobState::Done, 3));
+    assert!(status.video, "{status:?}");
+    let steps: Vec<(String, String)> = c
+        .prepare("SELECT kind, state FROM tasks WHERE job_id = ?1 AND kind != 'render'")
+        .unwrap()
+        .query_map([j], |r| Ok((r.get(0)?, r.get(1)?)))
+        .unwrap()
+        .collect::<rusqlite::Result<_>>()
+        .unwrap();
+    let done = |kind: &str| {
+        steps
+            .iter()
+            .filter(|s| s.0 == kind && s.1 == "done")
+            .count()
+    };
+    assert_eq!(
+        (done("denoise"), done("encode"), steps.len()),
+        (3, 1, 4),
+        "{steps:?}"
+    );
+    // The steps came after every pass; the passes left them (3 denoised frames, one
+    // after another on the one worker, and 3 frames encoded: 4.3 s with the plan's 10 %
+    // margin) and the assembly reserve (0.25 s) before the 10 s deadline.
+    let first_step = first_step.expect("the steps ran");
+    assert_eq!(renders_after, 0, "a pass after the steps began");
+    let reserve = ((3.0 * 1.024 + 3.0 * 0.256) / 0.9 * 1000.0) as i64;
+    assert!(
+        first_step <= 10_000 - 250 - reserve,
+        "steps began at {first_step} ms"
+    );
+    assert!(
+        spp < plain_spp,
+        "{spp} spp with the steps, {plain_spp} without"
+    );
+    let plan = status.budget.unwrap();
+    assert!(
+        plan.stage
+            .starts_with("finishing: denoising every frame, then the video"),
+        "{}",
+        plan.stage
+    );
+    println!("{spp} spp with the steps, {plain_spp} without; steps began at {first_step} ms");
+}
+
 /// Every frame that reached the job's spp leaves nothing to refine: the job ends early.
 #[test]
 fn a_time_budget_ends_early_when_every_frame_reaches_spp() {

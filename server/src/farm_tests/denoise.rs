@@ -142,11 +142,27 @@ fn a_denoise_lease_that_expires_goes_back_and_a_rerender_denoises_again() {
     assert_eq!(l.kind, TaskKind::Denoise);
 }
 
+/// The planner's figure for a worker's denoise step: what it timed when it started, then
+/// what its denoise tasks took from lease to upload.
 #[test]
-fn a_time_budget_job_cannot_denoise_yet() {
-    let mut spec = JobSpec::new(scene().digest);
-    spec.time_budget = Some(60.0);
-    spec.denoise = true;
-    let err = crate::spec::plan(spec, &scene(), 1_000).unwrap_err();
-    assert_eq!(err.field, "denoise");
+fn a_workers_denoise_time_is_what_it_timed_then_what_its_tasks_took() {
+    let mut c = db();
+    let j = denoised_job(&mut c, true);
+    let mut joining = joining("oidn", None);
+    joining.profile.denoiser = Some("Open Image Denoise 2.5.1");
+    joining.profile.step_ms_per_mp = [Some(4_000_000), None];
+    let d = join(&mut c, &joining, 0, TIMING.live_since(0)).unwrap().id;
+    let figure = |c: &Connection, t| {
+        workers::step_ms_per_mp(c, j, workers::Step::Denoise, TIMING.live_since(t)).unwrap()
+    };
+    assert_eq!(figure(&c, 0), [4e6]);
+    assert!(workers::step_ms_per_mp(&c, j, workers::Step::Encode, 0)
+        .unwrap()
+        .is_empty());
+    render_frame(&mut c, d, 1);
+    let l = lease(&mut c, d, 10, TIMING).unwrap().unwrap();
+    assert_eq!(l.kind, TaskKind::Denoise);
+    accept(&mut c, d, l.token, 0, 0, None, 522, TIMING).unwrap();
+    // 512 ms for 256 pixels.
+    assert_eq!(figure(&c, 522), [2e6]);
 }

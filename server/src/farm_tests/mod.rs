@@ -105,6 +105,7 @@ pub(super) fn joining<'a>(name: &'a str, credential: Option<&'a str>) -> Joining
             tags: &[],
             denoiser: None,
             encoder: None,
+            step_ms_per_mp: [None; 2],
         },
         credential,
     }

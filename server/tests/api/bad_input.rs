@@ -351,11 +351,7 @@ async fn worker_calls_with_bad_ids_or_fields_are_refused() {
                 name: name.into(),
                 threads,
                 version: "1".into(),
-                credential: None,
-                platform: None,
-                tags: vec![],
-                denoiser: None,
-                encoder: None,
+                ..Default::default()
             })
             .send()
             .await

@@ -54,11 +54,7 @@ impl Painter {
             name: format!("painter-{k}"),
             threads: 1,
             version: "test".into(),
-            credential: None,
-            platform: None,
-            tags: vec![],
-            denoiser: None,
-            encoder: None,
+            ..Default::default()
         };
         let answer = post_json(port, "/api/v1/workers", &reg, None);
         assert_eq!(answer.status, 201, "{}", answer.text());

@@ -56,6 +56,28 @@ pub(super) fn find_encoder(config: &WorkerConfig) -> Option<Encoder> {
     }
 }
 
+/// What the worker's denoiser and encoder take per megapixel, timed once at start off
+/// the async runtime (and said in the log), for the server's time-budget planner.
+pub(super) async fn time_steps(
+    denoiser: Option<Denoiser>,
+    encoder: Option<Encoder>,
+) -> [Option<u64>; 2] {
+    let timed = tokio::task::spawn_blocking(move || {
+        [
+            denoiser.and_then(|d| d.time_per_megapixel()),
+            encoder.and_then(|e| e.time_per_megapixel()),
+        ]
+    })
+    .await
+    .unwrap_or_default();
+    for (step, ms) in ["denoising", "encoding"].iter().zip(timed) {
+        if let Some(ms) = ms {
+            tracing::info!("{step} takes {ms} ms per megapixel here");
+        }
+    }
+    timed
+}
+
 impl Daemon {
     /// What a step after rendering reads from the server (`frame` for an encode lease).
     async fn step_input(
