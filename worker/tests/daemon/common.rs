@@ -265,6 +265,31 @@ pub async fn wait_for(
     }
 }
 
+/// Polls the server's worker list until a worker is on it (registered: a worker that
+/// denoises or encodes first times those steps), for at most 10 s.
+pub async fn wait_for_a_worker(s: &TestServer) {
+    let c = client();
+    let start = Instant::now();
+    loop {
+        let list: proto::WorkerList = c
+            .get(s.url("/workers"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        if !list.workers.is_empty() {
+            return;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "no worker registered"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
 pub async fn wait_until_done(s: &TestServer, c: &reqwest::Client, id: u64) -> JobStatus {
     wait_for(s, c, id, Duration::from_secs(60), |j| {
         j.state == JobState::Done

@@ -107,21 +107,8 @@ async fn a_worker_whose_server_lost_its_data_registers_again() {
     let first = TestServer::start_on(bind_again(addr), config.clone()).kill_on_drop();
     let w = TestWorker::start(&first.base, &dir.path().join("cache"), None);
     // Registered and polling.
+    wait_for_a_worker(&first).await;
     let c = client();
-    for _ in 0..100 {
-        let list: proto::WorkerList = c
-            .get(first.url("/workers"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
-        if !list.workers.is_empty() {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
     // The server lists the worker as soon as it commits the registration; give the answer
     // time to reach the worker (else it registers only once, with the second server).
     tokio::time::sleep(Duration::from_millis(300)).await;
@@ -156,7 +143,7 @@ async fn a_wrong_token_stops_the_worker_with_a_clear_error() {
 
     // The right token works.
     let w = TestWorker::start(&s.base, &dir.path().join("cache"), Some("right"));
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    wait_for_a_worker(&s).await;
     let summary = w.shutdown().await.unwrap();
     assert_eq!(summary.registrations, 1);
 }
