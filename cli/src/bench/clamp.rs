@@ -3,16 +3,13 @@
 //! and alone on the demo as `tessera bench clamp`, where it also measures what the
 //! denoiser makes of each.
 
-use std::sync::Arc;
-
 use clap::Args;
 use serde::Serialize;
 
 use tracer::film::Layers;
-use tracer::motion::Shutter;
-use tracer::render::{prepare_frame, FrameOptions, PreparedFrame, RenderSettings};
+use tracer::render::{PreparedFrame, RenderSettings};
 
-use super::denoise::denoised;
+use super::denoise::{demo_frame, denoised};
 use super::scenes::{display_mse, render, rmse};
 use super::{REFERENCE_SEED, SEED, SWEEP_DEPTH};
 use crate::args::parse_size;
@@ -145,17 +142,7 @@ pub fn run(args: ClampArgs) -> anyhow::Result<()> {
             None
         }
     };
-    let options = FrameOptions {
-        frame: 12,
-        width: args.size.0,
-        height: args.size.1,
-        shutter: Shutter {
-            open: -0.25,
-            close: 0.25,
-        },
-        ..FrameOptions::default()
-    };
-    let frame = prepare_frame(Arc::new(tracer::demo::animated_demo_scene()), &options)?;
+    let frame = demo_frame(tracer::demo::animated_demo_scene(), 12, 0.25, args.size)?;
     let settings = RenderSettings {
         max_depth: SWEEP_DEPTH,
         seed: SEED,
@@ -200,6 +187,10 @@ pub fn run(args: ClampArgs) -> anyhow::Result<()> {
 
 #[cfg(test)]
 mod tests {
+    use std::sync::Arc;
+
+    use tracer::render::{prepare_frame, FrameOptions};
+
     use super::*;
 
     /// On a small demo frame: clamping keeps less light the lower the limit, never more

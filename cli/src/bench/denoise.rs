@@ -114,7 +114,7 @@ fn settings(seed: u32) -> RenderSettings {
     }
 }
 
-fn demo_frame(
+pub(super) fn demo_frame(
     scene: Scene,
     frame: i32,
     shutter: f64,

@@ -265,21 +265,24 @@ pub async fn wait_for(
     }
 }
 
+/// The server's worker list.
+pub async fn workers(s: &TestServer) -> proto::WorkerList {
+    client()
+        .get(s.url("/workers"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap()
+}
+
 /// Polls the server's worker list until a worker is on it (registered: a worker that
 /// denoises or encodes first times those steps), for at most 10 s.
 pub async fn wait_for_a_worker(s: &TestServer) {
-    let c = client();
     let start = Instant::now();
     loop {
-        let list: proto::WorkerList = c
-            .get(s.url("/workers"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
-        if !list.workers.is_empty() {
+        if !workers(s).await.workers.is_empty() {
             return;
         }
         assert!(

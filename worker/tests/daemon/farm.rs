@@ -75,14 +75,7 @@ async fn frames_rendered_by_the_worker_equal_the_direct_render() {
     );
 
     // The worker left: the server lists it offline.
-    let workers: proto::WorkerList = c
-        .get(s.url("/workers"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let workers = workers(&s).await;
     assert_eq!(workers.workers.len(), 1);
     assert!(!workers.workers[0].online, "{workers:?}");
     assert_eq!(workers.workers[0].tasks_done, 24);
