@@ -25,7 +25,7 @@ use crate::db::plans::{self, Open};
 use crate::db::workers::{self, Step};
 use crate::db::{frames, jobs, tasks};
 use crate::error::Result;
-use crate::state::JobControl;
+use crate::state::{JobControl, TaskState};
 
 /// A worker's speed is measured over its last this many tiles of the job.
 const SPEED_WINDOW: u32 = 8;
@@ -82,23 +82,25 @@ fn seconds_to_finish(open: &Open, speed: &Speed) -> f64 {
     open.samples / speed.total + open.largest / speed.slowest
 }
 
-/// Seconds the steps after rendering will take at the end of `spec`'s job: every frame
-/// denoised, shared among the live workers that denoise (the last frame on the slowest),
-/// then the video on the slowest encoder. A step no live worker can take counts nothing
-/// (the job waits for one, and says so in its status).
+/// Seconds the steps after rendering have left at the end of `spec`'s job: every frame
+/// not yet denoised, shared among the live workers that denoise (the last frame on the
+/// slowest), then the video, unless made, on the slowest encoder. A step no live worker
+/// can take counts nothing (the job waits for one, and says so in its status).
 fn finishing_seconds(tx: &Transaction, job: u64, spec: &JobSpec, live_since: i64) -> Result<f64> {
     let frame_mp = f64::from(spec.width) * f64::from(spec.height) / 1e6;
     let frames = frames::counts(tx, job)?.0 as f64;
+    let undenoised = frames::undenoised_count(tx, job)? as f64;
     let mut ms = 0.0;
-    if spec.denoise {
+    if spec.denoise && undenoised > 0.0 {
         let each = workers::step_ms_per_mp(tx, job, Step::Denoise, live_since)?;
         if !each.is_empty() {
             let shared = each.iter().map(|m| 1.0 / m).sum::<f64>();
             let slowest = each.iter().copied().fold(0.0, f64::max);
-            ms += (frames - 1.0).max(0.0) * frame_mp / shared + frame_mp * slowest;
+            ms += (undenoised - 1.0) * frame_mp / shared + frame_mp * slowest;
         }
     }
-    if spec.video {
+    let video_made = tasks::encode_of_job(tx, job)?.is_some_and(|t| t.state == TaskState::Done);
+    if spec.video && !video_made {
         let each = workers::step_ms_per_mp(tx, job, Step::Encode, live_since)?;
         ms += frames * frame_mp * each.iter().copied().fold(0.0, f64::max);
     }

@@ -94,6 +94,15 @@ pub fn any_needs_assembly(conn: &Connection, job: u64) -> Result<bool> {
     )?)
 }
 
+/// How many frames of `job` have no denoised layer.
+pub fn undenoised_count(conn: &Connection, job: u64) -> Result<u64> {
+    Ok(conn.row(
+        "SELECT count(*) FROM frames WHERE job_id = ?1 AND denoised_ms IS NULL",
+        [job],
+        |r| r.get(0),
+    )?)
+}
+
 /// The frames of `job` assembled from every task they have, in order.
 pub fn assembled(conn: &Connection, job: u64) -> Result<Vec<i32>> {
     let mut stmt = conn.prepare(
