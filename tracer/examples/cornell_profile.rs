@@ -2,9 +2,10 @@
 //! `render_tile` on all threads: camera paths per second, rays, and a hash of the image,
 //! so that a change meant to leave every pixel alone can show it did.
 //!
-//! `cargo run --release -p tracer --example cornell_profile -- [SPP] [spectral]` (default
-//! 1, RGB). Under `valgrind --tool=callgrind` it gives the instruction counts in
-//! BENCHMARKS.md.
+//! `cargo run --release -p tracer --example cornell_profile -- [SPP] [spectral|motion]`
+//! (default 1, RGB; `motion`: the animated demo at frame 12 with its shutter instead, for
+//! what moving frames cost). Under `valgrind --tool=callgrind` it gives the instruction
+//! counts in BENCHMARKS.md.
 use std::sync::Arc;
 use std::time::Instant;
 use tracer::film::{SampleRange, TileRect};
@@ -15,16 +16,28 @@ fn main() {
         .nth(1)
         .map(|s| s.parse().unwrap())
         .unwrap_or(1);
+    let mode = std::env::args().nth(2);
+    let moving = mode.as_deref() == Some("motion");
     let options = FrameOptions {
         width: 256,
         height: 256,
+        frame: if moving { 12 } else { 0 },
+        shutter: tracer::motion::Shutter {
+            open: if moving { -0.25 } else { 0.0 },
+            close: if moving { 0.25 } else { 0.0 },
+        },
         ..Default::default()
     };
-    let frame = prepare_frame(Arc::new(tracer::demo::cornell_box()), &options).unwrap();
+    let scene = if moving {
+        tracer::demo::animated_demo_scene()
+    } else {
+        tracer::demo::cornell_box()
+    };
+    let frame = prepare_frame(Arc::new(scene), &options).unwrap();
     let settings = RenderSettings {
         max_depth: 8,
         seed: 7,
-        spectral: std::env::args().nth(2).as_deref() == Some("spectral"),
+        spectral: mode.as_deref() == Some("spectral"),
         ..RenderSettings::DEFAULT
     };
     let start = Instant::now();

@@ -1,6 +1,7 @@
 //! `tessera bench denoise`: what Open Image Denoise buys. Its time per megapixel; for the
-//! demo and the Cornell box, the fewest spp whose denoised frame is as close to a
-//! reference as an undenoised frame at 256 and at 1024 spp (the speed-up users get); and
+//! reference scenes (the demo moving and still, the Cornell box), the fewest spp whose
+//! denoised frame is as close to a reference as an undenoised frame at 256 and at 1024
+//! spp (the speed-up users get); and
 //! the flicker of a denoised animation with each frame's own sampling pattern and with
 //! the same pattern on every frame (`--fixed-pattern`).
 
@@ -77,6 +78,7 @@ pub fn run(args: DenoiseArgs) -> anyhow::Result<()> {
                 12,
                 0.25,
             ),
+            ("demo, still", tracer::demo::demo_scene(), 0, 0.0),
             ("Cornell box", tracer::demo::cornell_box(), 0, 0.0),
         ] {
             equal_error(&oidn, &args, name, scene, frame, shutter)?;

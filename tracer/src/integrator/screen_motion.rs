@@ -12,6 +12,9 @@ use crate::geometry::{barycentric, Hit, Ray};
 /// place on its triangle, which moves and deforms as the frame says; the camera moves
 /// too. Zero where the point is behind the camera at either end of the shutter, and for
 /// the environment seen by an orthographic camera.
+// Not inlined: once per camera sample of a moving frame, and its cost shows apart in a
+// profile.
+#[inline(never)]
 pub(crate) fn screen_motion(frame: &PreparedFrame, ray: &Ray, hit: Option<&Hit>) -> Vec2 {
     let camera = &frame.camera;
     let film_at = |time: f32| match hit {
