@@ -527,6 +527,6 @@ mod tests {
             let config = sc.get_arguments().find(|a| a.get_id() == CONFIG).unwrap();
             assert_eq!(config.get_env().unwrap(), "TESSERA_CONFIG");
         }
-        assert_eq!(seen, 16 + 12);
+        assert_eq!(seen, 16 + 14);
     }
 }

@@ -1,6 +1,8 @@
 //! `tessera worker`: settings (flags, `TESSERA_*` variables, `--config` file: see
-//! [`crate::settings`]) into a [`worker::WorkerConfig`], then [`worker::run`] until SIGINT
-//! or SIGTERM (the lease in hand is given back to the server before exiting).
+//! [`crate::settings`]) into a [`worker::WorkerConfig`], then [`worker::run_draining`]
+//! until SIGINT or SIGTERM (the lease in hand is given back to the server before
+//! exiting), SIGUSR1 (the lease in hand is finished first), or until it leaves by itself
+//! (`--exit-when-idle`, `--max-tasks`).
 
 use std::path::PathBuf;
 
@@ -70,6 +72,14 @@ pub struct WorkerArgs {
     /// libx264 takes encode tasks (a job's MP4).
     #[arg(long, env = "TESSERA_FFMPEG", value_name = "PATH")]
     pub ffmpeg: Option<PathBuf>,
+    /// Leave the farm after this many seconds without a task: for a worker started as a
+    /// cluster job (Slurm, a Kubernetes Job), so that the job ends when the farm has no
+    /// more work for it [default: never].
+    #[arg(long, env = "TESSERA_EXIT_WHEN_IDLE", value_name = "SECONDS")]
+    pub exit_when_idle: Option<u64>,
+    /// Leave the farm after working on this many tasks [default: no limit].
+    #[arg(long, env = "TESSERA_MAX_TASKS", value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_tasks: Option<u64>,
     /// Misbehave on purpose, for the farm's fault tests: `fail-job=JOB` or `perturb`.
     #[arg(long, hide = true)]
     #[serde(skip)]
@@ -111,6 +121,10 @@ pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
         encode: !args.no_encode,
         ffmpeg: args.ffmpeg,
         fault: args.inject_fault,
+        pilot: worker::PilotLimits {
+            exit_when_idle: args.exit_when_idle.map(std::time::Duration::from_secs),
+            max_tasks: args.max_tasks,
+        },
     };
     tracing::info!(
         "Tessera worker `{}` for {} ({} threads, scenes cached in {}, at most {} MB)",
@@ -121,10 +135,16 @@ pub fn run(mut args: WorkerArgs, layers: Layers) -> anyhow::Result<()> {
         config.cache_limit_bytes >> 20
     );
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    let summary = runtime.block_on(worker::run(config, crate::signal::interrupted()))?;
+    let limits = config.pilot;
+    let summary = runtime.block_on(worker::run_draining(
+        config,
+        crate::signal::interrupted(),
+        crate::signal::drain_asked(),
+    ))?;
     tracing::info!(
-        "worker stopped: {} tiles uploaded, {} failed, {} taken back by the server, {} \
+        "worker stopped ({}): {} tiles uploaded, {} failed, {} taken back by the server, {} \
          interrupted, {} scenes downloaded",
+        summary.ended.describe(&limits),
         summary.tasks_done,
         summary.tasks_failed,
         summary.tasks_abandoned,

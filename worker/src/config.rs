@@ -4,6 +4,7 @@
 
 use std::net::IpAddr;
 use std::path::PathBuf;
+use std::time::Duration;
 
 use serde::Serialize;
 use tracer::output::ExrCompression;
@@ -45,6 +46,17 @@ pub struct WorkerConfig {
     /// A fault to inject, for testing how the farm copes with a bad worker; `None` for
     /// every real worker.
     pub fault: Option<Fault>,
+    /// When it leaves by itself (a pilot job): after so long idle, after so many tasks.
+    pub pilot: PilotLimits,
+}
+
+/// When a worker leaves by itself; both off by default (a long-running daemon).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PilotLimits {
+    /// Leave after this long without a task.
+    pub exit_when_idle: Option<Duration>,
+    /// Leave once this many tasks were worked on (done, failed or taken back).
+    pub max_tasks: Option<u64>,
 }
 
 /// How a worker compresses the tiles it uploads (`tessera worker --upload-compression`).
@@ -208,6 +220,7 @@ mod tests {
             encode: true,
             ffmpeg: None,
             fault: None,
+            pilot: Default::default(),
         }
     }
 

@@ -53,10 +53,13 @@ use crate::stop::Stop;
 use crate::task_log::{self, TaskLog};
 
 mod courier;
+mod pilot;
 mod scenes;
 mod steps;
 
 use self::courier::Courier;
+pub use self::pilot::Ending;
+use self::pilot::Pilot;
 use self::steps::{find_encoder, load_denoiser, time_steps, ENCODER_NAME};
 
 /// How long the goodbye (`leave`) may take in all before the worker exits anyway; its
@@ -79,6 +82,8 @@ pub struct RunSummary {
     pub scenes_downloaded: u64,
     /// Times the worker registered (more than 1 when the server forgot it).
     pub registrations: u64,
+    /// Why it stopped.
+    pub ended: Ending,
 }
 
 /// Runs a worker until `shutdown` completes: then a render in progress is cancelled, the
@@ -88,6 +93,17 @@ pub struct RunSummary {
 pub async fn run(
     config: WorkerConfig,
     shutdown: impl Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<RunSummary> {
+    run_draining(config, shutdown, std::future::pending()).await
+}
+
+/// [`run`], and when `drain` completes, the worker finishes the task in hand (render and
+/// upload), takes no other and leaves: what a cluster's scheduler asks before it stops a
+/// worker's job (Slurm's SIGUSR1 before a time limit).
+pub async fn run_draining(
+    config: WorkerConfig,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+    drain: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<RunSummary> {
     anyhow::ensure!(config.threads >= 1, "threads must be at least 1");
     anyhow::ensure!(
@@ -110,6 +126,12 @@ pub async fn run(
     let watcher = tokio::spawn(async move {
         shutdown.await;
         let _ = set_stop.send(true);
+    });
+    let (set_drain, draining) = Stop::new();
+    let drain_watcher = tokio::spawn(async move {
+        drain.await;
+        tracing::info!("asked to drain: finishing the task in hand, then leaving");
+        let _ = set_drain.send(true);
     });
     let compression = config.upload_compression.for_server(&config.server);
     tracing::info!(
@@ -153,9 +175,13 @@ pub async fn run(
         delivery: None,
         late_log: None,
         summary: RunSummary::default(),
+        pilot: Pilot::new(config.pilot),
+        limits: config.pilot,
+        draining,
     };
     let result = daemon.main_loop().await;
     watcher.abort();
+    drain_watcher.abort();
     result.map(|()| daemon.summary)
 }
 
@@ -187,6 +213,11 @@ struct Daemon {
     /// lease request.
     late_log: Option<TaskLogLines>,
     summary: RunSummary,
+    /// Its progress towards leaving by itself, and the limits it leaves at.
+    pilot: Pilot,
+    limits: crate::config::PilotLimits,
+    /// Set once a drain is asked for.
+    draining: Stop,
 }
 
 /// What became of a rendered tile handed to [`Courier::deliver`]: the summary's count it
@@ -251,6 +282,11 @@ impl Daemon {
                 }
                 continue;
             };
+            if let Some(ending) = self.pilot.ending(self.draining.is_set()) {
+                tracing::info!("leaving the farm: {}", ending.describe(&self.limits));
+                self.summary.ended = ending;
+                break;
+            }
             // A finished upload is counted first: its error may be one to act on.
             let result = if self.delivery.as_ref().is_some_and(JoinHandle::is_finished) {
                 self.settle().await
@@ -297,15 +333,19 @@ impl Daemon {
 
     /// Long-polls for a lease and works on it; `None` when shutdown began meanwhile.
     async fn lease_and_work(&mut self, reg: &WorkerRegistered) -> Option<Result<(), ApiError>> {
-        let wait = Duration::from_secs(reg.max_wait_seconds);
+        let wait = self
+            .pilot
+            .poll_wait(Duration::from_secs(reg.max_wait_seconds));
         let asked = Instant::now();
         let late_log = self.late_log.take();
-        let answer = self
-            .api
-            .retry("lease", &self.stop, InFlight::Drop, || {
+        // A drain ends the long poll (a lease granted to it meanwhile is given back by
+        // `leave`).
+        let answer = tokio::select! {
+            answer = self.api.retry("lease", &self.stop, InFlight::Drop, || {
                 self.api.lease(reg.worker_id, wait, late_log.clone())
-            })
-            .await;
+            }) => answer,
+            () = self.draining.wait() => return Some(Ok(())),
+        };
         Some(match answer {
             Ok(None) => return None,
             Ok(Some(LeaseAnswer::NoWork)) => {
@@ -322,7 +362,9 @@ impl Daemon {
                     job = lease.job_id,
                     attempt = lease.token.attempt
                 );
-                self.work(reg, *lease).instrument(span).await
+                let worked = self.work(reg, *lease).instrument(span).await;
+                self.pilot.worked();
+                worked
             }
             Err(e) => Err(e),
         })

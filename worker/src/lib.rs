@@ -14,10 +14,12 @@
 //! | [`finishing`] | the steps after rendering: a frame denoised with Open Image Denoise, a job's MP4 made with FFmpeg, their uploads |
 //! | [`task_log`] | the lines logged per task, sent with its heartbeats, failure report or the next lease request |
 //! | `stop` | the shutdown signal every wait listens to |
-//! | `daemon` | [`run`]: the register / lease / render / upload loop; `daemon/courier.rs` the uploads, `daemon/steps.rs` a denoise or encode lease |
+//! | `daemon` | [`run`]: the register / lease / render / upload loop; `daemon/courier.rs` the uploads, `daemon/steps.rs` a denoise or encode lease, `daemon/scenes.rs` a lease's scene and frame, `daemon/pilot.rs` leaving by itself (idle, task count, drain) |
 //!
 //! A binary (or a test) calls [`run`] with a config and a shutdown future; it returns a
-//! [`RunSummary`] when the future completes and the server has been told.
+//! [`RunSummary`] when the future completes (or the worker leaves by itself, see
+//! [`PilotLimits`]; [`run_draining`] also takes a drain future) and the server has been
+//! told.
 
 pub mod api;
 pub mod backoff;
@@ -31,5 +33,5 @@ mod stop;
 pub mod task_log;
 
 pub use api::{http_client, tls_hint};
-pub use config::{platform, Fault, UploadCompression, WorkerConfig};
-pub use daemon::{run, RunSummary};
+pub use config::{platform, Fault, PilotLimits, UploadCompression, WorkerConfig};
+pub use daemon::{run, run_draining, Ending, RunSummary};

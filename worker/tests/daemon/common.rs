@@ -51,12 +51,14 @@ pub fn worker_config(server: &str, cache: &Path) -> WorkerConfig {
         encode: true,
         ffmpeg: None,
         fault: None,
+        pilot: Default::default(),
     }
 }
 
 /// A worker daemon running on the test's runtime.
 pub struct TestWorker {
     stop: Option<tokio::sync::oneshot::Sender<()>>,
+    drain: Option<tokio::sync::oneshot::Sender<()>>,
     task: tokio::task::JoinHandle<anyhow::Result<RunSummary>>,
 }
 
@@ -72,13 +74,29 @@ impl TestWorker {
     /// Starts `worker::run` with `config`.
     pub fn start_config(config: WorkerConfig) -> TestWorker {
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-        let task = tokio::spawn(worker::run(config, async {
-            let _ = rx.await;
-        }));
+        let (drain_tx, drain_rx) = tokio::sync::oneshot::channel::<()>();
+        let task = tokio::spawn(worker::run_draining(
+            config,
+            async {
+                let _ = rx.await;
+            },
+            async {
+                // Dropped unsent: no drain.
+                if drain_rx.await.is_err() {
+                    std::future::pending::<()>().await;
+                }
+            },
+        ));
         TestWorker {
             stop: Some(tx),
+            drain: Some(drain_tx),
             task,
         }
+    }
+
+    /// Asks the worker to drain, as SIGUSR1 does.
+    pub fn drain(&mut self) {
+        let _ = self.drain.take().unwrap().send(());
     }
 
     /// Completes the shutdown future and waits for `run` to return.

@@ -5,4 +5,5 @@ mod cache;
 mod common;
 mod farm;
 mod faults;
+mod pilot;
 mod pipeline;
