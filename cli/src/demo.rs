@@ -121,9 +121,9 @@ impl DemoArgs {
             return self.clamp_indirect;
         }
         notes.push(format!(
-            "indirect light is clamped at {DEMO_CLAMP} against the caustics' fireflies, \
-             which no denoiser removes (--clamp-indirect; --no-clamp turns it off; \
-             `tessera bench clamp` measures it)"
+            "frames are not denoised, so indirect light is clamped at {DEMO_CLAMP} against \
+             the caustics' fireflies (--clamp-indirect; --no-clamp turns it off; `tessera \
+             bench clamp` measures it)"
         ));
         Some(DEMO_CLAMP)
     }
