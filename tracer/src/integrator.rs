@@ -63,7 +63,6 @@ fn hero_alone<W: Carrier>(
     carrier.keep_hero()
 }
 
-/// The power heuristic with exponent 2 (Veach 1997).
 /// Light `c` reaching the camera, clamped to `limit` in its largest RGB channel where it is
 /// `indirect` (it left the light and met at least two surfaces before the camera) and the
 /// settings ask for it: Cycles' "clamp indirect", which trades bias for the fireflies of
@@ -83,6 +82,7 @@ fn clamped<W: Carrier>(carrier: &W, c: W::Colour, indirect: bool, limit: Option<
     }
 }
 
+/// The power heuristic with exponent 2 (Veach 1997).
 fn power_heuristic(a: f32, b: f32) -> f32 {
     let (a2, b2) = (a * a, b * b);
     if a2.is_infinite() {

@@ -176,7 +176,6 @@ pub async fn run_draining(
         late_log: None,
         summary: RunSummary::default(),
         pilot: Pilot::new(config.pilot),
-        limits: config.pilot,
         draining,
     };
     let result = daemon.main_loop().await;
@@ -213,9 +212,8 @@ struct Daemon {
     /// lease request.
     late_log: Option<TaskLogLines>,
     summary: RunSummary,
-    /// Its progress towards leaving by itself, and the limits it leaves at.
+    /// Its progress towards leaving by itself.
     pilot: Pilot,
-    limits: crate::config::PilotLimits,
     /// Set once a drain is asked for.
     draining: Stop,
 }
@@ -283,7 +281,7 @@ impl Daemon {
                 continue;
             };
             if let Some(ending) = self.pilot.ending(self.draining.is_set()) {
-                tracing::info!("leaving the farm: {}", ending.describe(&self.limits));
+                tracing::info!("leaving the farm: {}", ending.describe(self.pilot.limits()));
                 self.summary.ended = ending;
                 break;
             }

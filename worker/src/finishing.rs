@@ -164,9 +164,8 @@ impl Encoder {
                 .map(|()| png)
             })
             .collect::<Option<_>>()?;
-        let started = Instant::now();
-        self.encode(&frames, 24.0).ok()?;
-        Some(per_megapixel(started.elapsed().as_millis(), PROBE_FRAMES))
+        let (_, ms) = self.encode(&frames, 24.0).ok()?;
+        Some(per_megapixel(ms.into(), PROBE_FRAMES))
     }
 }
 

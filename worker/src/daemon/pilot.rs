@@ -54,6 +54,11 @@ impl Pilot {
         }
     }
 
+    /// The limits it leaves at.
+    pub(super) fn limits(&self) -> &PilotLimits {
+        &self.limits
+    }
+
     /// A lease was worked on (its upload may still be running).
     pub(super) fn worked(&mut self) {
         self.leases += 1;
