@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use glam::{DMat4, DVec3, Vec2, Vec3};
 use tracer::camera::Projection;
-use tracer::film::{Layers, SampleRange, TileRect};
+use tracer::film::{Layers, SampleRange, TileBuffer, TileRect};
 use tracer::light::Environment;
 use tracer::material::Material;
 use tracer::render::{prepare_frame, render_region, FrameOptions, PreparedFrame, RenderSettings};
@@ -153,4 +153,36 @@ impl Rng {
     pub fn below(&mut self, n: usize) -> usize {
         (self.next_u64() % n as u64) as usize
     }
+}
+
+/// `scene` prepared at frame 0, `width`×`height`.
+pub fn frame(scene: Scene, width: u32, height: u32) -> PreparedFrame {
+    let options = FrameOptions {
+        width,
+        height,
+        ..Default::default()
+    };
+    prepare_frame(Arc::new(scene), &options).expect("scene prepares")
+}
+
+/// The whole of `frame` at `settings` and `spp`, as sums (tiles of 16).
+pub fn render(frame: &PreparedFrame, settings: &RenderSettings, spp: u32) -> TileBuffer {
+    let rect = TileRect::new(0, 0, frame.width, frame.height);
+    render_region(frame, settings, rect, SampleRange::new(0, spp), 16, &|_| {})
+}
+
+/// The still demo at 24x24.
+pub fn demo_frame() -> PreparedFrame {
+    frame(tracer::demo::demo_scene(), 24, 24)
+}
+
+/// The measured Cornell box's frame `number` at 24x24.
+pub fn cornell_frame(number: i32) -> PreparedFrame {
+    let options = FrameOptions {
+        frame: number,
+        width: 24,
+        height: 24,
+        ..Default::default()
+    };
+    prepare_frame(Arc::new(tracer::demo::cornell_box()), &options).expect("scene prepares")
 }
