@@ -3,7 +3,9 @@
 # parts that some tests need, where this machine allows it: Embree 3, for the BVH
 # comparison of `tessera bench rays --embree`, Intel Open Image Denoise and FFmpeg
 # (`tessera install oidn|ffmpeg`, into the user's data folder), for the denoising and
-# video tests. Then it runs `cargo test --workspace` with the cargo features those parts
+# video tests, Slurm and MUNGE (Debian's packages), for the test that runs a one-node
+# Slurm cluster, and the npm packages that check deploy/kubernetes against the Kubernetes
+# and KEDA schemas. Then it runs `cargo test --workspace` with the cargo features those parts
 # enable. Where a part cannot be installed, it says so loudly and its tests report
 # themselves skipped. The fuzz targets (a workspace of their own, run by fuzz/run.sh with
 # nightly) are type-checked against today's types first, with their lock file as
@@ -27,6 +29,12 @@ for part in oidn ffmpeg; do
         echo "=== WARNING: $part could not be installed: its tests will be skipped ===" >&2
     fi
 done
+
+echo "=== Slurm, and the Kubernetes schema check, for the cluster engine tests ==="
+bash scripts/install-slurm.sh ||
+    echo "=== WARNING: Slurm could not be installed: the Slurm test will be skipped ===" >&2
+bash scripts/install-kubernetes-check.sh ||
+    echo "=== WARNING: the Kubernetes schema check could not be installed: it will be skipped ===" >&2
 
 if [ ${#features[@]} -gt 0 ]; then
     exec cargo test --workspace --features "$(IFS=,; echo "${features[*]}")" "$@"

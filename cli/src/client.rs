@@ -51,6 +51,15 @@ impl fmt::Display for JobRef {
     }
 }
 
+/// The value of the unlabelled gauge `name` in Prometheus' text format, as a count.
+fn parse_gauge(text: &str, name: &str) -> Option<u64> {
+    text.lines().find_map(|line| {
+        let value = line.strip_prefix(name)?.strip_prefix(' ')?;
+        let value: f64 = value.split_whitespace().next()?.parse().ok()?;
+        (value.is_finite() && value >= 0.0).then_some(value as u64)
+    })
+}
+
 /// Where `submit`, `status` and the rest look for the server when not told.
 pub const DEFAULT_SERVER: &str = "http://127.0.0.1:8700";
 
@@ -480,6 +489,25 @@ impl Client {
         Ok(bytes.to_vec())
     }
 
+    /// The farm's demand, read from `GET /metrics` (no token needed): the tasks that want
+    /// a worker now, as autoscalers see them (`server::metrics::DEMAND`).
+    pub async fn demand(&self) -> Result<u64, ClientError> {
+        let what = "GET /metrics";
+        let req = self.http.get(format!("{}/metrics", self.base));
+        let answer = self.send(req.timeout(JSON_TIMEOUT), what).await?;
+        let text = answer.text().await.map_err(|e| ClientError::Transport {
+            request: what.to_string(),
+            detail: format!("reading the answer: {}", root_cause(&e)),
+        })?;
+        parse_gauge(&text, server::metrics::DEMAND).ok_or_else(|| ClientError::Transport {
+            request: what.to_string(),
+            detail: format!(
+                "no `{}` gauge in the answer; are the server and the CLI the same version?",
+                server::metrics::DEMAND
+            ),
+        })
+    }
+
     /// `GET /workers`.
     pub async fn workers(&self) -> Result<WorkerList, ClientError> {
         self.get("/workers").await
@@ -557,5 +585,24 @@ mod tests {
         assert!(Client::new("ftp://farm:21", None).is_err());
         let c = Client::new("https://farm.example:443", Some(String::new())).unwrap();
         assert!(c.token.is_none());
+    }
+
+    #[test]
+    fn the_demand_gauge_is_read_by_its_whole_name() {
+        let text = "# TYPE tessera_demand_tasks gauge\ntessera_demand_tasks_total 9\n\
+                    tessera_demand_tasks 12\n";
+        assert_eq!(parse_gauge(text, "tessera_demand_tasks"), Some(12));
+        assert_eq!(
+            parse_gauge("tessera_demand_tasks 3.0\n", "tessera_demand_tasks"),
+            Some(3)
+        );
+        assert_eq!(
+            parse_gauge("tessera_demand_tasks_total 9\n", "tessera_demand_tasks"),
+            None
+        );
+        assert_eq!(
+            parse_gauge("tessera_demand_tasks NaN\n", "tessera_demand_tasks"),
+            None
+        );
     }
 }

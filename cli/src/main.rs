@@ -11,6 +11,7 @@ mod logs;
 mod manage;
 mod progress;
 mod render;
+mod scale;
 mod server;
 mod settings;
 mod signal;
@@ -42,6 +43,9 @@ enum Command {
     Server(server::ServerArgs),
     /// Run a worker: lease tiles from a farm server, render them, upload them.
     Worker(worker::WorkerArgs),
+    /// Start workers as jobs of a cluster engine (`slurm`) as the farm's queue wants them,
+    /// and cancel the pending ones it no longer wants.
+    Scale(scale::ScaleArgs),
     /// Pack a scene, upload it to the farm and create a render job (--wait: follow it and
     /// download the frames).
     Submit(submit::SubmitArgs),
@@ -109,6 +113,7 @@ fn run() -> anyhow::Result<()> {
         },
         Command::Server(args) => server::run(args, layers),
         Command::Worker(args) => worker::run(args, layers),
+        Command::Scale(args) => scale::run(args, layers),
         Command::Submit(args) => submit::run(args),
         Command::Status(args) => control::status(args),
         Command::Cancel(args) => control::control(args, client::Control::Cancel),

@@ -1,4 +1,5 @@
-//! Settings of the long-running commands (`tessera server`, `tessera worker`) in layers:
+//! Settings of the long-running commands (`tessera server`, `tessera worker`, `tessera
+//! scale`) in layers:
 //! a flag beats its `TESSERA_*` variable, which beats the `--config` file, which beats the
 //! built-in default. This module is the one place that knows it.
 //!
@@ -40,8 +41,8 @@ const CONFIG: &str = "config";
 /// Flags every configurable command has.
 #[derive(Args, Clone, Debug, Serialize)]
 pub struct Common {
-    /// A TOML file of settings: a [server] and a [worker] table whose keys are the long
-    /// flags with `_` for `-` (`lease_seconds = 120`). Flags and TESSERA_* variables
+    /// A TOML file of settings: [server], [worker] and [scale] tables whose keys are the
+    /// long flags with `_` for `-` (`lease_seconds = 120`). Flags and TESSERA_* variables
     /// override it. No file is read unless one is named (a system-wide install would keep
     /// it in /etc/tessera/tessera.toml).
     #[arg(long, env = "TESSERA_CONFIG", value_name = "FILE")]
@@ -223,10 +224,15 @@ fn unset_if_empty(arg: Arg) -> Arg {
     }
 }
 
-/// The flags of `cmd` the file may set: visible ones that take a value, but `--config`.
+/// The flags of `cmd` the file may set: visible ones that take a value, but `--config` (and
+/// not positional arguments: `scale`'s engine is named on the command line).
 fn settable(cmd: &Command) -> impl Iterator<Item = &Arg> {
-    cmd.get_arguments()
-        .filter(|a| a.get_action().takes_values() && !a.is_hide_set() && a.get_id() != CONFIG)
+    cmd.get_arguments().filter(|a| {
+        a.get_action().takes_values()
+            && !a.is_hide_set()
+            && !a.is_positional()
+            && a.get_id() != CONFIG
+    })
 }
 
 /// The configurable subcommands of `cmd`.

@@ -106,12 +106,15 @@ fn describe() {
         "Open server-sent event streams."
     );
     describe_gauge!(
-        "tessera_demand_tasks",
+        DEMAND,
         Unit::Count,
         "Tasks that want a worker now, for autoscalers: queued and leased tasks of jobs \
          that are not paused, plus the passes time-budget jobs could run now."
     );
 }
+
+/// The gauge autoscalers size the worker pool by (KEDA's query, `tessera scale`).
+pub const DEMAND: &str = "tessera_demand_tasks";
 
 /// Gauges read from the database.
 #[derive(Debug, Default)]
@@ -198,7 +201,7 @@ impl Metrics {
             metrics::gauge!("tessera_workers", "state" => "offline")
                 .set((snapshot.workers_total - snapshot.workers_online) as f64);
             metrics::gauge!("tessera_event_listeners").set(snapshot.listeners as f64);
-            metrics::gauge!("tessera_demand_tasks").set(snapshot.demand as f64);
+            metrics::gauge!(DEMAND).set(snapshot.demand as f64);
         });
         self.handle.render()
     }

@@ -2,7 +2,8 @@
 //! subcommand, flag and `TESSERA_*` variable that the Dockerfile, compose file, manifests
 //! and systemd units use exists in `tessera <role> --help`, and `--print-config` shows
 //! their values taken; every port is 8700; and the paths that probes and Prometheus hit,
-//! and the queue-depth series the autoscaler reads, answer on a running server.
+//! and the queue-depth series the autoscaler reads, answer on a running server; and the
+//! manifests match the Kubernetes and KEDA schemas (deploy/schemas.rs).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -14,6 +15,9 @@ use tests::{tessera_bin, Farm};
 #[path = "deploy/files.rs"]
 mod files;
 use files::*;
+
+#[path = "deploy/schemas.rs"]
+mod schemas;
 
 /// The one port the farm uses, in and out of containers.
 const PORT: i64 = 8700;
@@ -43,13 +47,18 @@ fn compose_file_and_manifests_parse_and_name_what_they_make() {
             "{file}: no apiVersion"
         );
         if kind == "Kustomization" {
+            // Resources are files or folders with a kustomization of their own, relative to
+            // the kustomization's folder.
+            let folder = Path::new(file).parent().unwrap();
             for r in doc["resources"].as_vec().expect("resources") {
-                let r = r.as_str().unwrap();
+                let r = normalize(&folder.join(r.as_str().unwrap()));
+                let path = deploy_dir().join("kubernetes").join(&r);
                 assert!(
-                    deploy_dir().join("kubernetes").join(r).is_file(),
-                    "{file} lists {r}"
+                    path.is_file() || path.join("kustomization.yaml").is_file(),
+                    "{file} lists {}",
+                    r.display()
                 );
-                listed.insert(r.to_string());
+                listed.insert(r.to_string_lossy().into_owned());
             }
         } else {
             assert!(
@@ -59,15 +68,28 @@ fn compose_file_and_manifests_parse_and_name_what_they_make() {
         }
     }
     // Every manifest but the example Secret (placeholder tokens must not reach a cluster
-    // by accident) is part of the kustomization.
+    // by accident) is part of a kustomization, and both ways to run workers name the same
+    // image.
     for (file, doc) in &docs {
         if !matches!(doc["kind"].as_str(), Some("Kustomization" | "Secret")) {
-            assert!(
-                listed.contains(file),
-                "kustomization.yaml does not list {file}"
-            );
+            assert!(listed.contains(file), "no kustomization lists {file}");
         }
     }
+    let images: Vec<&yaml_rust2::Yaml> = docs
+        .iter()
+        .filter(|(_, d)| d["kind"].as_str() == Some("Kustomization"))
+        .map(|(_, d)| &d["images"])
+        .filter(|i| !i.is_badvalue())
+        .collect();
+    assert_eq!(
+        images.len(),
+        2,
+        "kustomization.yaml and jobs/ set the image"
+    );
+    assert_eq!(
+        images[0], images[1],
+        "both kustomizations name the same image"
+    );
 
     // The pieces fit together: the Service selects the server's pods, the StatefulSet is
     // governed by it, KEDA scales the workers' Deployment, secrets come from the Secret.
@@ -100,6 +122,14 @@ fn compose_file_and_manifests_parse_and_name_what_they_make() {
         scaler["spec"]["scaleTargetRef"]["name"].as_str(),
         Some(name_of(workers))
     );
+    // The pilot-job variant: KEDA starts Jobs on the same demand query; each worker
+    // leaves when idle and its pod is not restarted.
+    let jobs = manifest(&docs, "ScaledJob");
+    assert_eq!(jobs["spec"]["triggers"], scaler["spec"]["triggers"]);
+    let pod = &jobs["spec"]["jobTargetRef"]["template"]["spec"];
+    assert_eq!(pod["restartPolicy"].as_str(), Some("Never"));
+    let launch = kubernetes_launches(&[("jobs".into(), jobs.clone())]).remove(0);
+    assert!(launch.env("TESSERA_EXIT_WHEN_IDLE").is_some());
     for (file, c) in containers(&docs) {
         for e in c["env"].as_vec().into_iter().flatten() {
             let secret_ref = &e["valueFrom"]["secretKeyRef"];
@@ -112,6 +142,21 @@ fn compose_file_and_manifests_parse_and_name_what_they_make() {
             }
         }
     }
+}
+
+/// `a/b/../c` as `a/c`.
+fn normalize(path: &Path) -> std::path::PathBuf {
+    let mut out = std::path::PathBuf::new();
+    for part in path.components() {
+        match part {
+            std::path::Component::ParentDir => {
+                assert!(out.pop(), "{} leaves deploy/kubernetes", path.display())
+            }
+            std::path::Component::CurDir => {}
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 #[test]
@@ -172,7 +217,9 @@ fn every_subcommand_flag_and_variable_they_use_exists() {
     // Any TESSERA_* name anywhere under deploy/ (comments, README, examples) exists: in a
     // role, or in the client commands (`tessera submit`).
     let mut known: BTreeSet<String> = roles.iter().flat_map(|r| r.env_names()).collect();
-    known.extend(parse_options(&help(&["submit"])).into_values().flatten());
+    for command in [&["submit"][..], &["scale", "slurm"]] {
+        known.extend(parse_options(&help(command)).into_values().flatten());
+    }
     let mut stack = vec![deploy_dir()];
     while let Some(dir) = stack.pop() {
         for entry in std::fs::read_dir(&dir).unwrap() {
@@ -321,23 +368,27 @@ fn every_port_is_8700() {
 #[test]
 fn workers_get_the_cores_they_use_and_time_to_give_their_lease_back() {
     let docs = manifests();
-    let workers = manifest(&docs, "Deployment");
-    let pod = &workers["spec"]["template"]["spec"];
-    let grace = pod["terminationGracePeriodSeconds"]
-        .as_i64()
-        .expect("a grace period");
-    assert!(grace as u64 >= 2 * LEAVE_SECONDS, "grace {grace} s");
-    let launch = kubernetes_launches(&docs)
-        .into_iter()
-        .find(|l| l.role() == "worker")
-        .unwrap();
-    let threads = launch
-        .env("TESSERA_THREADS")
-        .expect("TESSERA_THREADS is set");
-    let container = &pod["containers"][0];
-    for bound in ["requests", "limits"] {
-        let cpu = text(&container["resources"][bound]["cpu"]);
-        assert_eq!(cpu.as_deref(), Some(threads), "cpu {bound} = threads");
+    for kind in ["Deployment", "ScaledJob"] {
+        let workers = manifest(&docs, kind);
+        let pod = &pod_template(workers).unwrap()["spec"];
+        let grace = pod["terminationGracePeriodSeconds"]
+            .as_i64()
+            .expect("a grace period");
+        assert!(grace as u64 >= 2 * LEAVE_SECONDS, "{kind}: grace {grace} s");
+        let launch = kubernetes_launches(&[(kind.into(), workers.clone())]).remove(0);
+        assert_eq!(launch.role(), "worker");
+        let threads = launch
+            .env("TESSERA_THREADS")
+            .expect("TESSERA_THREADS is set");
+        let container = &pod["containers"][0];
+        for bound in ["requests", "limits"] {
+            let cpu = text(&container["resources"][bound]["cpu"]);
+            assert_eq!(
+                cpu.as_deref(),
+                Some(threads),
+                "{kind}: cpu {bound} = threads"
+            );
+        }
     }
 
     let compose = compose();

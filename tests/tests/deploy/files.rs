@@ -211,13 +211,23 @@ pub fn compose_launches() -> Vec<Launch> {
         .collect()
 }
 
-/// Every document of every manifest, with its file name.
+/// Every document of every manifest under deploy/kubernetes/ (subfolders too), with its
+/// path there (`server/server-service.yaml`).
 pub fn manifests() -> Vec<(String, Yaml)> {
-    let mut files: Vec<String> = std::fs::read_dir(deploy_dir().join("kubernetes"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|f| f.ends_with(".yaml") || f.ends_with(".yml"))
-        .collect();
+    let root = deploy_dir().join("kubernetes");
+    let mut files = vec![];
+    let mut stack = vec![root.clone()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == "yaml" || e == "yml") {
+                let rel = path.strip_prefix(&root).unwrap();
+                files.push(rel.to_string_lossy().into_owned());
+            }
+        }
+    }
     files.sort();
     let mut docs = vec![];
     for file in files {
@@ -240,11 +250,22 @@ pub fn manifest<'a>(docs: &'a [(String, Yaml)], kind: &str) -> &'a Yaml {
     &found[0].1
 }
 
+/// A manifest's pod template: a Deployment's or StatefulSet's, or the Job's of a KEDA
+/// ScaledJob.
+pub fn pod_template(doc: &Yaml) -> Option<&Yaml> {
+    [
+        &doc["spec"]["template"],
+        &doc["spec"]["jobTargetRef"]["template"],
+    ]
+    .into_iter()
+    .find(|t| !t.is_badvalue())
+}
+
 /// The containers of the pod templates.
 pub fn containers(docs: &[(String, Yaml)]) -> Vec<(String, &Yaml)> {
     docs.iter()
         .filter_map(|(file, doc)| {
-            let list = doc["spec"]["template"]["spec"]["containers"].as_vec()?;
+            let list = pod_template(doc)?["spec"]["containers"].as_vec()?;
             Some(list.iter().map(move |c| (file.clone(), c)))
         })
         .flatten()
