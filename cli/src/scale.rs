@@ -150,8 +150,9 @@ impl Sizing {
 pub struct Step {
     /// Workers wanted.
     pub wanted: u32,
-    /// Jobs that were running and pending before the changes.
+    /// Jobs running before the changes.
     pub running: u32,
+    /// Jobs pending before the changes.
     pub pending: u32,
     /// Jobs submitted.
     pub submitted: u32,
@@ -229,7 +230,7 @@ pub fn run(mut args: ScaleArgs, layers: Layers) -> anyhow::Result<()> {
         args.interval
     );
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    runtime.block_on(watch(&client, &mut engine, sizing, args.interval))?;
+    runtime.block_on(watch(&client, &mut engine, sizing, args.interval));
     // Pending jobs would start workers for a farm nobody scales any more; running ones
     // finish their tiles and leave when idle.
     let pending: Vec<String> = engine
@@ -250,18 +251,13 @@ pub fn run(mut args: ScaleArgs, layers: Layers) -> anyhow::Result<()> {
 
 /// Looks at the queue every `interval` seconds until SIGINT or SIGTERM. A server or engine
 /// that fails to answer is logged and asked again at the next look.
-async fn watch(
-    client: &Client,
-    engine: &mut dyn Engine,
-    sizing: Sizing,
-    interval: u64,
-) -> anyhow::Result<()> {
+async fn watch(client: &Client, engine: &mut dyn Engine, sizing: Sizing, interval: u64) {
     let stop = crate::signal::interrupted();
     tokio::pin!(stop);
     let mut last = None;
     loop {
         let demand = tokio::select! {
-            _ = &mut stop => return Ok(()),
+            _ = &mut stop => return,
             demand = client.demand() => demand,
         };
         match demand {
@@ -278,7 +274,7 @@ async fn watch(
             Err(e) => tracing::warn!("reading the farm's demand: {e}"),
         }
         tokio::select! {
-            _ = &mut stop => return Ok(()),
+            _ = &mut stop => return,
             _ = tokio::time::sleep(Duration::from_secs(interval)) => {}
         }
     }
