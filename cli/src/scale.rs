@@ -11,8 +11,9 @@
 
 mod slurm;
 
+use std::collections::HashSet;
 use std::path::PathBuf;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
@@ -108,24 +109,41 @@ pub struct ScaleArgs {
     pub common: Common,
 }
 
+/// Where a worker job stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JobState {
+    /// Not started yet: it may be cancelled without losing work.
+    Pending,
+    /// Its worker runs (or is starting).
+    Running,
+    /// Ended with its worker's success: it left when idle, drained, or was done.
+    Succeeded,
+    /// Ended with a failure of its own (the worker could not start, or stopped on an
+    /// error): not a time limit, a preemption or a cancellation, which stop healthy
+    /// workers too.
+    Failed,
+}
+
 /// A worker job as the engine lists it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct WorkerJob {
     /// The engine's id (Slurm: `1234_5` for an array's element).
     pub id: String,
-    /// Not started yet: it may be cancelled without losing work.
-    pub pending: bool,
+    pub state: JobState,
 }
 
 /// What a provisioner needs of a cluster engine. Every method touches only the jobs this
 /// provisioner submitted.
 pub trait Engine {
-    /// The worker jobs alive (pending or running), oldest first.
+    /// The worker jobs alive (pending or running) and those that ended recently (as long
+    /// as the engine remembers them), oldest first.
     fn jobs(&mut self) -> anyhow::Result<Vec<WorkerJob>>;
     /// Submits `count` worker jobs; returns what the engine calls them.
     fn submit(&mut self, count: u32) -> anyhow::Result<String>;
     /// Cancels these jobs.
     fn cancel(&mut self, ids: &[String]) -> anyhow::Result<()>;
+    /// Where job `id` logs, to point a person at it.
+    fn log_of(&self, id: &str) -> String;
 }
 
 /// How many workers a demand wants.
@@ -145,6 +163,14 @@ impl Sizing {
     }
 }
 
+/// Worker jobs that fail one after another, with no success between them, before the
+/// provisioner holds its submissions: a worker that cannot start (no `tessera` on the
+/// nodes, a wrong token) would otherwise be submitted again at every look.
+const FAILURES_BEFORE_HOLD: u32 = 3;
+/// The first hold; each further failure doubles it, up to [`LONGEST_HOLD`].
+const FIRST_HOLD: Duration = Duration::from_secs(60);
+const LONGEST_HOLD: Duration = Duration::from_secs(15 * 60);
+
 /// What one look at the queue changed.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Step {
@@ -158,36 +184,97 @@ pub struct Step {
     pub submitted: u32,
     /// Pending jobs cancelled.
     pub cancelled: Vec<String>,
+    /// Jobs seen failed at this look.
+    pub failed: Vec<String>,
+    /// Submissions are held until this long from now, after failures in a row.
+    pub held: Option<Duration>,
 }
 
-/// One look: brings the engine's worker jobs to what `demand` wants. Only pending jobs are
-/// cancelled, the newest first (the oldest start first).
-pub fn step(engine: &mut dyn Engine, sizing: Sizing, demand: u64) -> anyhow::Result<Step> {
-    let jobs = engine.jobs()?;
-    let pending: Vec<&WorkerJob> = jobs.iter().filter(|j| j.pending).collect();
-    let mut step = Step {
-        wanted: sizing.wanted(demand),
-        running: (jobs.len() - pending.len()) as u32,
-        pending: pending.len() as u32,
-        ..Step::default()
-    };
-    let alive = jobs.len() as u32;
-    if step.wanted > alive {
-        step.submitted = step.wanted - alive;
-        engine.submit(step.submitted)?;
-    } else if step.wanted < alive {
-        let surplus = (alive - step.wanted) as usize;
-        step.cancelled = pending
-            .iter()
-            .rev()
-            .take(surplus)
-            .map(|j| j.id.clone())
-            .collect();
-        if !step.cancelled.is_empty() {
-            engine.cancel(&step.cancelled)?;
+/// The provisioner's decisions, look after look.
+pub struct Provisioner {
+    sizing: Sizing,
+    /// Ended jobs already counted.
+    seen_ended: HashSet<String>,
+    /// Failed jobs since the last one that succeeded.
+    failures_in_a_row: u32,
+    /// No submission before this.
+    hold_until: Option<Instant>,
+}
+
+impl Provisioner {
+    pub fn new(sizing: Sizing) -> Provisioner {
+        Provisioner {
+            sizing,
+            seen_ended: HashSet::new(),
+            failures_in_a_row: 0,
+            hold_until: None,
         }
     }
-    Ok(step)
+
+    /// One look at `now`: brings the engine's worker jobs to what `demand` wants. Only
+    /// pending jobs are cancelled, the newest first (the oldest start first). After
+    /// [`FAILURES_BEFORE_HOLD`] failed jobs in a row nothing is submitted for a while.
+    pub fn step(
+        &mut self,
+        engine: &mut dyn Engine,
+        demand: u64,
+        now: Instant,
+    ) -> anyhow::Result<Step> {
+        let jobs = engine.jobs()?;
+        let mut step = Step {
+            wanted: self.sizing.wanted(demand),
+            ..Step::default()
+        };
+        for job in &jobs {
+            match job.state {
+                JobState::Pending => step.pending += 1,
+                JobState::Running => step.running += 1,
+                JobState::Succeeded | JobState::Failed => {
+                    if !self.seen_ended.insert(job.id.clone()) {
+                        continue;
+                    }
+                    if job.state == JobState::Succeeded {
+                        self.failures_in_a_row = 0;
+                        self.hold_until = None;
+                    } else {
+                        self.failures_in_a_row += 1;
+                        step.failed.push(job.id.clone());
+                    }
+                }
+            }
+        }
+        // Forget what the engine forgot.
+        self.seen_ended
+            .retain(|id| jobs.iter().any(|j| &j.id == id));
+        if !step.failed.is_empty() && self.failures_in_a_row >= FAILURES_BEFORE_HOLD {
+            let doublings = (self.failures_in_a_row - FAILURES_BEFORE_HOLD).min(10);
+            let hold = (FIRST_HOLD * (1 << doublings)).min(LONGEST_HOLD);
+            self.hold_until = Some(now + hold);
+        }
+        step.held = self
+            .hold_until
+            .and_then(|until| until.checked_duration_since(now))
+            .filter(|left| !left.is_zero());
+
+        let alive = step.pending + step.running;
+        if step.wanted > alive && step.held.is_none() {
+            step.submitted = step.wanted - alive;
+            engine.submit(step.submitted)?;
+        } else if step.wanted < alive {
+            let surplus = (alive - step.wanted) as usize;
+            step.cancelled = jobs
+                .iter()
+                .rev()
+                .filter(|j| j.state == JobState::Pending)
+                .take(surplus)
+                .map(|j| j.id.clone())
+                .collect();
+            if !step.cancelled.is_empty() {
+                engine.cancel(&step.cancelled)?;
+            }
+        }
+        Ok(step)
+    }
 }
 
 pub fn run(mut args: ScaleArgs, layers: Layers) -> anyhow::Result<()> {
@@ -221,7 +308,7 @@ pub fn run(mut args: ScaleArgs, layers: Layers) -> anyhow::Result<()> {
         max_workers,
     };
     tracing::info!(
-        "scaling workers for {} in Slurm: one per {} tasks, at most {}, {} cores each; a \
+        "scaling workers for {} in Slurm: one per {} tasks, at most {}, with --cpus {}; a \
          look every {} s",
         client.base(),
         sizing.tasks_per_worker,
@@ -230,13 +317,18 @@ pub fn run(mut args: ScaleArgs, layers: Layers) -> anyhow::Result<()> {
         args.interval
     );
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    runtime.block_on(watch(&client, &mut engine, sizing, args.interval));
+    runtime.block_on(watch(
+        &client,
+        &mut engine,
+        Provisioner::new(sizing),
+        args.interval,
+    ));
     // Pending jobs would start workers for a farm nobody scales any more; running ones
     // finish their tiles and leave when idle.
     let pending: Vec<String> = engine
         .jobs()?
         .into_iter()
-        .filter(|j| j.pending)
+        .filter(|j| j.state == JobState::Pending)
         .map(|j| j.id)
         .collect();
     if !pending.is_empty() {
@@ -251,7 +343,12 @@ pub fn run(mut args: ScaleArgs, layers: Layers) -> anyhow::Result<()> {
 
 /// Looks at the queue every `interval` seconds until SIGINT or SIGTERM. A server or engine
 /// that fails to answer is logged and asked again at the next look.
-async fn watch(client: &Client, engine: &mut dyn Engine, sizing: Sizing, interval: u64) {
+async fn watch(
+    client: &Client,
+    engine: &mut dyn Engine,
+    mut provisioner: Provisioner,
+    interval: u64,
+) {
     let stop = crate::signal::interrupted();
     tokio::pin!(stop);
     let mut last = None;
@@ -261,13 +358,17 @@ async fn watch(client: &Client, engine: &mut dyn Engine, sizing: Sizing, interva
             demand = client.demand() => demand,
         };
         match demand {
-            Ok(demand) => match step(engine, sizing, demand) {
+            Ok(demand) => match provisioner.step(engine, demand, Instant::now()) {
                 Ok(step) => {
+                    for id in &step.failed {
+                        tracing::warn!("worker job {id} failed; its log: {}", engine.log_of(id));
+                    }
                     let changed = step.submitted > 0 || !step.cancelled.is_empty();
-                    if changed || last != Some((demand, step.wanted)) {
+                    let state = (demand, step.wanted, step.held.is_some());
+                    if changed || !step.failed.is_empty() || last != Some(state) {
                         tracing::info!("{}", describe(demand, &step));
                     }
-                    last = Some((demand, step.wanted));
+                    last = Some(state);
                 }
                 Err(e) => tracing::error!("{e:#}"),
             },
@@ -292,6 +393,12 @@ fn describe(demand: u64, step: &Step) -> String {
     if !step.cancelled.is_empty() {
         line += &format!("; cancelled {}", step.cancelled.join(" "));
     }
+    if let Some(held) = step.held {
+        line += &format!(
+            "; worker jobs keep failing (see their logs): none submitted for {} s",
+            held.as_secs()
+        );
+    }
     line
 }
 
@@ -308,9 +415,15 @@ mod tests {
     }
 
     impl Fake {
+        /// The first `n` pending jobs start.
         fn start(&mut self, n: usize) {
-            for job in self.jobs.iter_mut().filter(|j| j.pending).take(n) {
-                job.pending = false;
+            self.set(JobState::Pending, JobState::Running, n);
+        }
+
+        /// The first `n` jobs in state `from` go to `to`.
+        fn set(&mut self, from: JobState, to: JobState, n: usize) {
+            for job in self.jobs.iter_mut().filter(|j| j.state == from).take(n) {
+                job.state = to;
             }
         }
     }
@@ -324,7 +437,7 @@ mod tests {
                 self.next += 1;
                 self.jobs.push(WorkerJob {
                     id: self.next.to_string(),
-                    pending: true,
+                    state: JobState::Pending,
                 });
             }
             self.submissions.push(count);
@@ -333,6 +446,9 @@ mod tests {
         fn cancel(&mut self, ids: &[String]) -> anyhow::Result<()> {
             self.jobs.retain(|j| !ids.contains(&j.id));
             Ok(())
+        }
+        fn log_of(&self, id: &str) -> String {
+            format!("log-{id}")
         }
     }
 
@@ -356,33 +472,75 @@ mod tests {
 
     #[test]
     fn submits_what_is_missing_and_cancels_only_pending_jobs_newest_first() {
-        let sizing = Sizing {
+        let mut p = Provisioner::new(Sizing {
             tasks_per_worker: 4,
             max_workers: 3,
-        };
+        });
+        let now = Instant::now();
         let mut engine = Fake::default();
+        let mut step = |engine: &mut Fake, demand| p.step(engine, demand, now).unwrap();
         // Nothing queued: nothing submitted.
-        assert_eq!(step(&mut engine, sizing, 0).unwrap(), Step::default());
+        assert_eq!(step(&mut engine, 0), Step::default());
         // 10 tasks want 3 workers; the engine starts one of them.
-        let s = step(&mut engine, sizing, 10).unwrap();
+        let s = step(&mut engine, 10);
         assert_eq!((s.wanted, s.submitted), (3, 3));
         engine.start(1);
         // The same demand again: nothing to change while two are pending.
-        let s = step(&mut engine, sizing, 10).unwrap();
+        let s = step(&mut engine, 10);
         assert_eq!((s.running, s.pending, s.submitted), (1, 2, 0));
         assert!(s.cancelled.is_empty());
         // Demand above the cap never goes past it.
-        assert_eq!(step(&mut engine, sizing, 500).unwrap().submitted, 0);
+        assert_eq!(step(&mut engine, 500).submitted, 0);
         // Demand falls to 4 tasks (1 worker): the two pending go, newest first.
-        let s = step(&mut engine, sizing, 4).unwrap();
+        let s = step(&mut engine, 4);
         assert_eq!(s.cancelled, ["3", "2"]);
         // Demand 0: the running one is left alone (it leaves when idle).
-        let s = step(&mut engine, sizing, 0).unwrap();
+        let s = step(&mut engine, 0);
         assert_eq!((s.running, s.cancelled.len()), (1, 0));
         assert_eq!(engine.jobs.len(), 1);
-        // Demand again: two more, beside the running one.
-        assert_eq!(step(&mut engine, sizing, 9).unwrap().submitted, 2);
-        assert_eq!(engine.submissions, [3, 2]);
+        // It leaves; demand again: two more. Ended jobs do not count as alive.
+        engine.set(JobState::Running, JobState::Succeeded, 1);
+        assert_eq!(step(&mut engine, 9).submitted, 3);
+        assert_eq!(engine.submissions, [3, 3]);
+    }
+
+    #[test]
+    fn jobs_that_keep_failing_hold_the_submissions_longer_each_time() {
+        let mut p = Provisioner::new(Sizing {
+            tasks_per_worker: 1,
+            max_workers: 2,
+        });
+        let start = Instant::now();
+        let mut engine = Fake::default();
+        // Two jobs fail, then one more: three in a row.
+        assert_eq!(p.step(&mut engine, 5, start).unwrap().submitted, 2);
+        engine.set(JobState::Pending, JobState::Failed, 2);
+        let s = p.step(&mut engine, 5, start).unwrap();
+        assert_eq!((s.failed.len(), s.held, s.submitted), (2, None, 2));
+        engine.set(JobState::Pending, JobState::Failed, 1);
+        let s = p.step(&mut engine, 5, start).unwrap();
+        assert_eq!((s.failed.len(), s.held), (1, Some(FIRST_HOLD)));
+        assert_eq!(s.submitted, 0, "held: one job is still pending, none added");
+        // Seen failures are not counted again; the hold runs out.
+        let later = start + FIRST_HOLD / 2;
+        let s = p.step(&mut engine, 5, later).unwrap();
+        assert_eq!((s.failed.len(), s.held), (0, Some(FIRST_HOLD / 2)));
+        let s = p.step(&mut engine, 5, start + FIRST_HOLD).unwrap();
+        assert_eq!((s.held, s.submitted), (None, 1));
+        // The next failure doubles the hold; a success ends it.
+        engine.set(JobState::Pending, JobState::Failed, 1);
+        let at = start + FIRST_HOLD;
+        assert_eq!(
+            p.step(&mut engine, 5, at).unwrap().held,
+            Some(2 * FIRST_HOLD)
+        );
+        engine.set(JobState::Pending, JobState::Succeeded, 1);
+        let s = p.step(&mut engine, 5, at).unwrap();
+        assert_eq!((s.held, s.submitted), (None, 2));
+        // The engine forgets ended jobs; so does the provisioner.
+        engine.jobs.retain(|j| j.state == JobState::Pending);
+        p.step(&mut engine, 5, at).unwrap();
+        assert!(p.seen_ended.is_empty());
     }
 
     #[test]
@@ -418,6 +576,8 @@ mod tests {
             pending: 0,
             submitted: 2,
             cancelled: vec![],
+            failed: vec![],
+            held: None,
         };
         assert_eq!(
             describe(10, &s),

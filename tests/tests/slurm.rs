@@ -155,6 +155,26 @@ fn slurm_runs_the_workers_the_queue_wants_and_they_leave_when_idle() {
         || cluster.jobs().is_empty(),
         || farm.logs(),
     );
+
+    // Worker jobs that cannot start their worker (no program at that path on the node)
+    // fail one after another: after three in a row the provisioner submits no more for a
+    // minute, and says where their logs are.
+    let job = farm.submit(&args);
+    let flags = ["--max-workers", "1", "--tessera", "/no/such/tessera"];
+    let mut broken = start_provisioner(&farm, &cluster, &flags);
+    wait_until(
+        "the provisioner to hold its submissions",
+        Duration::from_secs(60),
+        || broken.log().contains("none submitted for 60 s"),
+        || farm.logs(),
+    );
+    std::thread::sleep(Duration::from_secs(3));
+    let log = broken.log();
+    assert_eq!(log.matches("; submitted 1").count(), 3, "{log}");
+    assert_eq!(log.matches("failed; its log: ").count(), 3, "{log}");
+    assert!(log.contains("slurm-jobs/tessera-worker-"), "{log}");
+    assert!(broken.terminate(Duration::from_secs(30)).success());
+    farm.client(&["cancel", &job.to_string()]);
 }
 
 /// BENCHMARKS.md's Slurm figure for a time limit: worker jobs of one core and a one-minute
@@ -316,17 +336,22 @@ fn measure_slurm_started_workers_against_workers_started_by_hand() {
 }
 
 /// `tessera scale slurm` for the farm in the cluster, looking every second, with `extra`
-/// flags, once it has started (its sbatch options accepted). Worker jobs log to `slurm-jobs/` and cache scenes in `cache-slurm/` (the
+/// flags (at most 2 workers unless they say otherwise), once it has started (its sbatch options accepted). Worker jobs log to `slurm-jobs/` and cache scenes in `cache-slurm/` (the
 /// provisioner's environment reaches them: `--export=ALL`).
 fn start_provisioner(farm: &Farm, cluster: &Cluster, extra: &[&str]) -> Process {
     let logs = farm.path().join("slurm-jobs");
     std::fs::create_dir_all(&logs).unwrap();
     let mut cmd = Command::new(tessera_bin());
     cmd.args(["scale", "slurm", "--server", &farm.url()])
-        .args(["--max-workers", "2", "--interval", "1"])
+        .args(["--interval", "1"])
         .args(["--exit-when-idle", EXIT_WHEN_IDLE, "--log-dir"])
         .arg(&logs)
         .args(extra)
+        .args(if extra.contains(&"--max-workers") {
+            &[][..]
+        } else {
+            &["--max-workers", "2"]
+        })
         .env("SLURM_CONF", &cluster.conf)
         .env("TESSERA_CACHE", farm.path().join("cache-slurm"));
     let mut provisioner = Process::spawn("provisioner", cmd, farm.path());

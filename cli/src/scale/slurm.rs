@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 
 use anyhow::{bail, Context};
 
-use super::{Engine, ScaleArgs, WorkerJob};
+use super::{Engine, JobState, ScaleArgs, WorkerJob};
 
 /// Every worker job's name (`squeue --name`).
 pub const JOB_NAME: &str = "tessera-worker";
@@ -39,6 +39,8 @@ pub fn script(tessera: &Path) -> String {
 pub struct Slurm {
     /// The comment of this farm's worker jobs.
     marker: String,
+    /// Where the jobs log.
+    log_dir: std::path::PathBuf,
     /// `sbatch` options every submission has (the array's size comes last).
     options: Vec<String>,
     /// The worker's settings, handed to the jobs in the environment (`--export=ALL`).
@@ -89,6 +91,7 @@ impl Slurm {
         }
         let slurm = Slurm {
             marker,
+            log_dir: log_dir.to_path_buf(),
             options,
             env,
             script: script(args.tessera.as_deref().expect("run() set the program")),
@@ -113,9 +116,12 @@ impl Slurm {
 impl Engine for Slurm {
     fn jobs(&mut self) -> anyhow::Result<Vec<WorkerJob>> {
         let mut cmd = Command::new("squeue");
+        // Every state: ended jobs too, while the controller remembers them (its
+        // MinJobAge, 300 s by default), for the failures.
         cmd.args([
             "--noheader",
             "--array",
+            "--states=all",
             "--me",
             &format!("--name={JOB_NAME}"),
             "--format=%i|%T|%k",
@@ -136,48 +142,51 @@ impl Engine for Slurm {
         cmd.arg("--state=PENDING").args(ids);
         run(cmd, None).map(drop)
     }
+
+    fn log_of(&self, id: &str) -> String {
+        // `--output=.../tessera-worker-%A_%a.log`; an array element's id is `%A_%a`.
+        self.log_dir
+            .join(format!("tessera-worker-{id}.log"))
+            .display()
+            .to_string()
+    }
 }
 
-/// This farm's live worker jobs in `squeue --array --format=%i|%T|%k` output, oldest
-/// first. Jobs that are ending are left out: their workers have left.
+/// This farm's worker jobs in `squeue --array --format=%i|%T|%k` output, oldest first.
+/// Jobs whose state says nothing of their worker (ending, or stopped from outside: a time
+/// limit, a preemption, a cancellation) are left out.
 fn parse_squeue(out: &str, marker: &str) -> Vec<WorkerJob> {
     let mut jobs: Vec<((u64, u64), WorkerJob)> = out
         .lines()
         .filter_map(|line| {
             let mut fields = line.trim().splitn(3, '|');
             let (id, state, comment) = (fields.next()?, fields.next()?, fields.next()?);
-            if comment != marker || ENDING.contains(&state) {
+            if comment != marker {
                 return None;
             }
+            let state = job_state(state)?;
             let (job, index) = id.split_once('_').unwrap_or((id, "0"));
             let order = (job.parse().ok()?, index.parse().unwrap_or(0));
-            let pending = state == "PENDING";
-            Some((
-                order,
-                WorkerJob {
-                    id: id.to_string(),
-                    pending,
-                },
-            ))
+            let id = id.to_string();
+            Some((order, WorkerJob { id, state }))
         })
         .collect();
     jobs.sort_by_key(|(order, _)| *order);
     jobs.into_iter().map(|(_, job)| job).collect()
 }
 
-/// Job states whose worker is gone or going.
-const ENDING: &[&str] = &[
-    "COMPLETING",
-    "COMPLETED",
-    "CANCELLED",
-    "FAILED",
-    "TIMEOUT",
-    "NODE_FAIL",
-    "PREEMPTED",
-    "BOOT_FAIL",
-    "DEADLINE",
-    "OUT_OF_MEMORY",
-];
+/// A Slurm job state (`squeue %T`) as the provisioner counts it.
+fn job_state(state: &str) -> Option<JobState> {
+    Some(match state {
+        "PENDING" => JobState::Pending,
+        "COMPLETED" => JobState::Succeeded,
+        "FAILED" | "BOOT_FAIL" | "NODE_FAIL" | "OUT_OF_MEMORY" => JobState::Failed,
+        "COMPLETING" | "CANCELLED" | "TIMEOUT" | "PREEMPTED" | "DEADLINE" | "REVOKED"
+        | "SPECIAL_EXIT" => return None,
+        // RUNNING, CONFIGURING, SUSPENDED, REQUEUED, RESIZING, ...: the job holds its place.
+        _ => JobState::Running,
+    })
+}
 
 /// Runs a Slurm command; its standard output, or an error with what it printed.
 fn run(mut cmd: Command, stdin: Option<&str>) -> anyhow::Result<String> {
@@ -223,11 +232,21 @@ mod tests {
         let out = format!(
             "12_10|PENDING|{ours}\n12_2|RUNNING|{ours}\n9|RUNNING|{ours}\n\
              13_0|COMPLETING|{ours}\n14_0|PENDING|tessera-scale http://other:8700\n\
-             15_0|PENDING|\n"
+             15_0|PENDING|\n16_0|FAILED|{ours}\n16_1|COMPLETED|{ours}\n16_2|TIMEOUT|{ours}\n"
         );
         let jobs = parse_squeue(&out, &ours);
-        let ids: Vec<(&str, bool)> = jobs.iter().map(|j| (j.id.as_str(), j.pending)).collect();
-        assert_eq!(ids, [("9", false), ("12_2", false), ("12_10", true)]);
+        let ids: Vec<(&str, JobState)> = jobs.iter().map(|j| (j.id.as_str(), j.state)).collect();
+        use JobState::*;
+        assert_eq!(
+            ids,
+            [
+                ("9", Running),
+                ("12_2", Running),
+                ("12_10", Pending),
+                ("16_0", Failed),
+                ("16_1", Succeeded)
+            ]
+        );
     }
 
     #[test]
