@@ -38,6 +38,9 @@ pub const MAX_TILE_BYTES: usize = 64 << 20;
 pub const MAX_JSON_BYTES: usize = 64 << 10;
 /// Worker name and version strings, bytes.
 pub const MAX_WORKER_TEXT_BYTES: usize = 200;
+/// A worker's measured denoise or encode time per megapixel at registration, ms (an
+/// hour: far beyond any real machine, and within the database's signed integers).
+pub const MAX_STEP_MS_PER_MEGAPIXEL: u64 = 3_600_000;
 /// Failure message kept per report, bytes (longer ones are cut).
 pub const MAX_FAILURE_MESSAGE_BYTES: usize = 4_096;
 /// A time-budget job's default tile is sized for passes of this many samples (its passes

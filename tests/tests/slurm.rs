@@ -3,7 +3,8 @@
 //! the workers the queue wants; their frames equal a direct render bit for bit; a worker
 //! job cancelled mid-tile (`scancel` sends what a time limit or a preemption sends:
 //! SIGTERM, then SIGKILL) loses nothing; pending jobs go when the queue empties; the
-//! workers leave when idle.
+//! workers leave when idle; deploy/slurm/tessera-workers.sbatch works by hand; worker
+//! jobs that keep failing stop the submissions.
 //!
 //! Needs Slurm and MUNGE (`scripts/install-slurm.sh`, which `scripts/test.sh` runs) and
 //! root; without them the test says loudly that it is skipped.
@@ -32,8 +33,10 @@ fn slurm_runs_the_workers_the_queue_wants_and_they_leave_when_idle() {
     farm.start_server(60);
     let cluster = Cluster::start(&farm);
     let scene = farm.demo_scene();
-    // Two cores per worker job on this machine's node: one runs, a second one pends.
-    let flags = ["--cpus", "2", "--time", "10"];
+    // Worker jobs of every core of the node: one runs, a second one pends.
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cores = cores.to_string();
+    let flags = ["--cpus", &cores, "--time", "10"];
     let mut provisioner = start_provisioner(&farm, &cluster, &flags);
     std::thread::sleep(Duration::from_secs(2));
     assert!(
@@ -123,7 +126,7 @@ fn slurm_runs_the_workers_the_queue_wants_and_they_leave_when_idle() {
     assert!(provisioner.log().contains("provisioner stopped"));
 
     // deploy/slurm/tessera-workers.sbatch, submitted by hand as its comment says (the
-    // node's two cores instead of its eight), renders a job and leaves when idle.
+    // node's cores instead of its eight), renders a job and leaves when idle.
     let mut args = vec![scene.to_str().unwrap(), "--frames", "1-2", "--tile", "16"];
     args.extend(["--passes", "1"]);
     args.extend(settings("4"));
@@ -133,7 +136,7 @@ fn slurm_runs_the_workers_the_queue_wants_and_they_leave_when_idle() {
     let output = farm.path().join("slurm-jobs").join("by-hand-%A_%a.log");
     let submitted = cluster
         .command("sbatch")
-        .args(["--array=1-1", "--cpus-per-task=2"])
+        .args(["--array=1-1", &format!("--cpus-per-task={cores}")])
         .arg(format!("--output={}", output.display()))
         .arg(&script)
         .env("TESSERA_SERVER", farm.url())

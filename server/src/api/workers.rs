@@ -16,7 +16,10 @@ use proto::{
 use super::error::{read_body, Id, JsonBody, PathParams, QueryParams};
 use crate::app::{now_ms, AppState};
 use crate::error::{Error, Result};
-use crate::limits::{GONE_WORKER_LISTED_MS, MAX_FAILURE_MESSAGE_BYTES, MAX_WORKER_TEXT_BYTES};
+use crate::limits::{
+    GONE_WORKER_LISTED_MS, MAX_FAILURE_MESSAGE_BYTES, MAX_STEP_MS_PER_MEGAPIXEL,
+    MAX_WORKER_TEXT_BYTES,
+};
 use crate::{db, denoising, encoding, identity, intake, scheduler, verify};
 
 /// Registers a worker with the join token (the server's worker token); the answer carries
@@ -66,6 +69,18 @@ pub async fn register(
             field: "threads".into(),
             message: format!("must be 1 to 4096, got {}", reg.threads),
         });
+    }
+    let steps = [
+        ("denoise_ms_per_megapixel", reg.denoise_ms_per_megapixel),
+        ("encode_ms_per_megapixel", reg.encode_ms_per_megapixel),
+    ];
+    for (field, ms) in steps {
+        if let Some(ms) = ms.filter(|&ms| ms > MAX_STEP_MS_PER_MEGAPIXEL) {
+            return Err(Error::Invalid {
+                field: field.into(),
+                message: format!("must be at most {MAX_STEP_MS_PER_MEGAPIXEL}, got {ms}"),
+            });
+        }
     }
     let (now, timing) = (now_ms(), app.timing());
     let who = format!(
