@@ -319,17 +319,26 @@ impl Client {
         })
     }
 
+    /// The whole answer to a short request (at most [`JSON_TIMEOUT`]).
+    async fn short_answer(
+        &self,
+        req: RequestBuilder,
+        what: &str,
+    ) -> Result<impl AsRef<[u8]>, ClientError> {
+        let answer = self.send(req.timeout(JSON_TIMEOUT), what).await?;
+        answer.bytes().await.map_err(|e| ClientError::Transport {
+            request: what.to_string(),
+            detail: format!("reading the answer: {}", root_cause(&e)),
+        })
+    }
+
     async fn json<T: DeserializeOwned>(
         &self,
         req: RequestBuilder,
         what: &str,
     ) -> Result<T, ClientError> {
-        let answer = self.send(req.timeout(JSON_TIMEOUT), what).await?;
-        let bytes = answer.bytes().await.map_err(|e| ClientError::Transport {
-            request: what.to_string(),
-            detail: format!("reading the answer: {}", root_cause(&e)),
-        })?;
-        serde_json::from_slice(&bytes).map_err(|e| ClientError::Transport {
+        let bytes = self.short_answer(req, what).await?;
+        serde_json::from_slice(bytes.as_ref()).map_err(|e| ClientError::Transport {
             request: what.to_string(),
             detail: format!(
                 "the answer is not what this version of tessera expects ({e}); are the \
@@ -494,12 +503,12 @@ impl Client {
     pub async fn demand(&self) -> Result<u64, ClientError> {
         let what = "GET /metrics";
         let req = self.http.get(format!("{}/metrics", self.base));
-        let answer = self.send(req.timeout(JSON_TIMEOUT), what).await?;
-        let text = answer.text().await.map_err(|e| ClientError::Transport {
-            request: what.to_string(),
-            detail: format!("reading the answer: {}", root_cause(&e)),
-        })?;
-        parse_gauge(&text, server::metrics::DEMAND).ok_or_else(|| ClientError::Transport {
+        let text = self.short_answer(req, what).await?;
+        parse_gauge(
+            &String::from_utf8_lossy(text.as_ref()),
+            server::metrics::DEMAND,
+        )
+        .ok_or_else(|| ClientError::Transport {
             request: what.to_string(),
             detail: format!(
                 "no `{}` gauge in the answer; are the server and the CLI the same version?",

@@ -284,10 +284,11 @@ pub fn run(mut args: ScaleArgs, layers: Layers) -> anyhow::Result<()> {
         None => std::env::current_exe().context("finding this program's path")?,
     };
     let tessera = std::path::absolute(&tessera).unwrap_or(tessera);
-    args.tessera = Some(tessera);
     let log_dir = std::path::absolute(args.log_dir.take().unwrap_or_else(|| ".".into()))
         .context("the log folder")?;
-    args.log_dir = Some(log_dir);
+    // Shown as they will be used by --print-config.
+    args.tessera = Some(tessera.clone());
+    args.log_dir = Some(log_dir.clone());
     if args.common.print_config {
         print!("{}", layers.to_toml(&args)?);
         return Ok(());
@@ -301,7 +302,7 @@ pub fn run(mut args: ScaleArgs, layers: Layers) -> anyhow::Result<()> {
     crate::logs::init(args.common.log_format, "info", None);
     let client = Client::with_ca(&args.server, None, args.ca.as_deref())?;
     let mut engine = match args.engine {
-        EngineKind::Slurm => slurm::Slurm::new(&args)?,
+        EngineKind::Slurm => slurm::Slurm::new(&args, &tessera, &log_dir)?,
     };
     let sizing = Sizing {
         tasks_per_worker: args.tasks_per_worker,

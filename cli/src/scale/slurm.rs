@@ -51,9 +51,9 @@ pub struct Slurm {
 impl Slurm {
     /// Slurm for `args`, after `sbatch --test-only` accepted its options (a wrong
     /// partition or account is refused here, with Slurm's own words, not at every look).
-    pub fn new(args: &ScaleArgs) -> anyhow::Result<Slurm> {
+    /// `tessera` is the program the jobs run, `log_dir` where they log.
+    pub fn new(args: &ScaleArgs, tessera: &Path, log_dir: &Path) -> anyhow::Result<Slurm> {
         let marker = marker(&args.server);
-        let log_dir = args.log_dir.as_deref().expect("run() set the log folder");
         let mut options = vec![
             format!("--job-name={JOB_NAME}"),
             format!("--comment={marker}"),
@@ -94,7 +94,7 @@ impl Slurm {
             log_dir: log_dir.to_path_buf(),
             options,
             env,
-            script: script(args.tessera.as_deref().expect("run() set the program")),
+            script: script(tessera),
         };
         slurm
             .sbatch(&["--test-only".into(), "--array=0-0".into()])
