@@ -6,7 +6,9 @@ use std::cell::RefCell;
 
 use glam::{BVec3A, Vec3, Vec3A};
 
+use super::build::SAH_MAX_DEPTH;
 use super::motion::Segment;
+use super::wide::WIDTH;
 use crate::geometry::Ray;
 use crate::triangle::gamma;
 
@@ -27,17 +29,31 @@ pub(super) struct Node {
 /// enters its box.
 pub(super) type Deferred = (u32, f32);
 
+/// Entries in each thread's traversal stack. A query's stack holds at most what one level
+/// holds, twice (the instance level, and the mesh it searches above it). A level's path
+/// from the root passes at most `2 · SAH_MAX_DEPTH + 1` nodes (see `build`; the eight-wide
+/// tree is no deeper than the binary one it collapses), and each leaves at most seven of
+/// its eight children behind (a binary node: one), so one level holds fewer than
+/// [`LEVEL_STACK`] entries. A query past it would panic on the bounds check, not overrun.
+pub(super) const STACK_CAPACITY: usize = 2 * LEVEL_STACK;
+
+/// The most entries one level's traversal can hold (see [`STACK_CAPACITY`]).
+pub(super) const LEVEL_STACK: usize = WIDTH * (2 * SAH_MAX_DEPTH as usize + 1);
+
 thread_local! {
     /// Each thread's traversal stack, reused by every query: a fresh array per query had to
-    /// be zeroed each time, 2.5% of a render's instructions. The instance level and the
-    /// mesh levels it enters share it, each working above where its caller left it.
-    static STACK: RefCell<Vec<Deferred>> = const { RefCell::new(Vec::new()) };
+    /// be zeroed each time, 2.5% of a render's instructions. A fixed array rather than a
+    /// `Vec`: a traversal keeps its height in a register, where `Vec::push` reloaded its
+    /// length and capacity from memory at every push. The instance level and the mesh levels
+    /// it enters share it, each working in the part above where its caller left it.
+    static STACK: RefCell<[Deferred; STACK_CAPACITY]> =
+        const { RefCell::new([(0, 0.0); STACK_CAPACITY]) };
 }
 
 /// Runs a query with this thread's traversal stack. Queries do not nest (an `accept`
 /// callback must not start another), so the stack is never borrowed twice.
-pub(super) fn with_stack<R>(query: impl FnOnce(&mut Vec<Deferred>) -> R) -> R {
-    STACK.with_borrow_mut(query)
+pub(super) fn with_stack<R>(query: impl FnOnce(&mut [Deferred]) -> R) -> R {
+    STACK.with_borrow_mut(|stack| query(stack))
 }
 
 /// The far slab distance is scaled up by 1 + 2·gamma(3) to cover the rounding of both slab
@@ -177,27 +193,27 @@ impl NodeBoxes for MotionBoxes<'_> {
 ///
 /// `leaf(start, count, t_max, stack)` handles one leaf and may lower `t_max` (a closer
 /// hit); it returns true to stop the traversal (an any-hit query that found one). Deferred
-/// subtrees go on `stack` above its current length, which the leaf may use in turn, and
-/// the stack is left as it was found.
+/// subtrees go on `stack` from its start; a leaf gets the part of it above them, for a
+/// traversal of its own (the instance level's leaves search meshes).
 #[inline(always)]
 pub(super) fn traverse(
     nodes: &[Node],
     boxes: &impl NodeBoxes,
     ray: &BoxRay,
     t_max: &mut f32,
-    stack: &mut Vec<Deferred>,
-    mut leaf: impl FnMut(u32, u32, &mut f32, &mut Vec<Deferred>) -> bool,
+    stack: &mut [Deferred],
+    mut leaf: impl FnMut(u32, u32, &mut f32, &mut [Deferred]) -> bool,
 ) {
     let Some(root) = nodes.first() else { return };
     if boxes.entry(ray, root, 0, *t_max).is_none() {
         return;
     }
-    let base = stack.len();
+    // Entries `..len` of `stack` are this traversal's; a leaf gets the rest.
+    let mut len = 0;
     let mut node = root;
     loop {
         if node.count > 0 {
-            if leaf(node.start, node.count, t_max, stack) {
-                stack.truncate(base);
+            if leaf(node.start, node.count, t_max, &mut stack[len..]) {
                 return;
             }
         } else {
@@ -214,7 +230,8 @@ pub(super) fn traverse(
                     } else {
                         (right, l, dl)
                     };
-                    stack.push((far as u32, d_far));
+                    stack[len] = (far as u32, d_far);
+                    len += 1;
                     node = near;
                     continue;
                 }
@@ -231,10 +248,11 @@ pub(super) fn traverse(
         }
         // Pop the next deferred subtree that a closer hit has not ruled out.
         loop {
-            if stack.len() == base {
+            if len == 0 {
                 return;
             }
-            let Some((idx, d)) = stack.pop() else { return };
+            len -= 1;
+            let (idx, d) = stack[len];
             if d <= *t_max {
                 node = &nodes[idx as usize];
                 break;

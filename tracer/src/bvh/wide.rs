@@ -17,7 +17,7 @@ use super::node::{Deferred, Node, FAR_SCALE};
 use crate::geometry::{Aabb, Ray};
 
 /// Children per node.
-const WIDTH: usize = 8;
+pub(super) const WIDTH: usize = 8;
 
 /// Children per SIMD register: a node's lanes are tested in `WIDTH / LANES` halves.
 const LANES: usize = 4;
@@ -75,11 +75,28 @@ impl WideNode {
     }
 }
 
+/// How [`collapse`] turns small subtrees into leaves: those of at most `max_leaf`
+/// primitives, where the surface area heuristic, pricing a node visit at `node_cost`
+/// primitive tests, prefers one leaf to the subtree.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Merge {
+    pub max_leaf: u32,
+    pub node_cost: f64,
+}
+
+impl Merge {
+    /// Keeps the binary tree's leaves as they are.
+    pub const NONE: Merge = Merge {
+        max_leaf: 0,
+        node_cost: 0.0,
+    };
+}
+
 /// Collapses a binary hierarchy (as [`super::build::build`] makes it) into eight-wide nodes
-/// over the same leaves: each node takes its binary node's children and opens the largest
-/// interior one until it has eight, so the tree keeps SAH's grouping. Node 0 is the root;
-/// children come after their parents.
-pub(super) fn collapse(binary: &[Node]) -> Vec<WideNode> {
+/// over the same leaves, or over larger ones where `merge` says so: each node takes its
+/// binary node's children and opens the largest interior one until it has eight, so the
+/// tree keeps SAH's grouping. Node 0 is the root; children come after their parents.
+pub(super) fn collapse(binary: &[Node], merge: Merge) -> Vec<WideNode> {
     if binary.is_empty() {
         return Vec::new();
     }
@@ -87,11 +104,40 @@ pub(super) fn collapse(binary: &[Node]) -> Vec<WideNode> {
         let d = n.max - n.min;
         d.x * d.y + d.y * d.z + d.z * d.x
     };
+    // Each node's primitives (a subtree's leaves hold a contiguous range of them), and
+    // whether the subtree is cheaper as one leaf: the least cost of each subtree, as a leaf
+    // or as a node over its children's least costs, in double precision (a box's area may
+    // overflow f32; an infinite or NaN cost never merges more than it should: the
+    // comparison fails, or the leaf is as large as allowed anyway). Children come after
+    // their parents, so one reverse pass sees children first.
+    let mut range = vec![(0u32, 0u32); binary.len()];
+    let mut cost = vec![0.0f64; binary.len()];
+    let mut merged = vec![false; binary.len()];
+    for i in (0..binary.len()).rev() {
+        let n = &binary[i];
+        let area = f64::from(half_area(n));
+        if n.count > 0 {
+            range[i] = (n.start, n.count);
+            cost[i] = n.count as f64 * area;
+            continue;
+        }
+        let (l, r) = (n.start as usize, n.start as usize + 1);
+        range[i] = (range[l].0.min(range[r].0), range[l].1 + range[r].1);
+        let split = merge.node_cost * area + cost[l] + cost[r];
+        let leaf = range[i].1 as f64 * area;
+        if range[i].1 <= merge.max_leaf && leaf <= split {
+            merged[i] = true;
+            cost[i] = leaf;
+        } else {
+            cost[i] = split;
+        }
+    }
+    let is_leaf = |n: usize| binary[n].count > 0 || merged[n];
     let mut wide = vec![WideNode::EMPTY];
     // (binary node, the wide node that takes its children)
     let mut todo = vec![(0usize, 0usize)];
     while let Some((b, w)) = todo.pop() {
-        let mut lanes = if binary[b].count > 0 {
+        let mut lanes = if is_leaf(b) {
             // A leaf root: one lane.
             vec![b]
         } else {
@@ -102,7 +148,7 @@ pub(super) fn collapse(binary: &[Node]) -> Vec<WideNode> {
             let widest = lanes
                 .iter()
                 .enumerate()
-                .filter(|(_, &n)| binary[n].count == 0)
+                .filter(|(_, &n)| !is_leaf(n))
                 .max_by(|(_, &x), (_, &y)| half_area(&binary[x]).total_cmp(&half_area(&binary[y])));
             let Some((k, &n)) = widest else { break };
             let l = binary[n].start as usize;
@@ -111,8 +157,9 @@ pub(super) fn collapse(binary: &[Node]) -> Vec<WideNode> {
         }
         for (lane, &n) in lanes.iter().enumerate() {
             let node = &binary[n];
-            if node.count > 0 {
-                wide[w].set_lane(lane, node, node.start, node.count);
+            if is_leaf(n) {
+                let (start, count) = range[n];
+                wide[w].set_lane(lane, node, start, count);
             } else {
                 let child = wide.len();
                 wide.push(WideNode::EMPTY);
@@ -208,7 +255,7 @@ fn min_or_acc(acc: Vec4, x: Vec4) -> Vec4 {
 /// Hierarchies of more nodes than this (32 KiB, a core's L1 data cache) prefetch the
 /// children a ray enters; smaller ones stay in the cache, where a prefetch only costs
 /// instructions (1.1% more on the Cornell box).
-const PREFETCH_ABOVE: usize = 256;
+pub(super) const PREFETCH_ABOVE: usize = 256;
 
 /// Asks the CPU to start loading the two cache lines from `item` on (a node, or the first
 /// triangles of a leaf) into the cache.
@@ -240,21 +287,22 @@ pub(super) fn traverse_wide(
     nodes: &[WideNode],
     ray: &WideRay,
     t_max: &mut f32,
-    stack: &mut Vec<Deferred>,
+    stack: &mut [Deferred],
     prefetch_leaf: impl Fn(u32),
-    mut leaf: impl FnMut(u32, u32, &mut f32, &mut Vec<Deferred>) -> bool,
+    mut leaf: impl FnMut(u32, u32, &mut f32, &mut [Deferred]) -> bool,
 ) {
     if nodes.is_empty() {
         return;
     }
-    let base = stack.len();
     let prefetching = nodes.len() > PREFETCH_ABOVE;
+    // Entries `..len` of `stack` are this traversal's; a leaf gets the rest.
+    let mut len = 0;
     let mut current = 0u32;
     loop {
         let (entry, mut hits) = ray.enter(&nodes[current as usize], *t_max);
         // Push the children entered, kept in falling order of distance above `first`, so
         // that the nearest is popped first.
-        let first = stack.len();
+        let first = len;
         let node = &nodes[current as usize];
         while hits != 0 {
             let lane = hits.trailing_zeros();
@@ -272,8 +320,9 @@ pub(super) fn traverse_wide(
                     prefetch_leaf(start);
                 }
             }
-            stack.push((current * WIDTH as u32 + lane, entry[lane as usize]));
-            let mut i = stack.len() - 1;
+            stack[len] = (current * WIDTH as u32 + lane, entry[lane as usize]);
+            let mut i = len;
+            len += 1;
             while i > first && stack[i - 1].1 < stack[i].1 {
                 stack.swap(i - 1, i);
                 i -= 1;
@@ -282,12 +331,11 @@ pub(super) fn traverse_wide(
         // Pop the next child that a closer hit has not ruled out: a leaf is handled here,
         // an interior node is tested next.
         loop {
-            if stack.len() == base {
+            if len == 0 {
                 return;
             }
-            let Some((lane_ref, d)) = stack.pop() else {
-                return;
-            };
+            len -= 1;
+            let (lane_ref, d) = stack[len];
             if d > *t_max {
                 continue;
             }
@@ -298,8 +346,7 @@ pub(super) fn traverse_wide(
                 current = start;
                 break;
             }
-            if leaf(start, count, t_max, stack) {
-                stack.truncate(base);
+            if leaf(start, count, t_max, &mut stack[len..]) {
                 return;
             }
         }
@@ -308,8 +355,9 @@ pub(super) fn traverse_wide(
 
 #[cfg(test)]
 mod tests {
+    use super::super::build::SAH_MAX_DEPTH;
     use super::super::build::{build, BuildParams, BuildPrim};
-    use super::super::node::{traverse, BoxRay, StaticBoxes};
+    use super::super::node::{traverse, BoxRay, StaticBoxes, LEVEL_STACK, STACK_CAPACITY};
     use super::*;
     use crate::test_rng::Rng;
 
@@ -355,46 +403,77 @@ mod tests {
                 intersect_cost: 1.0,
             };
             let binary = build(&mut prims, &params);
-            let wide = collapse(&binary);
-            let mut leaves = Vec::new();
-            for (i, node) in wide.iter().enumerate() {
-                for lane in 0..WIDTH {
-                    let lane_box = node.lane_box(lane);
-                    if lane_box.is_empty() {
-                        continue;
-                    }
-                    if node.count[lane] > 0 {
-                        leaves.push((node.start[lane], node.count[lane]));
-                    } else {
-                        let child = node.start[lane] as usize;
-                        assert!(child > i, "children come after their parents");
-                        let inner = wide[child].bounds();
-                        assert!(lane_box.min.cmple(inner.min).all());
-                        assert!(lane_box.max.cmpge(inner.max).all());
-                    }
-                }
-            }
-            leaves.sort();
+            let wide = collapse(&binary, Merge::NONE);
+            check_collapse(&binary, &wide);
+            let leaves = wide_leaves(&wide);
             assert_eq!(leaves, binary_leaves(&binary), "{n} primitives");
-            assert_eq!(
-                wide[0].bounds(),
-                Aabb {
-                    min: binary[0].min,
-                    max: binary[0].max
-                }
-            );
-            // Lanes are used in order: `enter` tests one half of a node whose fifth is free.
-            for node in &wide {
-                let used = (0..WIDTH).filter(|&l| !node.lane_box(l).is_empty()).count();
-                assert!((0..used).all(|l| node.start[l] | node.count[l] != 0));
-                assert!((used..WIDTH).all(|l| node.start[l] | node.count[l] == 0));
+            // Merged: every primitive in exactly one leaf still, none larger than asked.
+            let merged = collapse(&binary, MERGE);
+            check_collapse(&binary, &merged);
+            let leaves = wide_leaves(&merged);
+            assert!(leaves.iter().all(|&(_, count)| count <= MERGE.max_leaf));
+            let mut next = 0;
+            for (start, count) in leaves {
+                assert_eq!(start, next, "{n} primitives");
+                next += count;
             }
-            // Half as deep: at most about a third as many nodes as the binary tree.
+            assert_eq!(next, n as u32);
+            // Half as deep: at most about half as many nodes as the binary tree.
             assert!(
                 wide.len() <= binary.len().div_ceil(2),
                 "{n}: {}",
                 wide.len()
             );
+        }
+    }
+
+    const MERGE: Merge = Merge {
+        max_leaf: 8,
+        node_cost: 4.0,
+    };
+
+    /// Every leaf of an eight-wide tree, once, as (start, count).
+    fn wide_leaves(wide: &[WideNode]) -> Vec<(u32, u32)> {
+        let mut leaves: Vec<_> = wide
+            .iter()
+            .flat_map(|node| {
+                (0..WIDTH)
+                    .filter(|&lane| node.count[lane] > 0)
+                    .map(|lane| (node.start[lane], node.count[lane]))
+            })
+            .collect();
+        leaves.sort();
+        leaves
+    }
+
+    /// Child boxes hold their children, children come after their parents, the root's box
+    /// is the binary root's, and lanes are used in order.
+    fn check_collapse(binary: &[Node], wide: &[WideNode]) {
+        for (i, node) in wide.iter().enumerate() {
+            for lane in 0..WIDTH {
+                let lane_box = node.lane_box(lane);
+                if lane_box.is_empty() || node.count[lane] > 0 {
+                    continue;
+                }
+                let child = node.start[lane] as usize;
+                assert!(child > i, "children come after their parents");
+                let inner = wide[child].bounds();
+                assert!(lane_box.min.cmple(inner.min).all());
+                assert!(lane_box.max.cmpge(inner.max).all());
+            }
+        }
+        assert_eq!(
+            wide[0].bounds(),
+            Aabb {
+                min: binary[0].min,
+                max: binary[0].max
+            }
+        );
+        // Lanes are used in order: `enter` tests one half of a node whose fifth is free.
+        for node in wide {
+            let used = (0..WIDTH).filter(|&l| !node.lane_box(l).is_empty()).count();
+            assert!((0..used).all(|l| node.start[l] | node.count[l] != 0));
+            assert!((used..WIDTH).all(|l| node.start[l] | node.count[l] == 0));
         }
     }
 
@@ -408,8 +487,8 @@ mod tests {
             intersect_cost: 1.0,
         };
         let binary = build(&mut prims, &params);
-        let wide = collapse(&binary);
-        let mut stack = Vec::new();
+        let wide = collapse(&binary, Merge::NONE);
+        let mut stack = [(0, 0.0); STACK_CAPACITY];
         for i in 0..2000 {
             let origin = rng.vec3() * 14.0 - 2.0;
             let mut dir = rng.vec3() * 2.0 - 1.0;
@@ -448,7 +527,6 @@ mod tests {
                     false
                 },
             );
-            assert!(stack.is_empty());
             seen_binary.sort();
             seen_wide.sort();
             assert_eq!(seen_wide, seen_binary, "ray {i}: {ray:?}");
@@ -471,16 +549,18 @@ mod tests {
             intersect_cost: 1.0,
         };
         let binary = build(&mut prims, &params);
-        let wide = collapse(&binary);
+        let wide = collapse(&binary, Merge::NONE);
         let ray = WideRay::new(&Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X));
-        let mut stack = vec![(7, 1.0)];
+        // The caller's entry below the part it hands on stays as it was.
+        let mut stack = [(0, 0.0); STACK_CAPACITY];
+        stack[0] = (7, 1.0);
         let mut order = Vec::new();
         let mut t_max = f32::INFINITY;
         traverse_wide(
             &wide,
             &ray,
             &mut t_max,
-            &mut stack,
+            &mut stack[1..],
             |_| {},
             |start, _, t_max, _| {
                 order.push(prims[start as usize].index);
@@ -490,25 +570,74 @@ mod tests {
             },
         );
         assert_eq!(order, [0]);
-        assert_eq!(
-            stack,
-            [(7, 1.0)],
-            "the caller's entries are left as they were"
-        );
+        assert_eq!(stack[0], (7, 1.0));
         let mut visits = 0;
         let mut t_max = f32::INFINITY;
         traverse_wide(
             &wide,
             &ray,
             &mut t_max,
-            &mut stack,
+            &mut stack[1..],
             |_| {},
             |_, _, _, _| {
                 visits += 1;
                 true
             },
         );
-        assert_eq!((visits, stack.len()), (1, 1));
+        assert_eq!((visits, stack[0]), (1, (7, 1.0)));
+    }
+
+    #[test]
+    fn a_path_as_deep_as_the_build_allows_fits_one_level_of_the_stack() {
+        // The worst case by hand: a chain of nodes as long as the build's depth guard
+        // allows, each with seven leaves and, nearest the ray, the next node, so that every
+        // node leaves seven entries behind.
+        let nodes_on_path = 2 * SAH_MAX_DEPTH as usize + 1;
+        let leaf_box = |k: usize| Node {
+            min: Vec3::new(100.0 + k as f32, -1.0, -1.0),
+            start: 0,
+            max: Vec3::new(101.0 + k as f32, 1.0, 1.0),
+            count: 1,
+        };
+        let mut nodes = vec![WideNode::EMPTY; nodes_on_path];
+        for (k, node) in nodes.iter_mut().enumerate() {
+            let last = k + 1 == nodes_on_path;
+            for lane in 0..WIDTH {
+                if lane + 1 == WIDTH && !last {
+                    let inner = Node {
+                        min: Vec3::splat(-1e3),
+                        start: 0,
+                        max: Vec3::splat(1e3),
+                        count: 0,
+                    };
+                    node.set_lane(lane, &inner, k as u32 + 1, 0);
+                } else {
+                    node.set_lane(lane, &leaf_box(k), 0, 1);
+                }
+            }
+        }
+        let ray = WideRay::new(&Ray::new(Vec3::new(-1e4, 0.0, 0.0), Vec3::X));
+        let deepest = (WIDTH - 1) * (nodes_on_path - 1) + WIDTH;
+        let leaves_with = |entries: usize| {
+            let mut stack = vec![(0, 0.0); entries];
+            let (mut leaves, mut t_max) = (0, f32::INFINITY);
+            traverse_wide(
+                &nodes,
+                &ray,
+                &mut t_max,
+                &mut stack,
+                |_| {},
+                |_, _, _, _| {
+                    leaves += 1;
+                    false
+                },
+            );
+            leaves
+        };
+        assert!(deepest <= LEVEL_STACK);
+        assert_eq!(leaves_with(LEVEL_STACK), deepest);
+        // It does reach that height: one entry fewer is out of bounds.
+        assert!(std::panic::catch_unwind(|| leaves_with(deepest - 1)).is_err());
     }
 
     #[test]
