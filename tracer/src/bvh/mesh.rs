@@ -313,6 +313,9 @@ impl MeshBvh {
             stack,
             |start| {
                 prefetch(&self.triangles[start as usize]);
+                if let Some(t) = self.triangles.get(start as usize + 3) {
+                    prefetch(t);
+                }
                 prefetch(&self.ids[start as usize]);
             },
             |start, count, t_max, _| {
