@@ -280,7 +280,7 @@ pub(super) fn prefetch<T>(item: &T) {
 /// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`,
 /// nearest child first; `leaf` and `stack` work as for the binary
 /// [`traverse`](super::node::traverse). Stack entries name a node's lane (`8·node + lane`).
-/// `prefetch_leaf(start)` is called for each leaf entered, when it is pushed, so that its
+/// `prefetch_leaf(start, count)` is called for each leaf entered, when it is pushed, so that its
 /// primitives can be on their way into the cache by the time it is visited.
 #[inline(always)]
 pub(super) fn traverse_wide(
@@ -288,7 +288,7 @@ pub(super) fn traverse_wide(
     ray: &WideRay,
     t_max: &mut f32,
     stack: &mut [Deferred],
-    prefetch_leaf: impl Fn(u32),
+    prefetch_leaf: impl Fn(u32, u32),
     mut leaf: impl FnMut(u32, u32, &mut f32, &mut [Deferred]) -> bool,
 ) {
     if nodes.is_empty() {
@@ -317,7 +317,7 @@ pub(super) fn traverse_wide(
                     prefetch(child);
                     prefetch(&child.bounds[1][1]);
                 } else {
-                    prefetch_leaf(start);
+                    prefetch_leaf(start, node.count[lane as usize]);
                 }
             }
             stack[len] = (current * WIDTH as u32 + lane, entry[lane as usize]);
@@ -521,7 +521,7 @@ mod tests {
                 &WideRay::new(&ray),
                 &mut { t_max },
                 &mut stack,
-                |_| {},
+                |_, _| {},
                 |s, c, _, _| {
                     seen_wide.push((s, c));
                     false
@@ -561,7 +561,7 @@ mod tests {
             &ray,
             &mut t_max,
             &mut stack[1..],
-            |_| {},
+            |_, _| {},
             |start, _, t_max, _| {
                 order.push(prims[start as usize].index);
                 // A hit at the near face of the first leaf entered rules out the rest.
@@ -578,7 +578,7 @@ mod tests {
             &ray,
             &mut t_max,
             &mut stack[1..],
-            |_| {},
+            |_, _| {},
             |_, _, _, _| {
                 visits += 1;
                 true
@@ -626,7 +626,7 @@ mod tests {
                 &ray,
                 &mut t_max,
                 &mut stack,
-                |_| {},
+                |_, _| {},
                 |_, _, _, _| {
                     leaves += 1;
                     false
