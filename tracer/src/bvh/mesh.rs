@@ -472,24 +472,29 @@ mod tests {
         }
     }
 
-    #[test]
-    fn matches_brute_force_on_a_soup() {
-        let mut rng = Rng(0x2545f4914f6cdd1d);
-        let tris = soup(&mut rng, 3000);
-        let bvh = MeshBvh::build(&tris);
-        assert_eq!(bvh.triangle_count(), 3000);
+    /// Random rays through `bvh` (built over `tris`) find what testing every triangle finds.
+    fn assert_matches_brute_force(bvh: &MeshBvh, tris: &[[Vec3; 3]], rng: &mut Rng) {
         for i in 0..3000 {
             let o = rng.vec3() * 14.0 - 2.0;
             let d = rng.vec3() - 0.5;
             let t_max = if i % 3 == 0 { 4.0 } else { f32::INFINITY };
             let ray = Ray::new(o, d);
-            let expect = brute(&tris, &ray, t_max);
+            let expect = brute(tris, &ray, t_max);
             let got = bvh
                 .intersect(&ray, t_max, |_, _, _| true)
                 .map(|h| (h.0, h.1));
             assert_eq!(got, expect, "ray {o} {d}");
             assert_eq!(bvh.occluded(&ray, t_max, |_, _, _| true), expect.is_some());
         }
+    }
+
+    #[test]
+    fn matches_brute_force_on_a_soup() {
+        let mut rng = Rng(0x2545f4914f6cdd1d);
+        let tris = soup(&mut rng, 3000);
+        let bvh = MeshBvh::build(&tris);
+        assert_eq!(bvh.triangle_count(), 3000);
+        assert_matches_brute_force(&bvh, &tris, &mut rng);
     }
 
     /// The eight-wide tree of `tris` as it would be without merging.
@@ -519,18 +524,7 @@ mod tests {
             merged < unmerged * 3 / 4,
             "{merged} nodes, {unmerged} unmerged"
         );
-        for i in 0..3000 {
-            let o = rng.vec3() * 14.0 - 2.0;
-            let d = rng.vec3() - 0.5;
-            let t_max = if i % 3 == 0 { 4.0 } else { f32::INFINITY };
-            let ray = Ray::new(o, d);
-            let expect = brute(&tris, &ray, t_max);
-            let got = bvh
-                .intersect(&ray, t_max, |_, _, _| true)
-                .map(|h| (h.0, h.1));
-            assert_eq!(got, expect, "ray {o} {d}");
-            assert_eq!(bvh.occluded(&ray, t_max, |_, _, _| true), expect.is_some());
-        }
+        assert_matches_brute_force(&bvh, &tris, &mut rng);
     }
 
     #[test]
