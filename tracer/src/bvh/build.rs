@@ -77,7 +77,7 @@ const EMPTY_BIN: Bin = Bin {
 
 /// Half the surface area of a box (the factor 2 cancels in SAH ratios); 0 when empty.
 #[inline]
-fn half_area(min: Vec3A, max: Vec3A) -> f32 {
+pub(super) fn half_area(min: Vec3A, max: Vec3A) -> f32 {
     let e = (max - min).max(Vec3A::ZERO);
     e.x * e.y + e.y * e.z + e.z * e.x
 }

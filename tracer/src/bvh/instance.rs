@@ -9,7 +9,7 @@ use super::build::{self, BuildParams, BuildPrim};
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
 use super::node::{ray_is_valid, with_stack};
-use super::wide::{collapse, traverse_wide, Merge, WideNode, WideRay};
+use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};
 use crate::triangle::gamma;
 
@@ -287,7 +287,7 @@ impl SceneBvh {
                 index: i as u32,
             })
             .collect();
-        let nodes = collapse(&build::build(&mut prims, &PARAMS), Merge::NONE);
+        let nodes = collapse(&build::build(&mut prims, &PARAMS), None);
         let order = prims.iter().map(|p| p.index).collect();
         SceneBvh {
             instances,

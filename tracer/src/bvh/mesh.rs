@@ -164,9 +164,9 @@ impl MeshBvh {
             .flat_map(|s| prims.iter().map(|p| s[p.index as usize]))
             .collect();
         let ids = prims.iter().map(|p| p.index).collect();
-        let wide = collapse(&nodes, Merge::NONE);
+        let wide = collapse(&nodes, None);
         let wide = if wide.len() > merge_above {
-            collapse(&nodes, MERGE_LARGE)
+            collapse(&nodes, Some(MERGE_LARGE))
         } else {
             wide
         };
@@ -497,25 +497,11 @@ mod tests {
         assert_matches_brute_force(&bvh, &tris, &mut rng);
     }
 
-    /// The eight-wide tree of `tris` as it would be without merging.
-    fn unmerged_nodes(tris: &[[Vec3; 3]]) -> usize {
-        let mut prims: Vec<BuildPrim> = tris
-            .iter()
-            .enumerate()
-            .map(|(i, t)| BuildPrim {
-                min: t[0].min(t[1]).min(t[2]),
-                max: t[0].max(t[1]).max(t[2]),
-                index: i as u32,
-            })
-            .collect();
-        collapse(&build::build(&mut prims, &PARAMS), Merge::NONE).len()
-    }
-
     #[test]
     fn merged_trees_hold_fewer_nodes_and_find_the_same_hits() {
         let mut rng = Rng(0x2545f4914f6cdd1d);
         let tris = soup(&mut rng, 3000);
-        let unmerged = unmerged_nodes(&tris);
+        let unmerged = MeshBvh::build_merging_above(&[&tris], usize::MAX).node_count();
         assert!(unmerged <= MERGE_ABOVE);
         assert_eq!(MeshBvh::build(&tris).node_count(), unmerged);
         let bvh = MeshBvh::build_merging_above(&[&tris], 0);

@@ -13,6 +13,7 @@
 
 use glam::{Vec3, Vec4};
 
+use super::build::half_area;
 use super::node::{Deferred, Node, FAR_SCALE};
 use crate::geometry::{Aabb, Ray};
 
@@ -84,55 +85,61 @@ pub(super) struct Merge {
     pub node_cost: f64,
 }
 
-impl Merge {
-    /// Keeps the binary tree's leaves as they are.
-    pub const NONE: Merge = Merge {
-        max_leaf: 0,
-        node_cost: 0.0,
+/// Half the surface area of a node's box.
+fn node_area(n: &Node) -> f32 {
+    half_area(n.min.into(), n.max.into())
+}
+
+/// Each binary node's primitives `(start, count)` where it is a leaf of the eight-wide tree:
+/// a binary leaf, or an interior node whose subtree `merge` makes one leaf (a subtree's
+/// leaves hold a contiguous range). `None` for an interior node that stays one.
+///
+/// Merging compares each subtree's least cost as a leaf with its least cost as a node over
+/// its children's least costs, in double precision (a box's area may overflow f32; an
+/// infinite or NaN cost never merges more than it should: the comparison fails, or the
+/// leaf is as large as allowed anyway). Children come after their parents, so one reverse
+/// pass sees children first.
+fn leaf_ranges(binary: &[Node], merge: Option<Merge>) -> Vec<Option<(u32, u32)>> {
+    let own = |n: &Node| (n.count > 0).then_some((n.start, n.count));
+    let Some(merge) = merge else {
+        return binary.iter().map(own).collect();
     };
+    let mut range = vec![(0u32, 0u32); binary.len()];
+    let mut cost = vec![0.0f64; binary.len()];
+    let mut leaf = vec![None; binary.len()];
+    for i in (0..binary.len()).rev() {
+        let n = &binary[i];
+        let area = f64::from(node_area(n));
+        if n.count > 0 {
+            range[i] = (n.start, n.count);
+            cost[i] = n.count as f64 * area;
+            leaf[i] = own(n);
+            continue;
+        }
+        let (l, r) = (n.start as usize, n.start as usize + 1);
+        range[i] = (range[l].0.min(range[r].0), range[l].1 + range[r].1);
+        let as_node = merge.node_cost * area + cost[l] + cost[r];
+        let as_leaf = range[i].1 as f64 * area;
+        if range[i].1 <= merge.max_leaf && as_leaf <= as_node {
+            leaf[i] = Some(range[i]);
+            cost[i] = as_leaf;
+        } else {
+            cost[i] = as_node;
+        }
+    }
+    leaf
 }
 
 /// Collapses a binary hierarchy (as [`super::build::build`] makes it) into eight-wide nodes
 /// over the same leaves, or over larger ones where `merge` says so: each node takes its
 /// binary node's children and opens the largest interior one until it has eight, so the
 /// tree keeps SAH's grouping. Node 0 is the root; children come after their parents.
-pub(super) fn collapse(binary: &[Node], merge: Merge) -> Vec<WideNode> {
+pub(super) fn collapse(binary: &[Node], merge: Option<Merge>) -> Vec<WideNode> {
     if binary.is_empty() {
         return Vec::new();
     }
-    let half_area = |n: &Node| {
-        let d = n.max - n.min;
-        d.x * d.y + d.y * d.z + d.z * d.x
-    };
-    // Each node's primitives (a subtree's leaves hold a contiguous range of them), and
-    // whether the subtree is cheaper as one leaf: the least cost of each subtree, as a leaf
-    // or as a node over its children's least costs, in double precision (a box's area may
-    // overflow f32; an infinite or NaN cost never merges more than it should: the
-    // comparison fails, or the leaf is as large as allowed anyway). Children come after
-    // their parents, so one reverse pass sees children first.
-    let mut range = vec![(0u32, 0u32); binary.len()];
-    let mut cost = vec![0.0f64; binary.len()];
-    let mut merged = vec![false; binary.len()];
-    for i in (0..binary.len()).rev() {
-        let n = &binary[i];
-        let area = f64::from(half_area(n));
-        if n.count > 0 {
-            range[i] = (n.start, n.count);
-            cost[i] = n.count as f64 * area;
-            continue;
-        }
-        let (l, r) = (n.start as usize, n.start as usize + 1);
-        range[i] = (range[l].0.min(range[r].0), range[l].1 + range[r].1);
-        let split = merge.node_cost * area + cost[l] + cost[r];
-        let leaf = range[i].1 as f64 * area;
-        if range[i].1 <= merge.max_leaf && leaf <= split {
-            merged[i] = true;
-            cost[i] = leaf;
-        } else {
-            cost[i] = split;
-        }
-    }
-    let is_leaf = |n: usize| binary[n].count > 0 || merged[n];
+    let leaves = leaf_ranges(binary, merge);
+    let is_leaf = |n: usize| leaves[n].is_some();
     let mut wide = vec![WideNode::EMPTY];
     // (binary node, the wide node that takes its children)
     let mut todo = vec![(0usize, 0usize)];
@@ -149,7 +156,7 @@ pub(super) fn collapse(binary: &[Node], merge: Merge) -> Vec<WideNode> {
                 .iter()
                 .enumerate()
                 .filter(|(_, &n)| !is_leaf(n))
-                .max_by(|(_, &x), (_, &y)| half_area(&binary[x]).total_cmp(&half_area(&binary[y])));
+                .max_by(|(_, &x), (_, &y)| node_area(&binary[x]).total_cmp(&node_area(&binary[y])));
             let Some((k, &n)) = widest else { break };
             let l = binary[n].start as usize;
             lanes[k] = l;
@@ -157,8 +164,7 @@ pub(super) fn collapse(binary: &[Node], merge: Merge) -> Vec<WideNode> {
         }
         for (lane, &n) in lanes.iter().enumerate() {
             let node = &binary[n];
-            if is_leaf(n) {
-                let (start, count) = range[n];
+            if let Some((start, count)) = leaves[n] {
                 wide[w].set_lane(lane, node, start, count);
             } else {
                 let child = wide.len();
@@ -255,7 +261,7 @@ fn min_or_acc(acc: Vec4, x: Vec4) -> Vec4 {
 /// Hierarchies of more nodes than this (32 KiB, a core's L1 data cache) prefetch the
 /// children a ray enters; smaller ones stay in the cache, where a prefetch only costs
 /// instructions (1.1% more on the Cornell box).
-pub(super) const PREFETCH_ABOVE: usize = 256;
+const PREFETCH_ABOVE: usize = 256;
 
 /// Asks the CPU to start loading the two cache lines from `item` on (a node, or the first
 /// triangles of a leaf) into the cache.
@@ -403,12 +409,12 @@ mod tests {
                 intersect_cost: 1.0,
             };
             let binary = build(&mut prims, &params);
-            let wide = collapse(&binary, Merge::NONE);
+            let wide = collapse(&binary, None);
             check_collapse(&binary, &wide);
             let leaves = wide_leaves(&wide);
             assert_eq!(leaves, binary_leaves(&binary), "{n} primitives");
             // Merged: every primitive in exactly one leaf still, none larger than asked.
-            let merged = collapse(&binary, MERGE);
+            let merged = collapse(&binary, Some(MERGE));
             check_collapse(&binary, &merged);
             let leaves = wide_leaves(&merged);
             assert!(leaves.iter().all(|&(_, count)| count <= MERGE.max_leaf));
@@ -487,7 +493,7 @@ mod tests {
             intersect_cost: 1.0,
         };
         let binary = build(&mut prims, &params);
-        let wide = collapse(&binary, Merge::NONE);
+        let wide = collapse(&binary, None);
         let mut stack = [(0, 0.0); STACK_CAPACITY];
         for i in 0..2000 {
             let origin = rng.vec3() * 14.0 - 2.0;
@@ -549,7 +555,7 @@ mod tests {
             intersect_cost: 1.0,
         };
         let binary = build(&mut prims, &params);
-        let wide = collapse(&binary, Merge::NONE);
+        let wide = collapse(&binary, None);
         let ray = WideRay::new(&Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X));
         // The caller's entry below the part it hands on stays as it was.
         let mut stack = [(0, 0.0); STACK_CAPACITY];
