@@ -275,6 +275,12 @@ pub fn world_triangles(scene: &Scene) -> Vec<[Vec3; 3]> {
 
 /// Rays per second of `query` over `rays` on the calling thread alone: the set traced
 /// twice, so that a run takes long enough to time.
+///
+/// Never inlined, so that a profiler can cut a run at each call: `valgrind --tool=callgrind
+/// --dump-before='*one_thread_rate*' tessera bench rays --embree --rounds 1` writes one file
+/// per timed set (in a run with Embree, Tessera's and Embree's in turn), whose totals
+/// divided by twice the set's rays are the per-ray counts in BENCHMARKS.md.
+#[inline(never)]
 fn one_thread_rate(rays: &[(Ray, f32)], query: impl Fn(&Ray, f32) -> bool) -> f64 {
     let start = Instant::now();
     let mut hits = 0usize;
@@ -346,8 +352,14 @@ pub fn run(args: RaysArgs) -> anyhow::Result<()> {
             "| rays | Tessera (M rays/s) | Embree (M rays/s) | Tessera / Embree | agree |\n\
              |---|---:|---:|---:|---:|"
         );
-        for set in &sets.sets {
-            let agreement = compare(&bvh, embree, set);
+        // Every set compared before any is timed, so that the timed calls follow one another
+        // (see `one_thread_rate`).
+        let agreements: Vec<Agreement> = sets
+            .sets
+            .iter()
+            .map(|set| compare(&bvh, embree, set))
+            .collect();
+        for (set, agreement) in sets.sets.iter().zip(agreements) {
             let RaySet {
                 kind,
                 rays,
