@@ -277,9 +277,10 @@ pub fn world_triangles(scene: &Scene) -> Vec<[Vec3; 3]> {
 /// twice, so that a run takes long enough to time.
 ///
 /// Never inlined, so that a profiler can cut a run at each call: `valgrind --tool=callgrind
-/// --dump-before='*one_thread_rate*' tessera bench rays --embree --rounds 1` writes one file
-/// per timed set (in a run with Embree, Tessera's and Embree's in turn), whose totals
-/// divided by twice the set's rays are the per-ray counts in BENCHMARKS.md.
+/// --dump-before='*one_thread_rate*' tessera bench rays --embree --rounds 1` dumps before each
+/// call, so that every file but the first (the set-up) holds one timed call, the last call
+/// in the file without a suffix; their totals divided by twice the set's rays are the
+/// per-ray counts in BENCHMARKS.md.
 #[inline(never)]
 fn one_thread_rate(rays: &[(Ray, f32)], query: impl Fn(&Ray, f32) -> bool) -> f64 {
     let start = Instant::now();
