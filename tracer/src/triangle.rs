@@ -13,6 +13,10 @@ use glam::{DVec2, Mat3A, Vec3, Vec3A};
 
 use crate::geometry::Ray;
 
+mod lanes;
+
+pub use lanes::RayLanes;
+
 /// `gamma(n)` of Higham / pbrt: the bound `n·u / (1 - n·u)` on the relative error of `n`
 /// successive rounded f32 operations, with `u` the unit roundoff.
 pub(crate) const fn gamma(n: i32) -> f32 {
