@@ -98,9 +98,14 @@ pub fn receive(
             frame,
             frame_complete,
             pass_complete,
+            queued,
             ..
         } => {
             app.metrics.tile_accepted(bytes.len());
+            if queued {
+                // A check of this tile: another worker may be waiting for work.
+                app.work.notify_waiters();
+            }
             if frame_complete {
                 finish_frame(app, job, frame)?;
             } else if pass_complete {
@@ -130,10 +135,16 @@ pub fn accept_step(
     let accepted = app
         .db
         .with(|c| scheduler::accept(c, worker, token, 0, meta.render_ms, None, now, timing))?;
-    let accepted = matches!(accepted, Accepted::New { .. });
-    if accepted {
+    if let Accepted::New { queued, .. } = accepted {
         app.metrics.tile_accepted(upload_bytes);
+        if queued {
+            // The job's encode, after its last frame's denoising: a worker waiting for
+            // work hears of it now, not when its wait runs out (the demo sat idle 30 s
+            // before its video).
+            app.work.notify_waiters();
+        }
     }
+    let accepted = matches!(accepted, Accepted::New { .. });
     Ok(Received {
         accepted,
         job: task.job_id,

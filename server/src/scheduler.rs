@@ -193,6 +193,9 @@ pub enum Accepted {
         frame_complete: bool,
         /// Every task of this pass of the frame is done: a preview can be made.
         pass_complete: bool,
+        /// The acceptance queued a task (a check of this tile, or the job's encode once
+        /// its last frame is denoised): workers waiting for work should look again.
+        queued: bool,
     },
 }
 
@@ -236,11 +239,13 @@ pub fn accept(
     tasks::set_done(&tx, task.id, now, rays, render_ms)?;
     workers::count_done(&tx, worker)?;
     if task.kind != TaskKind::Render {
+        let mut queued = false;
         if task.kind == TaskKind::Denoise {
             // Its frame's denoised layer is written: the frame is finished, and with it
             // perhaps the job's last.
             crate::denoising::mark_denoised(&tx, &task, now)?;
-            crate::encoding::queue_if_complete(&tx, task.job_id, &jobs::spec(&tx, task.job_id)?)?;
+            let spec = jobs::spec(&tx, task.job_id)?;
+            queued = crate::encoding::queue_if_complete(&tx, task.job_id, &spec)?;
         }
         jobs::update_finished(&tx, task.job_id, now)?;
         tx.commit()?;
@@ -250,10 +255,11 @@ pub fn accept(
             pass: task.pass,
             frame_complete: false,
             pass_complete: false,
+            queued,
         });
     }
     frames::count_done(&tx, task.job_id, task.frame)?;
-    match (task.check_of, verdict) {
+    let queued = match (task.check_of, verdict) {
         (Some(_), Some(verdict)) => verify::record(&tx, &task, worker, verdict, now)?,
         (Some(_), None) => {
             return Err(Error::Internal(format!(
@@ -269,7 +275,7 @@ pub fn accept(
             timing.live_since(now),
             now,
         )?,
-    }
+    };
     // Asked after the verdict: a check it queued belongs to the frame.
     let frame_complete = frames::is_complete(&tx, task.job_id, task.frame)?;
     let pass_complete = tasks::pass_done(&tx, task.job_id, task.frame, task.pass)?;
@@ -281,6 +287,7 @@ pub fn accept(
         pass: task.pass,
         frame_complete,
         pass_complete,
+        queued,
     })
 }
 

@@ -116,7 +116,7 @@ fn add_check(tx: &Transaction, task: &TaskRow, now: i64, why: &str) -> Result<()
 }
 
 /// After a render task is accepted: queue its check if it is sampled and another worker
-/// (live, not quarantined) could render it.
+/// (live, not quarantined) could render it. Whether it queued one.
 pub fn sample(
     tx: &Transaction,
     task: &TaskRow,
@@ -124,24 +124,26 @@ pub fn sample(
     fraction: f64,
     live_since: i64,
     now: i64,
-) -> Result<()> {
+) -> Result<bool> {
     if task.check_of.is_some() || !sampled(task.id, fraction) {
-        return Ok(());
+        return Ok(false);
     }
-    if workers::another_live(tx, task.job_id, worker, live_since)? {
-        add_check(tx, task, now, "sampled")?;
+    if !workers::another_live(tx, task.job_id, worker, live_since)? {
+        return Ok(false);
     }
-    Ok(())
+    add_check(tx, task, now, "sampled")?;
+    Ok(true)
 }
 
-/// After a check task is accepted: acts on its verdict.
+/// After a check task is accepted: acts on its verdict. Whether it queued a task (another
+/// check; the tasks of a worker it quarantined, leased or to be checked).
 pub fn record(
     tx: &Transaction,
     check: &TaskRow,
     worker: u64,
     verdict: &Verdict,
     now: i64,
-) -> Result<()> {
+) -> Result<bool> {
     let original_id = check
         .check_of
         .ok_or_else(|| Error::Internal(format!("task {} is not a check", check.id)))?;
@@ -159,6 +161,7 @@ pub fn record(
     match verdict {
         Verdict::Agrees(with) => {
             let right = |r: &Render| with.contains(&r.task);
+            let mut queued = false;
             for r in earlier.iter().filter(|r| !right(r)) {
                 let reason = format!(
                     "its tile of task {original_id} (job {}, frame {}, tile {}) differs from \
@@ -168,7 +171,7 @@ pub fn record(
                     check.tile,
                     with.len() + 1
                 );
-                quarantine(tx, r.worker, &reason, now)?;
+                queued |= quarantine(tx, r.worker, &reason, now)?;
             }
             for w in earlier
                 .iter()
@@ -187,18 +190,22 @@ pub fn record(
                     "task {original_id}: check {} agrees with {with:?}",
                     check.id
                 ),
-            )
+            )?;
+            Ok(queued)
         }
-        Verdict::Stands => log(
-            tx,
-            now,
-            Some(check.job_id),
-            "check_replaced",
-            &format!(
-                "task {original_id}: check {} replaces the tile of a quarantined worker",
-                check.id
-            ),
-        ),
+        Verdict::Stands => {
+            log(
+                tx,
+                now,
+                Some(check.job_id),
+                "check_replaced",
+                &format!(
+                    "task {original_id}: check {} replaces the tile of a quarantined worker",
+                    check.id
+                ),
+            )?;
+            Ok(false)
+        }
         Verdict::Disagrees => {
             for w in earlier.iter().map(|r| r.worker).chain([worker]) {
                 workers::suspect(tx, w, now)?;
@@ -216,7 +223,8 @@ pub fn record(
             )?;
             // `earlier` is the task and every check before this one.
             if (earlier.len() as u32) < MAX_CHECKS {
-                add_check(tx, &original, now, "renders disagree")
+                add_check(tx, &original, now, "renders disagree")?;
+                Ok(true)
             } else {
                 log(
                     tx,
@@ -227,7 +235,8 @@ pub fn record(
                         "task {original_id}: no two of {} renders agree; its first tile is kept",
                         earlier.len() + 1
                     ),
-                )
+                )?;
+                Ok(false)
             }
         }
     }
@@ -248,12 +257,13 @@ fn platforms(tx: &Transaction, renders: &[(u64, u64)]) -> Result<String> {
 
 /// Quarantines `worker`: its leases go back to the queue, it gets no more work, and its
 /// unchecked tiles in frames not yet assembled are checked.
-fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<()> {
+fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<bool> {
     if !workers::quarantine(tx, worker, reason, now)? {
-        return Ok(());
+        return Ok(false);
     }
-    for task in tasks::leased_by(tx, worker)? {
-        tasks::revoke(tx, &task)?;
+    let leased = tasks::leased_by(tx, worker)?;
+    for task in &leased {
+        tasks::revoke(tx, task)?;
     }
     let unchecked = tasks::unchecked_unmerged_of(tx, worker)?;
     for task in &unchecked {
@@ -271,7 +281,8 @@ fn quarantine(tx: &Transaction, worker: u64, reason: &str, now: i64) -> Result<(
              in assembled frames",
             unchecked.len()
         ),
-    )
+    )?;
+    Ok(!leased.is_empty() || !unchecked.is_empty())
 }
 
 /// An operator clears a worker: it is no longer quarantined or suspect and gets work again.

@@ -632,6 +632,52 @@ async fn a_waiting_lease_request_wakes_when_a_job_arrives() {
 }
 
 #[tokio::test(flavor = "multi_thread")]
+async fn a_waiting_lease_request_wakes_when_a_check_is_queued() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(dir.path());
+    cfg.verify_fraction = 1.0;
+    let s = TestServer::start(cfg);
+    let c = client();
+    let scene = upload_scene(&s, &c, quad_scene()).await;
+    let mut spec = small(&scene.digest, 1);
+    spec.tile_size = Some(spec.width.max(spec.height));
+    create_job(&s, &c, &spec).await;
+    let mut a = SimWorker::register(&s, "a").await;
+    let b = SimWorker::register(&s, "b").await;
+    let lease = a.lease(&s).await.expect("the one tile");
+    assert!(b.lease(&s).await.is_none());
+
+    // b waits for work; a's tile, once accepted, is checked by another worker: b.
+    let url = s.url(&format!("/workers/{}/lease", b.id));
+    let credential = b.credential.clone();
+    let waiting = tokio::spawn(async move {
+        client()
+            .post(url)
+            .bearer_auth(credential)
+            .json(&proto::LeaseRequest {
+                wait_seconds: 30,
+                ..proto::LeaseRequest::default()
+            })
+            .send()
+            .await
+            .unwrap()
+    });
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert!(
+        !waiting.is_finished(),
+        "b got an answer with no work queued"
+    );
+    let (exr, _) = a.render(&s, &lease).await;
+    assert_eq!(a.upload(&s, &lease, exr).await.status(), StatusCode::OK);
+    // Without a wake-up the request ran out after 30 s and answered 204.
+    let res = waiting.await.unwrap();
+    assert_eq!(res.status(), StatusCode::OK);
+    let check: proto::Lease = res.json().await.unwrap();
+    assert_ne!(check.token.task_id, lease.token.task_id);
+    assert_eq!((check.frame, check.tile), (lease.frame, lease.tile));
+}
+
+#[tokio::test(flavor = "multi_thread")]
 async fn delete_removes_the_job_and_its_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let s = TestServer::start(config(dir.path()));
