@@ -15,6 +15,8 @@
 //! anyway.) The same IEEE operations on every CPU: glam's SSE2 lanes on x86_64, its NEON or
 //! scalar lanes elsewhere.
 
+use std::borrow::Borrow;
+
 use glam::{BVec4A, Mat4, Vec3, Vec3A, Vec4};
 
 use super::RayPrecomputed;
@@ -45,10 +47,10 @@ impl RayLanes {
     /// A bit per triangle of `tris` (at most four; bit `i` for `tris[i]`) that the ray may
     /// hit: the others it surely misses.
     #[inline(always)]
-    pub fn may_hit(&self, tris: &[[Vec3; 3]]) -> u32 {
+    pub fn may_hit<T: Borrow<[Vec3; 3]>>(&self, tris: &[T]) -> u32 {
         debug_assert!(!tris.is_empty() && tris.len() <= 4);
         // Missing lanes repeat the first triangle and are masked off at the end.
-        let tri = |i: usize| tris.get(i).unwrap_or(&tris[0]);
+        let tri = |i: usize| tris.get(i).unwrap_or(&tris[0]).borrow();
         let [kx, ky, kz] = self.axes;
         // One vertex of the four triangles, relative to the origin, in the ray's 2D frame.
         let project = |j: usize| {

@@ -1,0 +1,316 @@
+use super::*;
+use crate::test_rng::Rng;
+use glam::{DQuat, DVec3, Quat};
+
+/// The square [-1, 1]² at z = 0, as two triangles.
+fn quad() -> Vec<[Vec3; 3]> {
+    let p = [
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(1.0, 1.0, 0.0),
+        Vec3::new(-1.0, 1.0, 0.0),
+    ];
+    vec![[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
+}
+
+fn quad_mesh() -> MeshBvh {
+    MeshBvh::build(&quad())
+}
+
+fn trs(scale: DVec3, rotation: DQuat, translation: DVec3) -> DMat4 {
+    DMat4::from_scale_rotation_translation(scale, rotation, translation)
+}
+
+#[test]
+fn singular_transforms_give_unhittable_instances_without_nan() {
+    let mesh = quad_mesh();
+    for m in [
+        Affine3A::from_scale(Vec3::ZERO),
+        Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0)),
+        Affine3A::from_scale(Vec3::splat(1e-30)),
+        Affine3A::from_translation(Vec3::new(f32::NAN, 0.0, 0.0)),
+    ] {
+        let inst = Instance::new(0, m, &mesh.bounds());
+        assert!(!inst.is_hittable());
+        assert!(inst.to_object.is_finite() && !inst.normal_to_world.is_nan());
+        let scene = SceneBvh::build(vec![inst], |_| &mesh);
+        assert!(scene.bounds().is_empty());
+        let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
+        assert!(scene
+            .intersect(|_| &mesh, &ray, f32::INFINITY, |_, _, _, _| true)
+            .is_none());
+    }
+}
+
+#[test]
+fn t_is_the_same_in_world_and_object_space() {
+    let mesh = quad_mesh();
+    let m = Affine3A::from_scale_rotation_translation(
+        Vec3::splat(3.0),
+        Quat::from_rotation_y(0.3),
+        Vec3::new(1.0, 2.0, -4.0),
+    );
+    let scene = SceneBvh::build(vec![Instance::new(0, m, &mesh.bounds())], |_| &mesh);
+    let target = m.transform_point3(Vec3::new(0.2, 0.1, 0.0));
+    let origin = Vec3::new(0.5, 2.5, 10.0);
+    let hit = scene
+        .intersect(
+            |_| &mesh,
+            &Ray::new(origin, (target - origin) * 0.5),
+            10.0,
+            |_, _, _, _| true,
+        )
+        .unwrap();
+    assert!((hit.t - 2.0).abs() < 1e-5, "t = {}", hit.t);
+    assert_eq!(hit.instance, 0);
+}
+
+#[test]
+fn normal_matrix_is_the_inverse_transpose() {
+    let m = Affine3A::from_scale_rotation_translation(
+        Vec3::new(1.0, 4.0, -2.0),
+        Quat::from_rotation_x(0.7),
+        Vec3::ONE,
+    );
+    let inst = Instance::new(0, m, &Aabb::from_points(Vec3::ZERO, Vec3::ONE));
+    // A normal stays perpendicular to transformed tangents.
+    let (n, t) = (
+        Vec3::new(1.0, 2.0, 3.0).normalize(),
+        Vec3::new(2.0, -1.0, 0.0),
+    );
+    let nw = inst.normal_to_world.mul_vec3(n);
+    assert!(nw.dot(m.transform_vector3(t)).abs() < 1e-5);
+}
+
+#[test]
+fn instance_bounds_hold_the_transformed_mesh() {
+    let m = Affine3A::from_rotation_translation(Quat::from_rotation_z(0.5), Vec3::splat(1e4));
+    let inst = Instance::new(0, m, &quad_mesh().bounds());
+    for p in quad().iter().flatten() {
+        let w = m.transform_point3(*p);
+        assert!(w.cmpge(inst.bounds.min).all() && w.cmple(inst.bounds.max).all());
+    }
+}
+
+#[test]
+fn equal_steps_give_a_static_instance_and_a_static_scene() {
+    let mesh = quad_mesh();
+    let m = trs(
+        DVec3::new(1.0, 2.0, 3.0),
+        DQuat::from_rotation_z(0.4),
+        DVec3::new(5.0, 6.0, 7.0),
+    );
+    let inst = Instance::moving(3, &[m, m, m], &mesh.bounds());
+    assert!(inst.motion.is_none() && !inst.has_motion());
+    assert_eq!(
+        inst,
+        Instance::new(3, Affine3A::from_mat4(m.as_mat4()), &mesh.bounds())
+    );
+    // Placements of a static instance are its matrices, at any time.
+    let p = inst.placement(0.7);
+    assert_eq!(
+        (p.to_world, p.to_object, p.normal_to_world),
+        (inst.to_world, inst.to_object, inst.normal_to_world)
+    );
+    let scene = SceneBvh::build(vec![inst.clone(), inst], |_| &mesh);
+    assert!(!scene.has_motion());
+
+    // One moving instance, or one deforming mesh, makes the scene move.
+    let moved = trs(DVec3::ONE, DQuat::IDENTITY, DVec3::X);
+    let moving = Instance::moving(0, &[m, moved], &mesh.bounds());
+    assert!(moving.has_motion());
+    let p = moving.placement(0.0);
+    assert_eq!(
+        (p.to_world, p.to_object, p.normal_to_world),
+        (moving.to_world, moving.to_object, moving.normal_to_world)
+    );
+    assert!(SceneBvh::build(vec![moving], |_| &mesh).has_motion());
+    let deforming = MeshBvh::build_motion(&[quad(), quad()]);
+    let still = Instance::new(0, Affine3A::IDENTITY, &deforming.bounds());
+    assert!(SceneBvh::build(vec![still], |_| &deforming).has_motion());
+}
+
+#[test]
+fn non_finite_steps_give_an_unhittable_instance() {
+    let bad = DMat4::from_translation(DVec3::new(f64::NAN, 0.0, 0.0));
+    let inst = Instance::moving(0, &[DMat4::IDENTITY, bad], &quad_mesh().bounds());
+    assert!(!inst.is_hittable() && inst.motion.is_none());
+    assert!(inst.to_object.is_finite());
+}
+
+#[test]
+fn moving_bounds_hold_the_mesh_at_random_times() {
+    let mut rng = Rng(0x5eed);
+    let points: Vec<Vec3> = (0..200).map(|_| rng.vec3() * 4.0 - 1.0).collect();
+    let mesh_bounds = points.iter().fold(Aabb::EMPTY, |mut b, p| {
+        b.grow(*p);
+        b
+    });
+    for case in 0..12 {
+        let n = 2 + case % 4;
+        let steps: Vec<DMat4> = (0..n)
+            .map(|k| {
+                let axis = (rng.vec3() - 0.5).as_dvec3().normalize();
+                let shear = DMat4::from_cols_array(&[
+                    1.0, 0.3, 0.0, 0.0, //
+                    0.0, 1.0, 0.0, 0.0, //
+                    -0.5, 0.0, 1.0, 0.0, //
+                    0.0, 0.0, 0.0, 1.0,
+                ]);
+                // Large turns, scales through zero and mirrors, translations far away.
+                let scale = match (case, k) {
+                    (3, 1) => DVec3::ZERO,
+                    (5, _) => DVec3::new(-1.0, 1.0, 2.0),
+                    _ => (rng.vec3() * 3.0 + 0.2).as_dvec3(),
+                };
+                trs(
+                    scale,
+                    DQuat::from_axis_angle(axis, rng.next_f32() as f64 * 6.0),
+                    (rng.vec3() * 2000.0 - 1000.0).as_dvec3(),
+                ) * if case % 2 == 0 {
+                    shear
+                } else {
+                    DMat4::IDENTITY
+                }
+            })
+            .collect();
+        let inst = Instance::moving(0, &steps, &mesh_bounds);
+        let motion = inst.motion.as_ref().expect("the steps differ");
+        let mut tight = Aabb::EMPTY;
+        for i in 0..1000 {
+            let t = if i < 10 {
+                i as f32 / 9.0
+            } else {
+                rng.next_f32()
+            };
+            let m = inst.placement(t).to_world;
+            assert_eq!(m, motion.at(t));
+            for p in &points {
+                let w = m.transform_point3(*p);
+                tight.grow(w);
+                assert!(
+                    w.cmpge(inst.bounds.min).all() && w.cmple(inst.bounds.max).all(),
+                    "case {case}: {w} at {t} outside {:?}",
+                    inst.bounds
+                );
+            }
+        }
+        // Conservative, but not wastefully so.
+        let (b, e) = (inst.bounds.extent(), tight.extent());
+        assert!(b.cmple(e * 1.2 + 1.0).all(), "case {case}: {b} for {e}");
+    }
+}
+
+#[test]
+fn a_moving_instance_is_hit_where_it_is_at_the_ray_time() {
+    let mesh = quad_mesh();
+    let steps = [
+        DMat4::IDENTITY,
+        trs(DVec3::ONE, DQuat::IDENTITY, DVec3::new(10.0, 0.0, 0.0)),
+    ];
+    let slide = Instance::moving(0, &steps, &mesh.bounds());
+    // A quarter turn about Y, from the XY plane into the YZ plane.
+    let turn = [
+        trs(DVec3::ONE, DQuat::IDENTITY, DVec3::new(0.0, 10.0, 0.0)),
+        trs(
+            DVec3::ONE,
+            DQuat::from_rotation_y(std::f64::consts::FRAC_PI_2),
+            DVec3::new(0.0, 10.0, 0.0),
+        ),
+    ];
+    let turn = Instance::moving(0, &turn, &mesh.bounds());
+    let scene = SceneBvh::build(vec![slide, turn], |_| &mesh);
+    assert!(scene.has_motion());
+    let hit = |x: f32, y: f32, time: f32| {
+        let mut ray = Ray::new(Vec3::new(x, y, 5.0), -Vec3::Z);
+        ray.time = time;
+        let hit = scene.intersect(|_| &mesh, &ray, f32::INFINITY, |_, _, _, _| true);
+        let occluded = scene.occluded(|_| &mesh, &ray, f32::INFINITY, |_, _, _, _| true);
+        assert_eq!(hit.is_some(), occluded);
+        hit.map(|h| (h.instance, h.t))
+    };
+    // The sliding quad: at x = 0 when the shutter opens, x = 10 when it closes.
+    assert_eq!(hit(0.0, 0.0, 0.0), Some((0, 5.0)));
+    assert_eq!(hit(0.0, 0.0, 1.0), None);
+    assert_eq!(hit(10.0, 0.0, 1.0), Some((0, 5.0)));
+    assert_eq!(hit(10.0, 0.0, 0.0), None);
+    assert_eq!(hit(5.0, 0.0, 0.5), Some((0, 5.0)));
+    assert_eq!(hit(5.0, 0.0, 0.1), None);
+    // The turning quad: at 45° the point above x = 0.5 lies at z = -0.5; at 90° the
+    // quad is edge-on and x = 0.5 misses it.
+    assert_eq!(hit(0.5, 10.0, 0.0), Some((1, 5.0)));
+    let (i, t) = hit(0.5, 10.0, 0.5).unwrap();
+    assert!(i == 1 && (t - 5.5).abs() < 1e-5, "t = {t}");
+    assert_eq!(hit(0.5, 10.0, 1.0), None);
+}
+
+#[test]
+fn motion_scene_matches_brute_force() {
+    let mut rng = Rng(0xfeed);
+    let soup: Vec<[Vec3; 3]> = (0..200)
+        .map(|_| {
+            let c = rng.vec3() * 4.0 - 2.0;
+            [
+                c + rng.vec3() - 0.5,
+                c + rng.vec3() - 0.5,
+                c + rng.vec3() - 0.5,
+            ]
+        })
+        .collect();
+    let wobble: Vec<Vec<[Vec3; 3]>> = (0..3)
+        .map(|_| {
+            soup.iter()
+                .map(|t| t.map(|v| v + (rng.vec3() - 0.5) * 0.8))
+                .collect()
+        })
+        .collect();
+    let meshes = [MeshBvh::build(&soup), MeshBvh::build_motion(&wobble)];
+    let mut instances = Vec::new();
+    for i in 0..40 {
+        let mut place = || {
+            trs(
+                DVec3::splat(0.5 + rng.next_f32() as f64),
+                DQuat::from_axis_angle(
+                    (rng.vec3() - 0.5).as_dvec3().normalize(),
+                    rng.next_f32() as f64 * 3.0,
+                ),
+                (rng.vec3() * 30.0 - 15.0).as_dvec3(),
+            )
+        };
+        let mesh = i % 2;
+        let bounds = meshes[mesh as usize].bounds();
+        instances.push(if i % 3 == 0 {
+            Instance::new(mesh, Affine3A::from_mat4(place().as_mat4()), &bounds)
+        } else {
+            let steps: Vec<DMat4> = (0..1 + i % 3).map(|_| place()).collect();
+            Instance::moving(mesh, &steps, &bounds)
+        });
+    }
+    let mesh = |m: u32| &meshes[m as usize];
+    let scene = SceneBvh::build(instances.clone(), mesh);
+    assert!(scene.has_motion());
+    let mut hits = 0;
+    for _ in 0..3000 {
+        let mut ray = Ray::new(rng.vec3() * 40.0 - 20.0, rng.vec3() - 0.5);
+        ray.time = rng.next_f32();
+        let mut expect: Option<(f32, u32, u32)> = None;
+        for (i, inst) in instances.iter().enumerate() {
+            let to_object = inst.placement(ray.time).to_object;
+            let limit = expect.map_or(f32::INFINITY, |e| e.0);
+            let object_ray = transform_ray(&to_object, &ray);
+            if let Some((t, tri, ..)) =
+                mesh(inst.mesh).intersect(&object_ray, limit, |_, _, _| true)
+            {
+                expect = Some((t, i as u32, tri));
+            }
+        }
+        let got = scene
+            .intersect(mesh, &ray, f32::INFINITY, |_, _, _, _| true)
+            .map(|h| (h.t, h.instance, h.triangle));
+        assert_eq!(got, expect, "ray {ray:?}");
+        let occluded = scene.occluded(mesh, &ray, f32::INFINITY, |_, _, _, _| true);
+        assert_eq!(occluded, expect.is_some());
+        hits += expect.is_some() as u32;
+    }
+    assert!(hits > 200, "only {hits} hits");
+}
