@@ -386,6 +386,7 @@ impl SceneBvh {
                 &WideRay::new(ray),
                 &mut t_max,
                 stack,
+                !ANY_HIT,
                 |_, _| {},
                 |start, count, t_max, stack| {
                     for &instance in &self.order[start as usize..(start + count) as usize] {

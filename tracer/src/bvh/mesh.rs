@@ -337,6 +337,7 @@ impl MeshBvh {
             &WideRay::new(ray),
             &mut t_max,
             stack,
+            !ANY_HIT,
             |start, count| {
                 let start = start as usize;
                 prefetch(&self.triangles[start]);

@@ -283,17 +283,25 @@ pub(super) fn prefetch<T>(item: &T) {
     let _ = item;
 }
 
-/// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`,
-/// nearest child first; `leaf` and `stack` work as for the binary
-/// [`traverse`](super::node::traverse). Stack entries name a node's lane (`8·node + lane`).
-/// `prefetch_leaf(start, count)` is called for each leaf entered, when it is pushed, so that its
-/// primitives can be on their way into the cache by the time it is visited.
+/// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`
+/// (inlined into each query, where `nearest_first` is a constant);
+/// `leaf` and `stack` work as for the binary [`traverse`](super::node::traverse). Stack
+/// entries name a node's lane (`8·node + lane`). `prefetch_leaf(start, count)` is called
+/// for each leaf entered, when it is pushed, so that its primitives can be on their way
+/// into the cache by the time it is visited.
+///
+/// With `nearest_first`, a node's children are visited nearest first, and one that a closer
+/// hit has ruled out since it was pushed is skipped: what a closest-hit search needs.
+/// Without, they are visited in reverse lane order, unsorted, as Embree's occlusion
+/// queries do: a search for any hit ends at its first accepted hit, so `t_max` never
+/// shrinks and the order cannot change its answer (whether there is one).
 #[inline(always)]
 pub(super) fn traverse_wide(
     nodes: &[WideNode],
     ray: &WideRay,
     t_max: &mut f32,
     stack: &mut [Deferred],
+    nearest_first: bool,
     prefetch_leaf: impl Fn(u32, u32),
     mut leaf: impl FnMut(u32, u32, &mut f32, &mut [Deferred]) -> bool,
 ) {
@@ -306,8 +314,8 @@ pub(super) fn traverse_wide(
     let mut current = 0u32;
     loop {
         let (entry, mut hits) = ray.enter(&nodes[current as usize], *t_max);
-        // Push the children entered, kept in falling order of distance above `first`, so
-        // that the nearest is popped first.
+        // Push the children entered; nearest first, kept in falling order of distance
+        // above `first`, so that the nearest is popped first.
         let first = len;
         let node = &nodes[current as usize];
         while hits != 0 {
@@ -329,7 +337,7 @@ pub(super) fn traverse_wide(
             stack[len] = (current * WIDTH as u32 + lane, entry[lane as usize]);
             let mut i = len;
             len += 1;
-            while i > first && stack[i - 1].1 < stack[i].1 {
+            while nearest_first && i > first && stack[i - 1].1 < stack[i].1 {
                 stack.swap(i - 1, i);
                 i -= 1;
             }
@@ -342,7 +350,7 @@ pub(super) fn traverse_wide(
             }
             len -= 1;
             let (lane_ref, d) = stack[len];
-            if d > *t_max {
+            if nearest_first && d > *t_max {
                 continue;
             }
             let node = &nodes[(lane_ref / WIDTH as u32) as usize];
@@ -521,21 +529,25 @@ mod tests {
                     false
                 },
             );
-            let mut seen_wide = Vec::new();
-            traverse_wide(
-                &wide,
-                &WideRay::new(&ray),
-                &mut { t_max },
-                &mut stack,
-                |_, _| {},
-                |s, c, _, _| {
-                    seen_wide.push((s, c));
-                    false
-                },
-            );
             seen_binary.sort();
-            seen_wide.sort();
-            assert_eq!(seen_wide, seen_binary, "ray {i}: {ray:?}");
+            // Sorted or not (a search for any hit), the same leaves.
+            for nearest_first in [true, false] {
+                let mut seen_wide = Vec::new();
+                traverse_wide(
+                    &wide,
+                    &WideRay::new(&ray),
+                    &mut { t_max },
+                    &mut stack,
+                    nearest_first,
+                    |_, _| {},
+                    |s, c, _, _| {
+                        seen_wide.push((s, c));
+                        false
+                    },
+                );
+                seen_wide.sort();
+                assert_eq!(seen_wide, seen_binary, "ray {i}: {ray:?}");
+            }
         }
     }
 
@@ -567,6 +579,7 @@ mod tests {
             &ray,
             &mut t_max,
             &mut stack[1..],
+            true,
             |_, _| {},
             |start, _, t_max, _| {
                 order.push(prims[start as usize].index);
@@ -584,6 +597,7 @@ mod tests {
             &ray,
             &mut t_max,
             &mut stack[1..],
+            true,
             |_, _| {},
             |_, _, _, _| {
                 visits += 1;
@@ -632,6 +646,7 @@ mod tests {
                 &ray,
                 &mut t_max,
                 &mut stack,
+                true,
                 |_, _| {},
                 |_, _, _, _| {
                     leaves += 1;
