@@ -165,6 +165,25 @@ impl SimWorker {
         self.lease_wait(s, 0).await
     }
 
+    /// A lease request that waits up to `wait_seconds` for work, sent from a task of its
+    /// own so that the test can make work appear meanwhile; the response as it came.
+    pub fn lease_waiting(
+        &self,
+        s: &TestServer,
+        wait_seconds: u64,
+    ) -> tokio::task::JoinHandle<reqwest::Response> {
+        let request = self
+            .auth(
+                self.client
+                    .post(s.url(&format!("/workers/{}/lease", self.id))),
+            )
+            .json(&LeaseRequest {
+                wait_seconds,
+                ..LeaseRequest::default()
+            });
+        tokio::spawn(async move { request.send().await.unwrap() })
+    }
+
     pub async fn lease_wait(&self, s: &TestServer, wait_seconds: u64) -> Option<Lease> {
         self.lease_with(
             s,
@@ -359,6 +378,20 @@ pub fn settings(lease: &Lease) -> RenderSettings {
         fixed_pattern: lease.fixed_pattern,
         ..RenderSettings::DEFAULT
     }
+}
+
+/// An EXR of a `w`x`h` frame whose beauty is `rgb` everywhere: what a denoise lease uploads.
+pub fn denoised_upload(w: u32, h: u32, rgb: glam::Vec3) -> Vec<u8> {
+    let mut layers = Layers::new(TileRect::new(0, 0, w, h));
+    layers.beauty.fill(rgb.extend(1.0));
+    tracer::output::encode_exr_layers(
+        (w, h),
+        &layers,
+        &ExrMetadata::new(),
+        &[tracer::output::ImageLayer::Beauty],
+        tracer::output::ExrCompression::Zip,
+    )
+    .unwrap()
 }
 
 /// The EXR bytes of a resolved tile, as a worker encodes them.

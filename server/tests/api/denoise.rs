@@ -6,29 +6,12 @@
 use glam::Vec3;
 use proto::{FrameList, FrameState, JobSpec, JobState, JobStatus, Lease, ResultAck, TaskKind};
 use reqwest::StatusCode;
-use tracer::film::{Layers, TileRect};
-use tracer::output::{
-    aces_filmic, decode_exr, encode_exr_layers, srgb_oetf, ExrCompression, ExrMetadata, ImageLayer,
-};
+use tracer::output::{aces_filmic, decode_exr, srgb_oetf};
 
 use crate::common::*;
 
 const W: u32 = 24;
 const H: u32 = 16;
-
-/// An EXR of a `w`x`h` frame whose beauty is `rgb` everywhere: what a denoise lease uploads.
-fn denoised_upload(w: u32, h: u32, rgb: Vec3) -> Vec<u8> {
-    let mut layers = Layers::new(TileRect::new(0, 0, w, h));
-    layers.beauty.fill(rgb.extend(1.0));
-    encode_exr_layers(
-        (w, h),
-        &layers,
-        &ExrMetadata::new(),
-        &[ImageLayer::Beauty],
-        ExrCompression::Zip,
-    )
-    .unwrap()
-}
 
 async fn frame_file(s: &TestServer, c: &reqwest::Client, job: u64, ext: &str) -> Vec<u8> {
     let res = c

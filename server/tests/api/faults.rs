@@ -610,20 +610,7 @@ async fn a_waiting_lease_request_wakes_when_a_job_arrives() {
     let scene = upload_scene(&s, &c, quad_scene()).await;
     let w = SimWorker::register(&s, "sim").await;
     assert!(w.lease(&s).await.is_none());
-    let url = s.url(&format!("/workers/{}/lease", w.id));
-    let credential = w.credential.clone();
-    let waiting = tokio::spawn(async move {
-        client()
-            .post(url)
-            .bearer_auth(credential)
-            .json(&proto::LeaseRequest {
-                wait_seconds: 30,
-                ..proto::LeaseRequest::default()
-            })
-            .send()
-            .await
-            .unwrap()
-    });
+    let waiting = w.lease_waiting(&s, 30);
     let job = create_job(&s, &c, &small(&scene.digest, 1)).await;
     let res = waiting.await.unwrap();
     assert_eq!(res.status(), StatusCode::OK);
@@ -648,20 +635,7 @@ async fn a_waiting_lease_request_wakes_when_a_check_is_queued() {
     assert!(b.lease(&s).await.is_none());
 
     // b waits for work; a's tile, once accepted, is checked by another worker: b.
-    let url = s.url(&format!("/workers/{}/lease", b.id));
-    let credential = b.credential.clone();
-    let waiting = tokio::spawn(async move {
-        client()
-            .post(url)
-            .bearer_auth(credential)
-            .json(&proto::LeaseRequest {
-                wait_seconds: 30,
-                ..proto::LeaseRequest::default()
-            })
-            .send()
-            .await
-            .unwrap()
-    });
+    let waiting = b.lease_waiting(&s, 30);
     tokio::time::sleep(Duration::from_millis(300)).await;
     assert!(
         !waiting.is_finished(),

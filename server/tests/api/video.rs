@@ -35,15 +35,21 @@ async fn upload(s: &TestServer, w: &SimWorker, lease: &Lease, mp4: Vec<u8>) -> r
     w.upload_with(s, lease, mp4, &meta).await
 }
 
+/// A frame of two 8x8 tiles at 1 spp through the quad scene's camera.
+fn two_tiles(digest: &str) -> JobSpec {
+    let mut spec = JobSpec::new(digest);
+    (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 8, Some(8), 1);
+    spec.camera = proto::CameraSpec::Name("Main".into());
+    spec
+}
+
 #[tokio::test(flavor = "multi_thread")]
 async fn the_video_is_read_from_the_frames_pngs_and_downloaded_once_encoded() {
     let dir = tempfile::tempdir().unwrap();
     let s = TestServer::start(config(dir.path()));
     let c = client();
     let scene = upload_scene(&s, &c, quad_scene()).await;
-    let mut spec = JobSpec::new(&scene.digest);
-    (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 8, Some(8), 1);
-    spec.camera = proto::CameraSpec::Name("Main".into());
+    let mut spec = two_tiles(&scene.digest);
     spec.frames = Some(FrameRange {
         start: 1,
         end: 3,
@@ -108,9 +114,7 @@ async fn an_encoder_waiting_for_work_wakes_when_the_last_frame_is_denoised() {
     let s = TestServer::start(config(dir.path()));
     let c = client();
     let scene = upload_scene(&s, &c, quad_scene()).await;
-    let mut spec = JobSpec::new(&scene.digest);
-    (spec.width, spec.height, spec.tile_size, spec.spp) = (16, 8, Some(8), 1);
-    spec.camera = proto::CameraSpec::Name("Main".into());
+    let mut spec = two_tiles(&scene.digest);
     (spec.denoise, spec.video) = (true, true);
     let job = create_job(&s, &c, &spec).await.id;
     let mut plain = SimWorker::register(&s, "plain").await;
@@ -122,37 +126,14 @@ async fn an_encoder_waiting_for_work_wakes_when_the_last_frame_is_denoised() {
     // The encoder asks for work while the frame is still being denoised, and waits for
     // up to the server's longest wait (30 s); none is there yet.
     let enc = SimWorker::register_encoder(&s, "ffmpeg", "FFmpeg with libx264").await;
-    let url = s.url(&format!("/workers/{}/lease", enc.id));
-    let credential = enc.credential.clone();
-    let waiting = tokio::spawn(async move {
-        client()
-            .post(url)
-            .bearer_auth(credential)
-            .json(&proto::LeaseRequest {
-                wait_seconds: 30,
-                ..proto::LeaseRequest::default()
-            })
-            .send()
-            .await
-            .unwrap()
-    });
+    let waiting = enc.lease_waiting(&s, 30);
     tokio::time::sleep(std::time::Duration::from_millis(300)).await;
     assert!(!waiting.is_finished(), "the encoder got an answer too soon");
 
-    // The denoised frame arrives: the encode task is the waiting request's answer (before
-    // this fix the request ran out and answered 204, and the farm idled until it asked
+    // The denoised frame arrives: the encode task is the waiting request's answer (a
+    // request nothing wakes runs out and answers 204, and the farm idles until it asks
     // again).
-    let (w, h) = (spec.width, spec.height);
-    let mut layers = tracer::film::Layers::new(tracer::film::TileRect::new(0, 0, w, h));
-    layers.beauty.fill(glam::Vec4::splat(0.5));
-    let exr = tracer::output::encode_exr_layers(
-        (w, h),
-        &layers,
-        &tracer::output::ExrMetadata::new(),
-        &[tracer::output::ImageLayer::Beauty],
-        tracer::output::ExrCompression::Zip,
-    )
-    .unwrap();
+    let exr = denoised_upload(spec.width, spec.height, glam::Vec3::splat(0.5));
     let res = upload(&s, &d, &denoise, exr).await;
     assert_eq!(res.status(), StatusCode::OK);
     let res = waiting.await.unwrap();
