@@ -283,18 +283,18 @@ pub(super) fn prefetch<T>(item: &T) {
     let _ = item;
 }
 
-/// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`
-/// (inlined into each query, where `nearest_first` is a constant);
+/// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`;
 /// `leaf` and `stack` work as for the binary [`traverse`](super::node::traverse). Stack
 /// entries name a node's lane (`8·node + lane`). `prefetch_leaf(start, count)` is called
 /// for each leaf entered, when it is pushed, so that its primitives can be on their way
 /// into the cache by the time it is visited.
 ///
-/// With `nearest_first`, a node's children are visited nearest first, and one that a closer
-/// hit has ruled out since it was pushed is skipped: what a closest-hit search needs.
-/// Without, they are visited in reverse lane order, unsorted, as Embree's occlusion
-/// queries do: a search for any hit ends at its first accepted hit, so `t_max` never
-/// shrinks and the order cannot change its answer (whether there is one).
+/// With `nearest_first` (a constant in each query, which this is inlined into), a node's
+/// children are visited nearest first, and one that a closer hit has ruled out since it
+/// was pushed is skipped: what a closest-hit search needs. Without, they are visited in
+/// reverse lane order, unsorted, as Embree's occlusion queries do: a search for any hit
+/// ends at its first accepted hit, so `t_max` never shrinks and the order cannot change
+/// its answer (whether there is one).
 #[inline(always)]
 pub(super) fn traverse_wide(
     nodes: &[WideNode],
