@@ -103,7 +103,8 @@ pub fn receive(
         } => {
             app.metrics.tile_accepted(bytes.len());
             if queued {
-                // A check of this tile: another worker may be waiting for work.
+                // A check (of this tile, or of the tile this one checked) or a quarantined
+                // worker's tasks: another worker may be waiting for work.
                 app.work.notify_waiters();
             }
             if frame_complete {
