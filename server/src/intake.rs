@@ -101,12 +101,7 @@ pub fn receive(
             queued,
             ..
         } => {
-            app.metrics.tile_accepted(bytes.len());
-            if queued {
-                // A check (of this tile, or of the tile this one checked) or a quarantined
-                // worker's tasks: another worker may be waiting for work.
-                app.work.notify_waiters();
-            }
+            counted(app, bytes.len(), queued);
             if frame_complete {
                 finish_frame(app, job, frame)?;
             } else if pass_complete {
@@ -119,6 +114,17 @@ pub fn receive(
                 frame_done: frame_complete,
             })
         }
+    }
+}
+
+/// Counts an accepted upload of `bytes`; where its acceptance `queued` a task (a check, a
+/// quarantined worker's tasks, the job's encode after its last denoised frame), wakes the
+/// workers waiting for a lease now rather than when their waits run out (the demo sat idle
+/// 30 s before its video).
+fn counted(app: &App, bytes: usize, queued: bool) {
+    app.metrics.tile_accepted(bytes);
+    if queued {
+        app.work.notify_waiters();
     }
 }
 
@@ -137,13 +143,7 @@ pub fn accept_step(
         .db
         .with(|c| scheduler::accept(c, worker, token, 0, meta.render_ms, None, now, timing))?;
     if let Accepted::New { queued, .. } = accepted {
-        app.metrics.tile_accepted(upload_bytes);
-        if queued {
-            // The job's encode, after its last frame's denoising: a worker waiting for
-            // work hears of it now, not when its wait runs out (the demo sat idle 30 s
-            // before its video).
-            app.work.notify_waiters();
-        }
+        counted(app, upload_bytes, queued);
     }
     let accepted = matches!(accepted, Accepted::New { .. });
     Ok(Received {
