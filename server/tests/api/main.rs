@@ -11,4 +11,5 @@ mod farm;
 mod faults;
 mod openapi;
 mod video;
+mod waiting;
 mod webhooks;
