@@ -51,29 +51,24 @@ impl RayPrecomputed {
     /// Precomputes the permutation and shear for `ray`. A ray whose direction is zero or not
     /// finite gets NaN shear constants, and [`intersect_triangle`] then never reports a hit.
     pub fn new(ray: &Ray) -> Self {
-        let d = ray.dir;
-        let a = d.abs();
+        // Arithmetic and array indexing rather than branches and `Vec3`'s indexing (a
+        // `match`): a ray's axes are a coin toss to the branch predictor, which mispredicted
+        // here about once per incoherent ray.
+        let d = ray.dir.to_array();
+        let a = ray.dir.abs();
         // The dimension where the direction is largest, so that the shear is at most 1.
-        let kz = if a.x >= a.y && a.x >= a.z {
-            0
-        } else if a.y >= a.z {
-            1
-        } else {
-            2
-        };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
+        let x_largest = a.x >= a.y && a.x >= a.z;
+        let kz = usize::from(!x_largest) * (2 - usize::from(a.y >= a.z));
+        let (kx, ky) = ([1, 2, 0][kz], [2, 0, 1][kz]);
         // Swapping kx and ky for a negative direction keeps the triangles' winding, so the
         // sign of the determinant still tells front from back.
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        let (kx, ky) = if d[kz] < 0.0 { (ky, kx) } else { (kx, ky) };
         let shear = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
         let e = |k: usize| Vec3A::AXES[k];
         let rows = [e(kx) - shear.x * e(kz), e(ky) - shear.y * e(kz), e(kz)];
         Self {
             origin: ray.origin,
-            dir: d,
+            dir: ray.dir,
             kx,
             ky,
             kz,
@@ -204,10 +199,11 @@ fn precise_hit(
         nu / (1.0 - nu)
     }
     let (kx, ky, kz) = (ray.kx, ray.ky, ray.kz);
-    let d = ray.dir.as_dvec3();
+    // Arrays, not `DVec3`, so that indexing by axis is a load rather than a `match`.
+    let d = ray.dir.as_dvec3().to_array();
     let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
     let o = ray.origin.as_dvec3();
-    let [a, b, c] = [v0, v1, v2].map(|v| v.as_dvec3() - o);
+    let [a, b, c] = [v0, v1, v2].map(|v| (v.as_dvec3() - o).to_array());
     let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
     let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
     let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);

@@ -309,38 +309,74 @@ pub(super) fn traverse_wide(
         return;
     }
     let prefetching = nodes.len() > PREFETCH_ABOVE;
+    // Fetch a child entered but not visited next at once: in a large tree each node is a
+    // cache miss, and misses issued together overlap.
+    let fetch = |node: &WideNode, lane: usize| {
+        if prefetching {
+            let start = node.start[lane];
+            if node.count[lane] == 0 {
+                // Its four lines: 0 and 1 from the start, 2 and 3 from byte 128.
+                let child = &nodes[start as usize];
+                prefetch(child);
+                prefetch(&child.bounds[1][1]);
+            } else {
+                prefetch_leaf(start, node.count[lane]);
+            }
+        }
+    };
     // Entries `..len` of `stack` are this traversal's; a leaf gets the rest.
     let mut len = 0;
     let mut current = 0u32;
     loop {
-        let (entry, mut hits) = ray.enter(&nodes[current as usize], *t_max);
-        // Push the children entered; nearest first, kept in falling order of distance
-        // above `first`, so that the nearest is popped first.
-        let first = len;
         let node = &nodes[current as usize];
-        while hits != 0 {
-            let lane = hits.trailing_zeros();
-            hits &= hits - 1;
-            if prefetching {
-                // Fetch every child entered at once: in a large tree each node is a cache
-                // miss, and misses issued together overlap.
-                let start = node.start[lane as usize];
-                if node.count[lane as usize] == 0 {
-                    // Its four lines: 0 and 1 from the start, 2 and 3 from byte 128.
-                    let child = &nodes[start as usize];
-                    prefetch(child);
-                    prefetch(&child.bounds[1][1]);
-                } else {
-                    prefetch_leaf(start, node.count[lane as usize]);
+        let (entry, hits) = ray.enter(node, *t_max);
+        // The lane to visit next when this node decides it without the stack: its only
+        // child entered, or the nearer of two (at equal distances the later lane, as the
+        // sort below orders them). As Embree's traversal does: most nodes are entered by
+        // one or two children, and a push, a sort and a pop mispredict where a compare
+        // need not.
+        let next = match hits.count_ones() {
+            0 => None,
+            1 if nearest_first => Some(hits.trailing_zeros() as usize),
+            2 if nearest_first => {
+                let (a, b) = (
+                    hits.trailing_zeros() as usize,
+                    31 - hits.leading_zeros() as usize,
+                );
+                let (near, far) = if entry[a] < entry[b] { (a, b) } else { (b, a) };
+                fetch(node, far);
+                stack[len] = (current * WIDTH as u32 + far as u32, entry[far]);
+                len += 1;
+                Some(near)
+            }
+            _ => {
+                // Push the children entered; nearest first, kept in falling order of
+                // distance above `first`, so that the nearest is popped first.
+                let first = len;
+                let mut hits = hits;
+                while hits != 0 {
+                    let lane = hits.trailing_zeros();
+                    hits &= hits - 1;
+                    fetch(node, lane as usize);
+                    stack[len] = (current * WIDTH as u32 + lane, entry[lane as usize]);
+                    let mut i = len;
+                    len += 1;
+                    while nearest_first && i > first && stack[i - 1].1 < stack[i].1 {
+                        stack.swap(i - 1, i);
+                        i -= 1;
+                    }
                 }
+                None
             }
-            stack[len] = (current * WIDTH as u32 + lane, entry[lane as usize]);
-            let mut i = len;
+        };
+        if let Some(lane) = next {
+            if node.count[lane] == 0 {
+                current = node.start[lane];
+                continue;
+            }
+            // A leaf goes through the stack after all: the leaf's code is then inlined once.
+            stack[len] = (current * WIDTH as u32 + lane as u32, entry[lane]);
             len += 1;
-            while nearest_first && i > first && stack[i - 1].1 < stack[i].1 {
-                stack.swap(i - 1, i);
-                i -= 1;
-            }
         }
         // Pop the next child that a closer hit has not ruled out: a leaf is handled here,
         // an interior node is tested next.
@@ -368,315 +404,4 @@ pub(super) fn traverse_wide(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::super::build::SAH_MAX_DEPTH;
-    use super::super::build::{build, BuildParams, BuildPrim};
-    use super::super::node::{traverse, BoxRay, StaticBoxes, LEVEL_STACK, STACK_CAPACITY};
-    use super::*;
-    use crate::test_rng::Rng;
-
-    #[test]
-    fn node_is_four_cache_lines() {
-        assert_eq!(std::mem::size_of::<WideNode>(), 256);
-        assert_eq!(std::mem::align_of::<WideNode>(), 64);
-    }
-
-    fn random_prims(rng: &mut Rng, n: usize) -> Vec<BuildPrim> {
-        (0..n)
-            .map(|i| {
-                let c = rng.vec3() * 10.0;
-                let h = rng.vec3() * 0.5;
-                BuildPrim {
-                    min: c - h,
-                    max: c + h,
-                    index: i as u32,
-                }
-            })
-            .collect()
-    }
-
-    /// Every leaf of the binary tree, once, as (start, count).
-    fn binary_leaves(nodes: &[Node]) -> Vec<(u32, u32)> {
-        let mut leaves: Vec<_> = nodes
-            .iter()
-            .filter(|n| n.count > 0)
-            .map(|n| (n.start, n.count))
-            .collect();
-        leaves.sort();
-        leaves
-    }
-
-    #[test]
-    fn collapse_keeps_every_leaf_once_and_boxes_hold_their_children() {
-        let mut rng = Rng(3);
-        for n in [1, 2, 3, 5, 8, 9, 40, 1000] {
-            let mut prims = random_prims(&mut rng, n);
-            let params = BuildParams {
-                max_leaf: 2,
-                traversal_cost: 1.0,
-                intersect_cost: 1.0,
-            };
-            let binary = build(&mut prims, &params);
-            let wide = collapse(&binary, None);
-            check_collapse(&binary, &wide);
-            let leaves = wide_leaves(&wide);
-            assert_eq!(leaves, binary_leaves(&binary), "{n} primitives");
-            // Merged: every primitive in exactly one leaf still, none larger than asked.
-            let merged = collapse(&binary, Some(MERGE));
-            check_collapse(&binary, &merged);
-            let leaves = wide_leaves(&merged);
-            assert!(leaves.iter().all(|&(_, count)| count <= MERGE.max_leaf));
-            let mut next = 0;
-            for (start, count) in leaves {
-                assert_eq!(start, next, "{n} primitives");
-                next += count;
-            }
-            assert_eq!(next, n as u32);
-            // Half as deep: at most about half as many nodes as the binary tree.
-            assert!(
-                wide.len() <= binary.len().div_ceil(2),
-                "{n}: {}",
-                wide.len()
-            );
-        }
-    }
-
-    const MERGE: Merge = Merge {
-        max_leaf: 8,
-        node_cost: 4.0,
-    };
-
-    /// Every leaf of an eight-wide tree, once, as (start, count).
-    fn wide_leaves(wide: &[WideNode]) -> Vec<(u32, u32)> {
-        let mut leaves: Vec<_> = wide
-            .iter()
-            .flat_map(|node| {
-                (0..WIDTH)
-                    .filter(|&lane| node.count[lane] > 0)
-                    .map(|lane| (node.start[lane], node.count[lane]))
-            })
-            .collect();
-        leaves.sort();
-        leaves
-    }
-
-    /// Child boxes hold their children, children come after their parents, the root's box
-    /// is the binary root's, and lanes are used in order.
-    fn check_collapse(binary: &[Node], wide: &[WideNode]) {
-        for (i, node) in wide.iter().enumerate() {
-            for lane in 0..WIDTH {
-                let lane_box = node.lane_box(lane);
-                if lane_box.is_empty() || node.count[lane] > 0 {
-                    continue;
-                }
-                let child = node.start[lane] as usize;
-                assert!(child > i, "children come after their parents");
-                let inner = wide[child].bounds();
-                assert!(lane_box.min.cmple(inner.min).all());
-                assert!(lane_box.max.cmpge(inner.max).all());
-            }
-        }
-        assert_eq!(
-            wide[0].bounds(),
-            Aabb {
-                min: binary[0].min,
-                max: binary[0].max
-            }
-        );
-        // Lanes are used in order: `enter` tests one half of a node whose fifth is free.
-        for node in wide {
-            let used = (0..WIDTH).filter(|&l| !node.lane_box(l).is_empty()).count();
-            assert!((0..used).all(|l| node.start[l] | node.count[l] != 0));
-            assert!((used..WIDTH).all(|l| node.start[l] | node.count[l] == 0));
-        }
-    }
-
-    #[test]
-    fn visits_the_same_leaves_at_the_same_distances_as_the_binary_traversal() {
-        let mut rng = Rng(11);
-        let mut prims = random_prims(&mut rng, 300);
-        let params = BuildParams {
-            max_leaf: 4,
-            traversal_cost: 1.0,
-            intersect_cost: 1.0,
-        };
-        let binary = build(&mut prims, &params);
-        let wide = collapse(&binary, None);
-        let mut stack = [(0, 0.0); STACK_CAPACITY];
-        for i in 0..2000 {
-            let origin = rng.vec3() * 14.0 - 2.0;
-            let mut dir = rng.vec3() * 2.0 - 1.0;
-            // Axis-parallel rays too, some of them in a box's face plane.
-            if i % 5 == 0 {
-                dir = Vec3::new(0.0, 0.0, if i % 2 == 0 { 1.0 } else { -0.0 });
-            }
-            let origin = if i % 7 == 0 {
-                Vec3::new(prims[i % 300].min.x, origin.y, origin.z)
-            } else {
-                origin
-            };
-            let ray = Ray::new(origin, dir);
-            let t_max = if i % 3 == 0 { 4.0 } else { f32::INFINITY };
-            let mut seen_binary = Vec::new();
-            traverse(
-                &binary,
-                &StaticBoxes,
-                &BoxRay::new(&ray),
-                &mut { t_max },
-                &mut stack,
-                |start, count, _, _| {
-                    seen_binary.push((start, count));
-                    false
-                },
-            );
-            seen_binary.sort();
-            // Sorted or not (a search for any hit), the same leaves.
-            for nearest_first in [true, false] {
-                let mut seen_wide = Vec::new();
-                traverse_wide(
-                    &wide,
-                    &WideRay::new(&ray),
-                    &mut { t_max },
-                    &mut stack,
-                    nearest_first,
-                    |_, _| {},
-                    |s, c, _, _| {
-                        seen_wide.push((s, c));
-                        false
-                    },
-                );
-                seen_wide.sort();
-                assert_eq!(seen_wide, seen_binary, "ray {i}: {ray:?}");
-            }
-        }
-    }
-
-    #[test]
-    fn a_closer_hit_prunes_and_any_hit_stops() {
-        // Five leaves in a row along x; a ray down the row finds the nearest first.
-        let mut prims: Vec<BuildPrim> = (0..5)
-            .map(|i| BuildPrim {
-                min: Vec3::new(i as f32 * 2.0, 0.0, 0.0),
-                max: Vec3::new(i as f32 * 2.0 + 1.0, 1.0, 1.0),
-                index: i,
-            })
-            .collect();
-        let params = BuildParams {
-            max_leaf: 1,
-            traversal_cost: 1.0,
-            intersect_cost: 1.0,
-        };
-        let binary = build(&mut prims, &params);
-        let wide = collapse(&binary, None);
-        let ray = WideRay::new(&Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X));
-        // The caller's entry below the part it hands on stays as it was.
-        let mut stack = [(0, 0.0); STACK_CAPACITY];
-        stack[0] = (7, 1.0);
-        let mut order = Vec::new();
-        let mut t_max = f32::INFINITY;
-        traverse_wide(
-            &wide,
-            &ray,
-            &mut t_max,
-            &mut stack[1..],
-            true,
-            |_, _| {},
-            |start, _, t_max, _| {
-                order.push(prims[start as usize].index);
-                // A hit at the near face of the first leaf entered rules out the rest.
-                *t_max = prims[start as usize].min.x + 1.0;
-                false
-            },
-        );
-        assert_eq!(order, [0]);
-        assert_eq!(stack[0], (7, 1.0));
-        let mut visits = 0;
-        let mut t_max = f32::INFINITY;
-        traverse_wide(
-            &wide,
-            &ray,
-            &mut t_max,
-            &mut stack[1..],
-            true,
-            |_, _| {},
-            |_, _, _, _| {
-                visits += 1;
-                true
-            },
-        );
-        assert_eq!((visits, stack[0]), (1, (7, 1.0)));
-    }
-
-    #[test]
-    fn a_path_as_deep_as_the_build_allows_fits_one_level_of_the_stack() {
-        // The worst case by hand: a chain of nodes as long as the build's depth guard
-        // allows, each with seven leaves and, nearest the ray, the next node, so that every
-        // node leaves seven entries behind.
-        let nodes_on_path = 2 * SAH_MAX_DEPTH as usize + 1;
-        let leaf_box = |k: usize| Node {
-            min: Vec3::new(100.0 + k as f32, -1.0, -1.0),
-            start: 0,
-            max: Vec3::new(101.0 + k as f32, 1.0, 1.0),
-            count: 1,
-        };
-        let mut nodes = vec![WideNode::EMPTY; nodes_on_path];
-        for (k, node) in nodes.iter_mut().enumerate() {
-            let last = k + 1 == nodes_on_path;
-            for lane in 0..WIDTH {
-                if lane + 1 == WIDTH && !last {
-                    let inner = Node {
-                        min: Vec3::splat(-1e3),
-                        start: 0,
-                        max: Vec3::splat(1e3),
-                        count: 0,
-                    };
-                    node.set_lane(lane, &inner, k as u32 + 1, 0);
-                } else {
-                    node.set_lane(lane, &leaf_box(k), 0, 1);
-                }
-            }
-        }
-        let ray = WideRay::new(&Ray::new(Vec3::new(-1e4, 0.0, 0.0), Vec3::X));
-        let deepest = (WIDTH - 1) * (nodes_on_path - 1) + WIDTH;
-        let leaves_with = |entries: usize| {
-            let mut stack = vec![(0, 0.0); entries];
-            let (mut leaves, mut t_max) = (0, f32::INFINITY);
-            traverse_wide(
-                &nodes,
-                &ray,
-                &mut t_max,
-                &mut stack,
-                true,
-                |_, _| {},
-                |_, _, _, _| {
-                    leaves += 1;
-                    false
-                },
-            );
-            leaves
-        };
-        assert!(deepest <= LEVEL_STACK);
-        assert_eq!(leaves_with(LEVEL_STACK), deepest);
-        // It does reach that height: one entry fewer is out of bounds.
-        assert!(std::panic::catch_unwind(|| leaves_with(deepest - 1)).is_err());
-    }
-
-    #[test]
-    fn nan_lanes_keep_the_accumulator() {
-        let acc = Vec4::new(1.0, 2.0, 3.0, 4.0);
-        let x = Vec4::new(f32::NAN, 5.0, f32::NAN, 0.5);
-        assert_eq!(max_or_acc(acc, x).to_array(), [1.0, 5.0, 3.0, 4.0]);
-        assert_eq!(min_or_acc(acc, x).to_array(), [1.0, 2.0, 3.0, 0.5]);
-    }
-
-    #[test]
-    fn empty_lanes_are_never_entered() {
-        let node = WideNode::EMPTY;
-        for dir in [Vec3::X, -Vec3::Y, Vec3::new(0.0, -0.0, 1.0), Vec3::ONE] {
-            for origin in [Vec3::ZERO, Vec3::splat(1e30), Vec3::splat(-3.0)] {
-                let (_, hits) = WideRay::new(&Ray::new(origin, dir)).enter(&node, f32::INFINITY);
-                assert_eq!(hits, 0, "{origin} {dir}");
-            }
-        }
-    }
-}
+mod tests;

@@ -38,7 +38,7 @@ impl RayLanes {
     pub fn new(ray: &RayPrecomputed) -> Self {
         let axes = [ray.kx, ray.ky, ray.kz];
         Self {
-            origin: axes.map(|k| Vec4::splat(ray.origin[k])),
+            origin: axes.map(|k| Vec4::splat(ray.origin.to_array()[k])),
             shear: [Vec4::splat(ray.shear.x), Vec4::splat(ray.shear.y)],
             axes,
         }
