@@ -285,16 +285,17 @@ pub(super) fn prefetch<T>(item: &T) {
 
 /// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`;
 /// `leaf` and `stack` work as for the binary [`traverse`](super::node::traverse). Stack
-/// entries name a node's lane (`8·node + lane`). `prefetch_leaf(start, count)` is called
-/// for each leaf entered, when it is pushed, so that its primitives can be on their way
-/// into the cache by the time it is visited.
+/// entries name a node's lane (`8·node + lane`). In a large tree `prefetch_leaf(start,
+/// count)` is called for each leaf entered, when it is pushed, so that its primitives can
+/// be on their way into the cache by the time it is visited; not for a leaf that a
+/// closest-hit search visits at once (a node's only child entered, or the nearer of two).
 ///
 /// With `nearest_first` (a constant in each query, which this is inlined into), a node's
-/// children are visited nearest first, and one that a closer hit has ruled out since it
-/// was pushed is skipped: what a closest-hit search needs. Without, they are visited in
-/// reverse lane order, unsorted, as Embree's occlusion queries do: a search for any hit
-/// ends at its first accepted hit, so `t_max` never shrinks and the order cannot change
-/// its answer (whether there is one).
+/// children are visited nearest first (at equal distances the later lane first), and one
+/// that a closer hit has ruled out since it was pushed is skipped: what a closest-hit
+/// search needs. Without, they are visited in reverse lane order, unsorted, as Embree's
+/// occlusion queries do: a search for any hit ends at its first accepted hit, so `t_max`
+/// never shrinks and the order cannot change its answer (whether there is one).
 #[inline(always)]
 pub(super) fn traverse_wide(
     nodes: &[WideNode],
