@@ -24,6 +24,17 @@ fn random_prims(rng: &mut Rng, n: usize) -> Vec<BuildPrim> {
         .collect()
 }
 
+/// The binary SAH tree over `prims`, a node visit priced as one test, leaves of up to
+/// `max_leaf`.
+fn binary_tree(prims: &mut [BuildPrim], max_leaf: u32) -> Vec<Node> {
+    let params = BuildParams {
+        max_leaf,
+        traversal_cost: 1.0,
+        intersect_cost: 1.0,
+    };
+    build(prims, &params)
+}
+
 /// Every leaf of the binary tree, once, as (start, count).
 fn binary_leaves(nodes: &[Node]) -> Vec<(u32, u32)> {
     let mut leaves: Vec<_> = nodes
@@ -40,12 +51,7 @@ fn collapse_keeps_every_leaf_once_and_boxes_hold_their_children() {
     let mut rng = Rng(3);
     for n in [1, 2, 3, 5, 8, 9, 40, 1000] {
         let mut prims = random_prims(&mut rng, n);
-        let params = BuildParams {
-            max_leaf: 2,
-            traversal_cost: 1.0,
-            intersect_cost: 1.0,
-        };
-        let binary = build(&mut prims, &params);
+        let binary = binary_tree(&mut prims, 2);
         let wide = collapse(&binary, None);
         check_collapse(&binary, &wide);
         let leaves = wide_leaves(&wide);
@@ -124,12 +130,7 @@ fn check_collapse(binary: &[Node], wide: &[WideNode]) {
 fn visits_the_same_leaves_at_the_same_distances_as_the_binary_traversal() {
     let mut rng = Rng(11);
     let mut prims = random_prims(&mut rng, 300);
-    let params = BuildParams {
-        max_leaf: 4,
-        traversal_cost: 1.0,
-        intersect_cost: 1.0,
-    };
-    let binary = build(&mut prims, &params);
+    let binary = binary_tree(&mut prims, 4);
     let wide = collapse(&binary, None);
     let mut stack = [(0, 0.0); STACK_CAPACITY];
     for i in 0..2000 {
@@ -218,12 +219,7 @@ fn a_closest_hit_search_visits_leaves_nearest_first_and_ties_by_lane() {
         let c = Vec3::new((i % 5) as f32, (i / 5 % 4) as f32, (i / 20) as f32);
         (p.min, p.max) = (c, c + 1.0);
     }
-    let params = BuildParams {
-        max_leaf: 2,
-        traversal_cost: 1.0,
-        intersect_cost: 1.0,
-    };
-    let binary = build(&mut prims, &params);
+    let binary = binary_tree(&mut prims, 2);
     let wide = collapse(&binary, None);
     let mut stack = [(0, 0.0); STACK_CAPACITY];
     for i in 0..2000 {
@@ -265,12 +261,7 @@ fn a_closer_hit_prunes_and_any_hit_stops() {
             index: i,
         })
         .collect();
-    let params = BuildParams {
-        max_leaf: 1,
-        traversal_cost: 1.0,
-        intersect_cost: 1.0,
-    };
-    let binary = build(&mut prims, &params);
+    let binary = binary_tree(&mut prims, 1);
     let wide = collapse(&binary, None);
     let ray = WideRay::new(&Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X));
     // The caller's entry below the part it hands on stays as it was.
