@@ -310,8 +310,8 @@ pub(super) fn traverse_wide(
         return;
     }
     let prefetching = nodes.len() > PREFETCH_ABOVE;
-    // Fetch a child entered but not visited next at once: in a large tree each node is a
-    // cache miss, and misses issued together overlap.
+    // Fetch each child pushed as it is pushed: in a large tree each node is a cache miss,
+    // and misses issued together overlap.
     let fetch = |node: &WideNode, lane: usize| {
         if prefetching {
             let start = node.start[lane];
