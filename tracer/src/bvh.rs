@@ -10,6 +10,7 @@
 //! | `mesh` | [`MeshBvh`]: object-space triangles in the BVH's own order, at 1..S steps |
 //! | `instance` | [`Instance`], [`Placement`], [`SceneBvh`]: placed meshes, the BVH over them |
 //! | `motion` | the shutter-time convention; [`MotionTransform`] (lerp, slerp, lerp) |
+//! | `huge_pages` | large arrays moved onto 2 MiB pages, which few TLB entries cover |
 //!
 //! Both levels are built as binary trees in one flat layout, a node's two children adjacent
 //! and stored after it, and queried as those trees collapsed eight-wide: slab tests in
@@ -30,6 +31,7 @@
 //!   const parameter: a static scene runs the same loop as if motion did not exist.
 
 mod build;
+mod huge_pages;
 mod instance;
 mod mesh;
 mod motion;

@@ -6,6 +6,7 @@ use std::sync::Arc;
 use glam::{Affine3A, DMat4, Mat3A, Vec3};
 
 use super::build::{self, BuildParams, BuildPrim};
+use super::huge_pages::on_huge_pages;
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
 use super::node::{ray_is_valid, with_stack};
@@ -290,9 +291,9 @@ impl SceneBvh {
         let nodes = collapse(&build::build(&mut prims, &PARAMS), None);
         let order = prims.iter().map(|p| p.index).collect();
         SceneBvh {
-            instances,
-            nodes,
-            order,
+            instances: on_huge_pages(instances),
+            nodes: on_huge_pages(nodes),
+            order: on_huge_pages(order),
             motion,
         }
     }

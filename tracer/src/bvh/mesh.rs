@@ -3,6 +3,7 @@
 use glam::{DVec3, Vec3};
 
 use super::build::{self, BuildParams, BuildPrim};
+use super::huge_pages::on_huge_pages;
 use super::motion::Segment;
 use super::node::{
     ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
@@ -195,11 +196,11 @@ impl MeshBvh {
             (Vec::new(), Vec::new())
         };
         Self {
-            wide,
-            nodes,
-            triangles,
+            wide: on_huge_pages(wide),
+            nodes: on_huge_pages(nodes),
+            triangles: on_huge_pages(triangles),
             steps: step_count,
-            step_boxes,
+            step_boxes: on_huge_pages(step_boxes),
         }
     }
 
