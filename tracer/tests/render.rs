@@ -473,6 +473,29 @@ fn layers_hash(layers: &Layers) -> u64 {
 /// constants were written; CI runs them on whatever CPU it gets.
 #[test]
 fn every_machine_renders_the_same_bits() {
+    // Both BVH node tests: AVX's, where this CPU has it, and SSE2's, which a CPU without
+    // AVX runs (the switch is process-wide; other tests running meanwhile get the same
+    // bits either way, which is what this checks).
+    if !tracer::bvh::avx() {
+        eprintln!("WARNING: this CPU has no AVX: only the SSE2 node test is checked");
+    }
+    for avx in [true, false] {
+        tracer::bvh::allow_avx(avx);
+        let node_test = if tracer::bvh::avx() { "AVX" } else { "SSE2" };
+        assert_eq!(
+            renders_that_touch_every_function(),
+            [16277519394599683615, 2217562461470136785],
+            "this machine renders other bits ({node_test} node test) than the machine that \
+             wrote the constants: CPU-dependent maths reached the tracer (a platform sin, exp \
+             or pow, or a SIMD path whose lanes round differently). If the image changed on \
+             purpose, these are the new constants."
+        );
+    }
+    tracer::bvh::allow_avx(true);
+}
+
+/// The hashes of two small renders that touch every transcendental function of the tracer.
+fn renders_that_touch_every_function() -> [u64; 2] {
     // The animated demo at frame 12 with a 180° shutter: metal, glass, a moving box.
     let options = FrameOptions {
         frame: 12,
@@ -518,13 +541,5 @@ fn every_machine_renders_the_same_bits() {
     b.environment(Environment::Map(map));
     let lit = render(&frame(b.finish(), 24, 24), &RenderSettings::default(), 4).resolve();
 
-    let got = [layers_hash(&demo), layers_hash(&lit)];
-    assert_eq!(
-        got,
-        [16277519394599683615, 2217562461470136785],
-        "this machine renders other bits than the machine that wrote the constants: \
-         CPU-dependent maths reached the tracer (a platform sin, exp or pow, or a SIMD \
-         path chosen at run time). If the image changed on purpose, these are the new \
-         constants."
-    );
+    [layers_hash(&demo), layers_hash(&lit)]
 }

@@ -255,6 +255,10 @@ pub struct RaysArgs {
     /// fastest round counts.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=20))]
     pub rounds: u32,
+    /// Test Tessera's nodes in SSE2's halves of four lanes even where the CPU has AVX: the
+    /// same hits, so one binary measures what AVX buys.
+    #[arg(long)]
+    pub sse2: bool,
 }
 
 /// Every triangle of `scene` in world space, each mesh placed by every node that holds it
@@ -324,8 +328,13 @@ pub fn run(args: RaysArgs) -> anyhow::Result<()> {
             one_thread_rate(rays, |r, t| bvh.intersect(r, t, |_, _, _| true).is_some())
         }
     };
+    if args.sse2 {
+        tracer::bvh::allow_avx(false);
+    }
+    let node_test = if tracer::bvh::avx() { "AVX" } else { "SSE2" };
     println!(
-        "\n{name}, {} triangles, one thread, {} rays per set, the fastest of {} rounds:\n",
+        "\n{name}, {} triangles, one thread, {} rays per set, the fastest of {} rounds, \
+         Tessera's node test in {node_test} lanes:\n",
         triangles.len(),
         sets.sets[0].rays.len(),
         args.rounds
@@ -593,6 +602,7 @@ mod tests {
             mesh: None,
             side: 4,
             rounds: 1,
+            sse2: false,
         };
         let err = run(args).unwrap_err().to_string();
         assert!(err.contains("scripts/install-embree.sh"), "{err}");

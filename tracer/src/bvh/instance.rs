@@ -10,6 +10,7 @@ use super::huge_pages::on_huge_pages;
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
 use super::node::{ray_is_valid, with_stack};
+use super::simd;
 use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};
 use crate::triangle::gamma;
@@ -365,11 +366,36 @@ impl SceneBvh {
         }
     }
 
-    /// The closest accepted hit, or with `ANY_HIT` the first one found. With `MOTION`,
-    /// moving instances are placed and deforming meshes interpolated at `ray.time`; the
-    /// top level's boxes cover the shutter either way.
+    /// [`Self::search_with`] with the node test this process uses (see `bvh/simd.rs`).
     #[inline(always)]
     fn search<'m, const ANY_HIT: bool, const MOTION: bool, M: Fn(u32) -> &'m MeshBvh>(
+        &self,
+        mesh: M,
+        ray: &Ray,
+        t_max: f32,
+        accept: impl FnMut(u32, u32, f32, f32) -> bool,
+    ) -> Option<Hit> {
+        #[cfg(target_arch = "x86_64")]
+        if simd::avx() {
+            let search = || self.search_with::<ANY_HIT, MOTION, true, M>(mesh, ray, t_max, accept);
+            // SAFETY: the CPU has AVX (`simd::avx`).
+            return unsafe { simd::with_avx(search) };
+        }
+        self.search_with::<ANY_HIT, MOTION, false, M>(mesh, ray, t_max, accept)
+    }
+
+    /// The closest accepted hit, or with `ANY_HIT` the first one found. With `MOTION`,
+    /// moving instances are placed and deforming meshes interpolated at `ray.time`; the
+    /// top level's boxes cover the shutter either way. With `AVX` (only where
+    /// [`simd::with_avx`] runs it), nodes are tested in AVX lanes at both levels.
+    #[inline(always)]
+    fn search_with<
+        'm,
+        const ANY_HIT: bool,
+        const MOTION: bool,
+        const AVX: bool,
+        M: Fn(u32) -> &'m MeshBvh,
+    >(
         &self,
         mesh: M,
         ray: &Ray,
@@ -382,7 +408,7 @@ impl SceneBvh {
         let mut t_max = t_max;
         let mut best = None;
         with_stack(|stack| {
-            traverse_wide(
+            traverse_wide::<AVX>(
                 &self.nodes,
                 &WideRay::new(ray),
                 &mut t_max,
@@ -398,7 +424,7 @@ impl SceneBvh {
                         } else {
                             inst.object_ray(ray)
                         };
-                        let hit = bvh.search::<ANY_HIT, MOTION>(
+                        let hit = bvh.search_with::<ANY_HIT, MOTION, AVX>(
                             &object_ray,
                             *t_max,
                             stack,

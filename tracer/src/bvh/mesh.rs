@@ -8,6 +8,7 @@ use super::motion::Segment;
 use super::node::{
     ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
 };
+use super::simd;
 use super::wide::{collapse, prefetch, traverse_wide, Merge, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
 use crate::triangle::{intersect_triangle, RayLanes, RayPrecomputed};
@@ -273,13 +274,32 @@ impl MeshBvh {
         .is_some()
     }
 
+    /// [`Self::search_with`] with the node test this process uses (see `bvh/simd.rs`).
+    #[inline(always)]
+    fn search<const ANY_HIT: bool, const MOTION: bool>(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        stack: &mut [Deferred],
+        accept: impl FnMut(u32, f32, f32) -> bool,
+    ) -> Option<(f32, u32, f32, f32)> {
+        #[cfg(target_arch = "x86_64")]
+        if simd::avx() {
+            let search = || self.search_with::<ANY_HIT, MOTION, true>(ray, t_max, stack, accept);
+            // SAFETY: the CPU has AVX (`simd::avx`).
+            return unsafe { simd::with_avx(search) };
+        }
+        self.search_with::<ANY_HIT, MOTION, false>(ray, t_max, stack, accept)
+    }
+
     /// The closest accepted hit, or with `ANY_HIT` the first one found (traversal stops
     /// there). With `MOTION`, a deforming mesh is searched at `ray.time`; without, or for a
     /// static mesh, the static loop runs (on a deforming mesh it would find the mesh at
     /// time 0: step 0 comes first and the eight-wide boxes span every step). Const parameters,
     /// so each query compiles to its own loop and a static scene pays nothing for motion.
+    /// With `AVX` (only where [`simd::with_avx`] runs it), nodes are tested in AVX lanes.
     #[inline(always)]
-    pub(super) fn search<const ANY_HIT: bool, const MOTION: bool>(
+    pub(super) fn search_with<const ANY_HIT: bool, const MOTION: bool, const AVX: bool>(
         &self,
         ray: &Ray,
         t_max: f32,
@@ -333,7 +353,7 @@ impl MeshBvh {
             return best;
         }
         let lanes = RayLanes::new(&pre);
-        traverse_wide(
+        traverse_wide::<AVX>(
             &self.wide,
             &WideRay::new(ray),
             &mut t_max,

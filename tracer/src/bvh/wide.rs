@@ -6,10 +6,11 @@
 //! The same tree eight-wide is a third as deep as binary: in a large mesh, where each node
 //! a ray visits is a cache miss, fewer levels are fewer misses (four-wide, as this was
 //! before, traced the incoherent rays of a 1M-triangle mesh 20% slower). The eight lanes
-//! are tested as two halves of four in SSE2 registers, which every x86_64 CPU has, so
-//! there is one code path and no run-time dispatch. Each lane runs the same IEEE
-//! operations per axis as [`BoxRay::entry`](super::node::BoxRay), so a child is entered
-//! at the same distance, and hit, exactly when the binary test says so.
+//! are tested in one AVX register where the CPU has AVX, else as two halves of four in
+//! SSE2 registers, which every x86_64 CPU has (`bvh/simd.rs` picks, once per query). Each
+//! lane runs the same IEEE operations per axis as [`BoxRay::entry`](super::node::BoxRay)
+//! in either, so a child is entered at the same distance, and hit, exactly when the binary
+//! test says so.
 
 use glam::{Vec3, Vec4};
 
@@ -204,9 +205,66 @@ impl WideRay {
     }
 
     /// The distances at which the ray enters `node`'s children, and a bit per child that
-    /// it enters within `[0, t_max]`.
+    /// it enters within `[0, t_max]`: with `AVX`, in one AVX register of eight lanes,
+    /// else in SSE2 halves of four. `AVX` is true only in code that
+    /// [`with_avx`](super::simd::with_avx) runs.
     #[inline(always)]
-    fn enter(&self, node: &WideNode, t_max: f32) -> ([f32; WIDTH], u32) {
+    fn enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> ([f32; WIDTH], u32) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: this code runs where the CPU has AVX (see above).
+            return unsafe { self.enter_avx(node, t_max) };
+        }
+        self.enter_halves(node, t_max)
+    }
+
+    /// [`Self::enter`] in one register: the same operations, in the same order, on each
+    /// lane as [`Self::enter_halves`], so the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    unsafe fn enter_avx(&self, node: &WideNode, t_max: f32) -> ([f32; WIDTH], u32) {
+        use std::arch::x86_64::{
+            _mm256_cmp_ps, _mm256_loadu_ps, _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps,
+            _mm256_mul_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps, _mm256_sub_ps,
+            _CMP_LE_OS,
+        };
+        let mut entry = [0.0; WIDTH];
+        let mut t0 = _mm256_setzero_ps();
+        let mut t1 = _mm256_set1_ps(t_max);
+        for axis in 0..3 {
+            let origin = _mm256_set1_ps(self.origin[axis].x);
+            let inv_dir = _mm256_set1_ps(self.inv_dir[axis].x);
+            // The eight lanes' planes lie in one row of 32 bytes.
+            let near = &node.bounds[self.near[axis] & 1][axis];
+            let far = &node.bounds[(self.near[axis] ^ 1) & 1][axis];
+            // SAFETY: each row is eight f32s.
+            let (near, far) = unsafe {
+                (
+                    _mm256_loadu_ps(near.as_ptr().cast()),
+                    _mm256_loadu_ps(far.as_ptr().cast()),
+                )
+            };
+            let near = _mm256_mul_ps(_mm256_sub_ps(near, origin), inv_dir);
+            let far = _mm256_mul_ps(
+                _mm256_mul_ps(_mm256_sub_ps(far, origin), inv_dir),
+                _mm256_set1_ps(FAR_SCALE),
+            );
+            // maxps/minps return their second operand where a lane is NaN, as the SSE2
+            // test's `max_or_acc` does.
+            t0 = _mm256_max_ps(near, t0);
+            t1 = _mm256_min_ps(far, t1);
+        }
+        // SAFETY: `entry` holds eight f32s.
+        unsafe { _mm256_storeu_ps(entry.as_mut_ptr(), t0) };
+        // `_CMP_LE_OS` is SSE2's `cmpleps`: false where a lane is NaN.
+        let hits = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(t0, t1)) as u32;
+        (entry, hits)
+    }
+
+    /// [`Self::enter`] in SSE2 halves of four lanes.
+    #[inline(always)]
+    fn enter_halves(&self, node: &WideNode, t_max: f32) -> ([f32; WIDTH], u32) {
         let mut entry = [0.0; WIDTH];
         let mut hits = 0;
         // Lanes are filled in order, so a node whose fifth lane is unused (no child node
@@ -297,7 +355,7 @@ pub(super) fn prefetch<T>(item: &T) {
 /// occlusion queries do: a search for any hit ends at its first accepted hit, so `t_max`
 /// never shrinks and the order cannot change its answer (whether there is one).
 #[inline(always)]
-pub(super) fn traverse_wide(
+pub(super) fn traverse_wide<const AVX: bool>(
     nodes: &[WideNode],
     ray: &WideRay,
     t_max: &mut f32,
@@ -330,7 +388,7 @@ pub(super) fn traverse_wide(
     let mut current = 0u32;
     loop {
         let node = &nodes[current as usize];
-        let (entry, hits) = ray.enter(node, *t_max);
+        let (entry, hits) = ray.enter::<AVX>(node, *t_max);
         // The lane to visit next when this node decides it without the stack: its only
         // child entered, or the nearer of two (at equal distances the later lane, as the
         // sort below orders them). As Embree's traversal does: most nodes are entered by

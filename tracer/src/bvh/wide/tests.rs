@@ -163,7 +163,7 @@ fn visits_the_same_leaves_at_the_same_distances_as_the_binary_traversal() {
         // Sorted or not (a search for any hit), the same leaves.
         for nearest_first in [true, false] {
             let mut seen_wide = Vec::new();
-            traverse_wide(
+            traverse_wide::<false>(
                 &wide,
                 &WideRay::new(&ray),
                 &mut { t_max },
@@ -188,7 +188,7 @@ fn reference_order(nodes: &[WideNode], ray: &WideRay, t_max: f32) -> Vec<(u32, u
     let (mut order, mut stack) = (Vec::new(), Vec::new());
     let mut current = 0;
     loop {
-        let (entry, hits) = ray.enter(&nodes[current], t_max);
+        let (entry, hits) = ray.enter::<false>(&nodes[current], t_max);
         let mut children: Vec<(usize, f32)> = (0..WIDTH)
             .filter(|lane| hits >> lane & 1 == 1)
             .map(|lane| (lane, entry[lane]))
@@ -231,7 +231,7 @@ fn a_closest_hit_search_visits_leaves_nearest_first_and_ties_by_lane() {
         };
         let wide_ray = WideRay::new(&ray);
         let mut order = Vec::new();
-        traverse_wide(
+        traverse_wide::<false>(
             &wide,
             &wide_ray,
             &mut { f32::INFINITY },
@@ -269,7 +269,7 @@ fn a_closer_hit_prunes_and_any_hit_stops() {
     stack[0] = (7, 1.0);
     let mut order = Vec::new();
     let mut t_max = f32::INFINITY;
-    traverse_wide(
+    traverse_wide::<false>(
         &wide,
         &ray,
         &mut t_max,
@@ -287,7 +287,7 @@ fn a_closer_hit_prunes_and_any_hit_stops() {
     assert_eq!(stack[0], (7, 1.0));
     let mut visits = 0;
     let mut t_max = f32::INFINITY;
-    traverse_wide(
+    traverse_wide::<false>(
         &wide,
         &ray,
         &mut t_max,
@@ -336,7 +336,7 @@ fn a_path_as_deep_as_the_build_allows_fits_one_level_of_the_stack() {
     let leaves_with = |entries: usize| {
         let mut stack = vec![(0, 0.0); entries];
         let (mut leaves, mut t_max) = (0, f32::INFINITY);
-        traverse_wide(
+        traverse_wide::<false>(
             &nodes,
             &ray,
             &mut t_max,
@@ -369,8 +369,67 @@ fn empty_lanes_are_never_entered() {
     let node = WideNode::EMPTY;
     for dir in [Vec3::X, -Vec3::Y, Vec3::new(0.0, -0.0, 1.0), Vec3::ONE] {
         for origin in [Vec3::ZERO, Vec3::splat(1e30), Vec3::splat(-3.0)] {
-            let (_, hits) = WideRay::new(&Ray::new(origin, dir)).enter(&node, f32::INFINITY);
+            let (_, hits) =
+                WideRay::new(&Ray::new(origin, dir)).enter::<false>(&node, f32::INFINITY);
             assert_eq!(hits, 0, "{origin} {dir}");
         }
     }
+}
+
+/// The AVX node test gives the SSE2 test's bits: entry distances and hit masks, on nodes
+/// of random, flat, empty and unused lanes, for rays along axes (zero directions: NaN
+/// products in the slab planes), from on a plane, and at random.
+#[test]
+fn the_avx_node_test_gives_the_same_bits_as_sse2() {
+    if !super::super::simd::avx() {
+        eprintln!("WARNING: AVX node test not compared: this CPU has no AVX");
+        return;
+    }
+    let mut rng = Rng(29);
+    let coords = [0.0, 1.0, -1.0, 2.5, f32::MAX, f32::INFINITY];
+    let mut checked = 0;
+    for n in 0..20_000 {
+        let mut node = WideNode::EMPTY;
+        for lane in 0..(n % WIDTH) + 1 {
+            let (a, b) = if n % 3 == 0 {
+                let pick = |r: &mut Rng| coords[(r.next_f32() * 6.0) as usize];
+                let v = |r: &mut Rng| Vec3::new(pick(r), pick(r), pick(r));
+                (v(&mut rng), v(&mut rng))
+            } else {
+                (rng.vec3() * 4.0 - 2.0, rng.vec3() * 4.0 - 2.0)
+            };
+            let child = Node {
+                min: a.min(b),
+                max: a.max(b),
+                start: 0,
+                count: 1,
+            };
+            node.set_lane(lane, &child, 0, 1);
+        }
+        let axis_dir = [Vec3::X, -Vec3::Y, Vec3::Z, Vec3::new(0.0, -0.0, 1.0)][n % 4];
+        let dir = if n % 2 == 0 {
+            axis_dir
+        } else {
+            rng.vec3() - 0.5
+        };
+        let origin = if n % 5 == 0 {
+            Vec3::new(1.0, -1.0, 0.0)
+        } else {
+            rng.vec3() * 6.0 - 3.0
+        };
+        let ray = WideRay::new(&Ray::new(origin, dir));
+        for t_max in [f32::INFINITY, 1.5] {
+            let (sse_entry, sse_hits) = ray.enter::<false>(&node, t_max);
+            // SAFETY: the CPU has AVX (checked above).
+            let (avx_entry, avx_hits) = unsafe { ray.enter_avx(&node, t_max) };
+            assert_eq!(avx_hits, sse_hits, "{node:?} {origin} {dir}");
+            // (Only entered lanes' distances are read: the SSE2 test skips the second
+            // half of a node of four children or fewer.)
+            for lane in (0..WIDTH).filter(|lane| sse_hits >> lane & 1 == 1) {
+                assert_eq!(avx_entry[lane].to_bits(), sse_entry[lane].to_bits());
+            }
+            checked += sse_hits.count_ones();
+        }
+    }
+    assert!(checked > 10_000, "{checked} lanes entered");
 }
