@@ -10,6 +10,7 @@ use super::huge_pages::on_huge_pages;
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
 use super::node::{ray_is_valid, with_stack};
+#[cfg(target_arch = "x86_64")]
 use super::simd;
 use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};

@@ -8,6 +8,7 @@ use super::motion::Segment;
 use super::node::{
     ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
 };
+#[cfg(target_arch = "x86_64")]
 use super::simd;
 use super::wide::{collapse, prefetch, traverse_wide, Merge, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
