@@ -159,24 +159,34 @@ pub fn intersect_triangle(
     let delta_e = 2.0 * (G2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
     let max_e = u.abs().max(v.abs()).max(w.abs());
     let delta_t = 3.0 * (G3 * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
-    // Each barycentric is off by at most about 4·delta_e/|det|, so the point by that times
-    // the vertices' distances from the origin, here in t's units.
-    let delta_p = 12.0 * delta_e * inv_det.abs() * ((max_xt + max_yt) * sz.abs() + max_zt);
-    if t > delta_t.max(delta_p) * IMPRECISE {
+    // Whether single precision places the hit well enough to keep it. pbrt's delta_t, which
+    // rules out hits behind the origin below, takes the edge functions' errors times the vertices' depth; but t
+    // is the mean of the depths weighted by the edge functions, and it moves with each by
+    // (z_i − t)/det, at most the triangle's extent in depth over det. The hit's barycentric
+    // point moves likewise by the triangle's extent. On a small triangle far away (any dense
+    // mesh seen whole) the extent is a thousandth of the depth, and the depth-based bound
+    // sent nearly every hit to double precision; a huge triangle seen from close by still
+    // goes there. Here t's and the point's error, in t's units; a t past 1024 times it is
+    // also proven positive.
+    // The extent along each axis, at most |b − a| + |c − a|: in SIMD lanes, all three at once.
+    let spread = ((b - a).abs() + (c - a).abs()).element_sum() * sz.abs();
+    let delta_hit =
+        3.0 * (G3 * max_e * max_zt + delta_e * spread + delta_z * max_e) * inv_det.abs();
+    if t > delta_hit * IMPRECISE {
         return (t < t_max).then_some((t, v * inv_det, w * inv_det));
     }
     // Provably behind the origin or beyond t_max (and NaN): no hit.
     if !(t + delta_t > 0.0 && t - delta_t < t_max) {
         return None;
     }
-    // The bounds grow with the vertices' distance from the origin, not with t: on a huge
-    // triangle seen from close by (a 1e5 floor under a camera 1e-3 above it) single
+    // The bounds grow with the triangle's size and its distance from the origin, not with
+    // t: on a huge triangle seen from close by (a 1e5 floor under a camera 1e-3 above it) single
     // precision can neither place the hit nor prove it in front. Double precision can.
     precise_hit(ray, v0, v1, v2, t_max)
 }
 
-/// When the single-precision bounds on `t` and on the hit's position exceed this fraction
-/// of `t`, the hit is recomputed in double precision.
+/// When the single-precision bound on the error of `t` and of the hit's position exceeds
+/// this fraction of `t`, the hit is recomputed in double precision.
 const IMPRECISE: f32 = 1024.0;
 
 /// [`intersect_triangle`] for a ray the single-precision test found inside the triangle
@@ -193,6 +203,8 @@ fn precise_hit(
     v2: Vec3,
     t_max: f32,
 ) -> Option<(f32, f32, f32)> {
+    #[cfg(test)]
+    tests::PRECISE_HITS.with(|n| n.set(n.get() + 1));
     const fn gamma64(n: i32) -> f64 {
         const U: f64 = f64::EPSILON * 0.5;
         let nu = n as f64 * U;
@@ -247,7 +259,15 @@ fn precise_hit(
 
 #[cfg(test)]
 mod tests {
+    use std::cell::Cell;
+
     use super::*;
+    use crate::test_rng::Rng;
+
+    thread_local! {
+        /// Calls of [`precise_hit`] on this thread.
+        pub(super) static PRECISE_HITS: Cell<u32> = const { Cell::new(0) };
+    }
 
     fn hit(o: Vec3, d: Vec3, tri: [Vec3; 3], t_max: f32) -> Option<(f32, f32, f32)> {
         intersect_triangle(
@@ -391,5 +411,112 @@ mod tests {
                 "ray from {o} to {target} slipped through the fan"
             );
         }
+    }
+
+    /// Hits of `tris` by rays from `eye` through random points of them, and how many of
+    /// those hits went to double precision.
+    fn hits_and_precise(eye: Vec3, tris: &[[Vec3; 3]], rng: &mut Rng) -> (u32, u32) {
+        let before = PRECISE_HITS.get();
+        let mut hits = 0;
+        for tri in tris {
+            let (r1, r2) = (rng.next_f32(), rng.next_f32());
+            let (b1, b2) = if r1 + r2 > 1.0 {
+                (1.0 - r1, 1.0 - r2)
+            } else {
+                (r1, r2)
+            };
+            let target = tri[0] + (tri[1] - tri[0]) * b1 + (tri[2] - tri[0]) * b2;
+            let pre = RayPrecomputed::new(&Ray::new(eye, target - eye));
+            hits += u32::from(intersect_triangle(&pre, tri[0], tri[1], tri[2], 2.0).is_some());
+        }
+        (hits, PRECISE_HITS.get() - before)
+    }
+
+    #[test]
+    fn a_dense_mesh_seen_whole_is_placed_in_single_precision() {
+        // Triangles 1/1000 of their distance across (a million-triangle mesh filling the
+        // view), at scales from 1e-4 to 1e5 and from head-on to 60 degrees: single
+        // precision places each hit to far better than t/1024. The depth-based bound sent
+        // all but a few of these to double precision.
+        let mut rng = Rng(5);
+        for scale in [1e-4, 1.0, 1e5] {
+            for tilt in [0.0f32, 0.5, 1.0] {
+                let eye = Vec3::new(0.0, 0.0, scale);
+                let tris: Vec<[Vec3; 3]> = (0..2000)
+                    .map(|_| {
+                        let c = (rng.vec3() - 0.5) * Vec3::new(scale, scale, 0.0);
+                        let size = scale * 1e-3;
+                        let [x, y] = [
+                            Vec3::X * size,
+                            Vec3::new(0.0, tilt.cos(), tilt.sin()) * size,
+                        ];
+                        [c, c + x, c + y]
+                    })
+                    .collect();
+                let (hits, precise) = hits_and_precise(eye, &tris, &mut rng);
+                assert!(hits > 1900, "{hits} of 2000 at scale {scale}");
+                assert_eq!(precise, 0, "scale {scale}, tilt {tilt}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_huge_triangle_seen_from_close_by_goes_to_double_precision() {
+        // A floor 1e5 across under an eye 1e-3 above it: single precision can place the
+        // hit only to centimetres along the floor, ten times the distance.
+        let floor = [
+            Vec3::new(-1e5, -1e5, 0.0),
+            Vec3::new(1e5, -1e5, 0.0),
+            Vec3::new(0.0, 1e5, 0.0),
+        ];
+        let eye = Vec3::new(3.0, 7.0, 1e-3);
+        let (hits, precise) = hits_and_precise(eye, &[floor; 100], &mut Rng(9));
+        assert_eq!((hits, precise), (100, 100));
+    }
+
+    #[test]
+    fn hits_kept_in_single_precision_are_placed_to_a_thousandth_of_t() {
+        // Random triangles from 1e-4 to 1e5 across, at distances from 1e-3 to 1e6 times
+        // that, at any angle: where single precision keeps a hit, its t and its point (from
+        // the barycentrics) are within t/1024 of the double-precision ones.
+        let mut rng = Rng(21);
+        let (mut single, mut double) = (0, 0);
+        for _ in 0..20_000 {
+            let size = 10f32.powf(rng.next_f32() * 9.0 - 4.0);
+            let distance = size * 10f32.powf(rng.next_f32() * 9.0 - 3.0);
+            let centre = (rng.vec3() - 0.5) * distance;
+            let tri = [0, 1, 2].map(|_| centre + (rng.vec3() - 0.5) * size);
+            let (r1, r2) = (rng.next_f32(), rng.next_f32());
+            let (b1, b2) = if r1 + r2 > 1.0 {
+                (1.0 - r1, 1.0 - r2)
+            } else {
+                (r1, r2)
+            };
+            let target = tri[0] + (tri[1] - tri[0]) * b1 + (tri[2] - tri[0]) * b2;
+            let eye = target + (rng.vec3() - 0.5).normalize() * distance;
+            let pre = RayPrecomputed::new(&Ray::new(eye, target - eye));
+            let before = PRECISE_HITS.get();
+            let Some((t, b1, b2)) = intersect_triangle(&pre, tri[0], tri[1], tri[2], 2.0) else {
+                continue;
+            };
+            if PRECISE_HITS.get() > before {
+                double += 1;
+                continue;
+            }
+            single += 1;
+            let (t_ref, r1, r2) = precise_hit(&pre, tri[0], tri[1], tri[2], 2.0).unwrap();
+            assert!((t - t_ref).abs() <= t / 1024.0, "t {t} against {t_ref}");
+            let point = |b1: f32, b2: f32| {
+                let [a, b, c] = tri.map(|v| v.as_dvec3());
+                a + (b - a) * b1 as f64 + (c - a) * b2 as f64
+            };
+            let off = point(b1, b2).distance(point(r1, r2));
+            let t_length = t as f64 * (target - eye).length() as f64;
+            assert!(off <= t_length / 1024.0, "point {off} off at t {t_length}");
+        }
+        assert!(
+            single > 10_000 && double > 100,
+            "{single} single, {double} double"
+        );
     }
 }
