@@ -159,16 +159,16 @@ pub fn intersect_triangle(
     let delta_e = 2.0 * (G2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
     let max_e = u.abs().max(v.abs()).max(w.abs());
     let delta_t = 3.0 * (G3 * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
-    // Whether single precision places the hit well enough to keep it. pbrt's delta_t, which
-    // rules out hits behind the origin below, takes the edge functions' errors times the vertices' depth; but t
-    // is the mean of the depths weighted by the edge functions, and it moves with each by
-    // (z_i − t)/det, at most the triangle's extent in depth over det. The hit's barycentric
-    // point moves likewise by the triangle's extent. On a small triangle far away (any dense
-    // mesh seen whole) the extent is a thousandth of the depth, and the depth-based bound
-    // sent nearly every hit to double precision; a huge triangle seen from close by still
-    // goes there. Here t's and the point's error, in t's units; a t past 1024 times it is
-    // also proven positive.
-    // The extent along each axis, at most |b − a| + |c − a|: in SIMD lanes, all three at once.
+    // Whether single precision places the hit well enough to keep it. pbrt's delta_t
+    // (which rules out hits behind the origin, below) takes the edge functions' errors
+    // times the vertices' depth; but t is the mean of the depths weighted by the edge
+    // functions, and moves with each by (z_i − t)/det: at most the triangle's extent in
+    // depth over det. The hit's barycentric point moves likewise by the triangle's extent.
+    // On a small triangle far away (any dense mesh seen whole) the extent is a thousandth
+    // of the depth, and the depth-based bound sent nearly every hit to double precision; a
+    // huge triangle seen from close by still goes there. `delta_hit` bounds t's and the
+    // point's error in t's units (a t past 1024 times it is also proven positive), with
+    // each axis's extent taken as at most |b − a| + |c − a|, all three in SIMD lanes.
     let spread = ((b - a).abs() + (c - a).abs()).element_sum() * sz.abs();
     let delta_hit =
         3.0 * (G3 * max_e * max_zt + delta_e * spread + delta_z * max_e) * inv_det.abs();
@@ -180,8 +180,9 @@ pub fn intersect_triangle(
         return None;
     }
     // The bounds grow with the triangle's size and its distance from the origin, not with
-    // t: on a huge triangle seen from close by (a 1e5 floor under a camera 1e-3 above it) single
-    // precision can neither place the hit nor prove it in front. Double precision can.
+    // t: on a huge triangle seen from close by (a 1e5 floor under a camera 1e-3 above it)
+    // single precision can neither place the hit nor prove it in front. Double precision
+    // can.
     precise_hit(ray, v0, v1, v2, t_max)
 }
 
@@ -435,7 +436,7 @@ mod tests {
     #[test]
     fn a_dense_mesh_seen_whole_is_placed_in_single_precision() {
         // Triangles 1/1000 of their distance across (a million-triangle mesh filling the
-        // view), at scales from 1e-4 to 1e5 and from head-on to 60 degrees: single
+        // view), at scales from 1e-4 to 1e5, head-on and tilted up to one radian: single
         // precision places each hit to far better than t/1024. The depth-based bound sent
         // all but a few of these to double precision.
         let mut rng = Rng(5);
