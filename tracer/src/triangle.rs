@@ -414,19 +414,24 @@ mod tests {
         }
     }
 
+    /// A uniformly random point of `tri`.
+    fn random_point(tri: &[Vec3; 3], rng: &mut Rng) -> Vec3 {
+        let (r1, r2) = (rng.next_f32(), rng.next_f32());
+        let (b1, b2) = if r1 + r2 > 1.0 {
+            (1.0 - r1, 1.0 - r2)
+        } else {
+            (r1, r2)
+        };
+        tri[0] + (tri[1] - tri[0]) * b1 + (tri[2] - tri[0]) * b2
+    }
+
     /// Hits of `tris` by rays from `eye` through random points of them, and how many of
     /// those hits went to double precision.
     fn hits_and_precise(eye: Vec3, tris: &[[Vec3; 3]], rng: &mut Rng) -> (u32, u32) {
         let before = PRECISE_HITS.get();
         let mut hits = 0;
         for tri in tris {
-            let (r1, r2) = (rng.next_f32(), rng.next_f32());
-            let (b1, b2) = if r1 + r2 > 1.0 {
-                (1.0 - r1, 1.0 - r2)
-            } else {
-                (r1, r2)
-            };
-            let target = tri[0] + (tri[1] - tri[0]) * b1 + (tri[2] - tri[0]) * b2;
+            let target = random_point(tri, rng);
             let pre = RayPrecomputed::new(&Ray::new(eye, target - eye));
             hits += u32::from(intersect_triangle(&pre, tri[0], tri[1], tri[2], 2.0).is_some());
         }
@@ -487,13 +492,7 @@ mod tests {
             let distance = size * 10f32.powf(rng.next_f32() * 9.0 - 3.0);
             let centre = (rng.vec3() - 0.5) * distance;
             let tri = [0, 1, 2].map(|_| centre + (rng.vec3() - 0.5) * size);
-            let (r1, r2) = (rng.next_f32(), rng.next_f32());
-            let (b1, b2) = if r1 + r2 > 1.0 {
-                (1.0 - r1, 1.0 - r2)
-            } else {
-                (r1, r2)
-            };
-            let target = tri[0] + (tri[1] - tri[0]) * b1 + (tri[2] - tri[0]) * b2;
+            let target = random_point(&tri, &mut rng);
             let eye = target + (rng.vec3() - 0.5).normalize() * distance;
             let pre = RayPrecomputed::new(&Ray::new(eye, target - eye));
             let before = PRECISE_HITS.get();
