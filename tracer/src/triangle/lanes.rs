@@ -35,6 +35,8 @@ pub struct RayLanes {
 
 impl RayLanes {
     /// The lanes of `ray`, once per ray.
+    // Inlined into each query, as `RayPrecomputed::new` is.
+    #[inline(always)]
     pub fn new(ray: &RayPrecomputed) -> Self {
         let axes = [ray.kx, ray.ky, ray.kz];
         Self {
