@@ -161,9 +161,8 @@ pub fn intersect_triangle(
     let delta_y = G5 * (max_yt + max_z);
     let delta_e = 2.0 * (G2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
     let max_e = u.abs().max(v.abs()).max(w.abs());
-    let delta_t = 3.0 * (G3 * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
     // Whether single precision places the hit well enough to keep it. pbrt's delta_t
-    // (which rules out hits behind the origin, below) takes the edge functions' errors
+    // (below, which rules out hits behind the origin) takes the edge functions' errors
     // times the vertices' depth; but t is the mean of the depths weighted by the edge
     // functions, and moves with each by (z_i − t)/det: at most the triangle's extent in
     // depth over det. The hit's barycentric point moves likewise by the triangle's extent.
@@ -179,6 +178,7 @@ pub fn intersect_triangle(
         return (t < t_max).then_some((t, v * inv_det, w * inv_det));
     }
     // Provably behind the origin or beyond t_max (and NaN): no hit.
+    let delta_t = 3.0 * (G3 * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
     if !(t + delta_t > 0.0 && t - delta_t < t_max) {
         return None;
     }
@@ -375,30 +375,22 @@ mod tests {
         assert!(hit(Vec3::ZERO, Vec3::Z, outside, 10.0).is_none());
     }
 
-    /// A small xorshift generator, so that the test needs no dependency.
-    fn rng(state: &mut u64) -> f32 {
-        *state ^= *state << 13;
-        *state ^= *state >> 7;
-        *state ^= *state << 17;
-        (*state >> 40) as f32 / (1u64 << 24) as f32
-    }
-
     #[test]
     fn rays_through_a_shared_vertex_or_edge_hit_a_fan_of_triangles() {
         // A closed fan of 7 triangles around a centre vertex, slightly non-planar.
-        let mut s = 0x9e3779b97f4a7c15u64;
+        let mut rng = Rng(0x9e3779b97f4a7c15);
         let centre = Vec3::new(0.1, -0.2, 0.05);
         let rim: Vec<Vec3> = (0..7)
             .map(|i| {
                 let a = i as f32 * std::f32::consts::TAU / 7.0;
-                Vec3::new(a.cos(), a.sin(), 0.3 * (rng(&mut s) - 0.5))
+                Vec3::new(a.cos(), a.sin(), 0.3 * (rng.next_f32() - 0.5))
             })
             .collect();
         let tris: Vec<[Vec3; 3]> = (0..7).map(|i| [centre, rim[i], rim[(i + 1) % 7]]).collect();
         for _ in 0..20_000 {
-            let o = Vec3::new(rng(&mut s) - 0.5, rng(&mut s) - 0.5, 1.0 + rng(&mut s)) * 4.0;
-            let i = (rng(&mut s) * 7.0) as usize % 7;
-            let f = rng(&mut s);
+            let o = (rng.vec3() - Vec3::new(0.5, 0.5, -1.0)) * 4.0;
+            let i = (rng.next_f32() * 7.0) as usize % 7;
+            let f = rng.next_f32();
             // Exactly at the centre, or at a point rounded onto a spoke edge.
             let target = if f < 0.2 {
                 centre
