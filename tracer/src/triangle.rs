@@ -161,6 +161,11 @@ pub fn intersect_triangle(
     let delta_y = G5 * (max_yt + max_z);
     let delta_e = 2.0 * (G2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
     let max_e = u.abs().max(v.abs()).max(w.abs());
+    // pbrt's bound on t's error, with the edge functions' errors times `depth`: the
+    // vertices' depth for pbrt's delta_t, the triangle's extent in depth for `delta_hit`.
+    let t_error = |depth: f32| {
+        3.0 * (G3 * max_e * max_zt + delta_e * depth + delta_z * max_e) * inv_det.abs()
+    };
     // Whether single precision places the hit well enough to keep it. pbrt's delta_t
     // (below, which rules out hits behind the origin) takes the edge functions' errors
     // times the vertices' depth; but t is the mean of the depths weighted by the edge
@@ -172,13 +177,12 @@ pub fn intersect_triangle(
     // point's error in t's units (a t past 1024 times it is also proven positive), with
     // each axis's extent taken as at most |b − a| + |c − a|, all three in SIMD lanes.
     let spread = ((b - a).abs() + (c - a).abs()).element_sum() * sz.abs();
-    let delta_hit =
-        3.0 * (G3 * max_e * max_zt + delta_e * spread + delta_z * max_e) * inv_det.abs();
+    let delta_hit = t_error(spread);
     if t > delta_hit * IMPRECISE {
         return (t < t_max).then_some((t, v * inv_det, w * inv_det));
     }
     // Provably behind the origin or beyond t_max (and NaN): no hit.
-    let delta_t = 3.0 * (G3 * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv_det.abs();
+    let delta_t = t_error(max_zt);
     if !(t + delta_t > 0.0 && t - delta_t < t_max) {
         return None;
     }
