@@ -22,22 +22,25 @@ const PARAMS: BuildParams = BuildParams {
     intersect_cost: 1.0,
 };
 
-/// Eight-wide nodes (32 MiB, the last-level cache of this machine class) past which a
-/// mesh's tree is collapsed again with [`MERGE_LARGE`]. In a tree that large each node a
-/// ray visits is a trip to memory, and fewer, fuller nodes over larger leaves are faster:
-/// the generated 1M-triangle mesh (210,916 nodes) traces 10 to 25% more rays per second
-/// merged. In a smaller one the nodes stay in cache and merging only adds triangle tests:
-/// 100k, 320k and 605k triangles traced up to 20% fewer, a 4k-triangle model rendered 9%
-/// slower (BENCHMARKS.md, "Merged leaves in large meshes"). A fixed count, not this
-/// machine's cache size: the tree, and so the bits of every hit, must not depend on the
-/// machine.
-const MERGE_ABOVE: usize = 1 << 17;
+/// Eight-wide nodes (16 MiB; with their triangles, past the 32 MiB last-level cache of
+/// this machine class) past which a mesh's tree is collapsed again with [`MERGE_LARGE`]. In
+/// a tree that large each node a ray visits is a trip to memory, and fewer, fuller nodes
+/// over larger leaves are faster: the generated 1M-triangle mesh (104,361 nodes unmerged,
+/// 38,215 merged) traces 14%, 3% and 9% more coherent, incoherent and any-hit rays per
+/// second merged. In a smaller
+/// one the nodes stay in cache and merging only adds triangle tests: 100k, 320k and 605k
+/// triangles traced up to 20% fewer, a 4k-triangle model rendered 9% slower (BENCHMARKS.md,
+/// "Merged leaves in large meshes"; the 605k mesh's tree has 59,359 nodes). A fixed count, not
+/// this machine's cache size: the tree, and so the bits of every hit, must not depend on
+/// the machine.
+const MERGE_ABOVE: usize = 1 << 16;
 
 /// Subtrees of up to a leaf's most triangles become one leaf where the surface area
-/// heuristic prefers it, pricing a node visit (a cache miss) at four triangle tests.
+/// heuristic prefers it, pricing a node visit (four cache lines, likely missed) at eight
+/// triangle tests.
 const MERGE_LARGE: Merge = Merge {
     max_leaf: PARAMS.max_leaf,
-    node_cost: 4.0,
+    node_cost: 8.0,
 };
 
 /// A triangle's vertices and the caller's index of it, in one 40-byte record: a leaf reads

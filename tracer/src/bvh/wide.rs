@@ -91,82 +91,134 @@ fn node_area(n: &Node) -> f32 {
     half_area(n.min.into(), n.max.into())
 }
 
-/// Each binary node's primitives `(start, count)` where it is a leaf of the eight-wide tree:
-/// a binary leaf, or an interior node whose subtree `merge` makes one leaf (a subtree's
-/// leaves hold a contiguous range). `None` for an interior node that stays one.
-///
-/// Merging compares each subtree's least cost as a leaf with its least cost as a node over
-/// its children's least costs, in double precision (a box's area may overflow f32; an
-/// infinite or NaN cost never merges more than it should: the comparison fails, or the
-/// leaf is as large as allowed anyway). Children come after their parents, so one reverse
-/// pass sees children first.
-fn leaf_ranges(binary: &[Node], merge: Option<Merge>) -> Vec<Option<(u32, u32)>> {
-    let own = |n: &Node| (n.count > 0).then_some((n.start, n.count));
-    let Some(merge) = merge else {
-        return binary.iter().map(own).collect();
-    };
-    let mut range = vec![(0u32, 0u32); binary.len()];
-    let mut cost = vec![0.0f64; binary.len()];
-    let mut leaf = vec![None; binary.len()];
-    for i in (0..binary.len()).rev() {
-        let n = &binary[i];
-        let area = f64::from(node_area(n));
-        if n.count > 0 {
-            range[i] = (n.start, n.count);
-            cost[i] = n.count as f64 * area;
-            leaf[i] = own(n);
-            continue;
-        }
-        let (l, r) = (n.start as usize, n.start as usize + 1);
-        range[i] = (range[l].0.min(range[r].0), range[l].1 + range[r].1);
-        let as_node = merge.node_cost * area + cost[l] + cost[r];
-        let as_leaf = range[i].1 as f64 * area;
-        if range[i].1 <= merge.max_leaf && as_leaf <= as_node {
-            leaf[i] = Some(range[i]);
-            cost[i] = as_leaf;
-        } else {
-            cost[i] = as_node;
+/// What the collapse knows of a binary node's subtree.
+#[derive(Clone, Copy, Debug)]
+struct Subtree {
+    /// Its primitives `(start, count)`: a subtree's leaves hold a contiguous range.
+    range: (u32, u32),
+    /// Whether, in one lane, it is a leaf of the eight-wide tree (else a node).
+    leaf: bool,
+    /// `cost[j]`: its least SAH cost in at most `j + 1` lanes of its parent's node.
+    cost: [f64; WIDTH],
+}
+
+/// The cheapest way for two sibling subtrees to share `lanes` lanes: how many the first
+/// takes (the fewest, at equal costs), and the cost.
+fn share(first: &Subtree, second: &Subtree, lanes: usize) -> (usize, f64) {
+    let mut best = (1, first.cost[0] + second.cost[lanes - 2]);
+    for k in 2..lanes {
+        let cost = first.cost[k - 1] + second.cost[lanes - k - 1];
+        // (A NaN cost, from a box whose area overflows, is never taken: any choice is valid.)
+        if cost < best.1 {
+            best = (k, cost);
         }
     }
-    leaf
+    best
+}
+
+/// Every binary node's [`Subtree`], by dynamic programming over the lanes each subtree
+/// may take (Ylitie et al., "Efficient Incoherent Ray Traversal on GPUs Through
+/// Compressed Wide BVHs", 2017): an interior node either takes one lane, as one leaf (with
+/// `merge`, at most `max_leaf` primitives) or as an eight-wide node over its cheapest
+/// share of eight lanes, or hands its lanes to its two children. A node visit is priced at
+/// `merge`'s `node_cost` primitive tests (without `merge`, the leaves are the binary
+/// leaves and any positive price gives the same tree). Costs are in double precision (a
+/// box's area may overflow f32); an infinite or NaN cost only makes choices arbitrary,
+/// never invalid. Children come after their parents, so one reverse pass sees children first.
+fn subtrees(binary: &[Node], merge: Option<Merge>) -> Vec<Subtree> {
+    let node_cost = merge.map_or(1.0, |m| m.node_cost);
+    let unset = Subtree {
+        range: (0, 0),
+        leaf: true,
+        cost: [0.0; WIDTH],
+    };
+    let mut subtrees = vec![unset; binary.len()];
+    for (i, n) in binary.iter().enumerate().rev() {
+        let area = f64::from(node_area(n));
+        subtrees[i] = if n.count > 0 {
+            Subtree {
+                range: (n.start, n.count),
+                leaf: true,
+                cost: [f64::from(n.count) * area; WIDTH],
+            }
+        } else {
+            let (l, r) = (subtrees[n.start as usize], subtrees[n.start as usize + 1]);
+            let range = (l.range.0.min(r.range.0), l.range.1 + r.range.1);
+            let may_merge = merge.is_some_and(|m| range.1 <= m.max_leaf);
+            let as_leaf = f64::from(range.1) * area;
+            // `shared[j]`: the children's least cost in `j + 1` lanes.
+            let shared: [f64; WIDTH] = std::array::from_fn(|j| {
+                if j == 0 {
+                    f64::INFINITY
+                } else {
+                    share(&l, &r, j + 1).1
+                }
+            });
+            let as_node = node_cost * area + shared[WIDTH - 1];
+            let leaf = may_merge && as_leaf <= as_node;
+            let mut cost = [if leaf { as_leaf } else { as_node }; WIDTH];
+            for j in 1..WIDTH {
+                cost[j] = if shared[j] < cost[j - 1] {
+                    shared[j]
+                } else {
+                    cost[j - 1]
+                };
+            }
+            Subtree { range, leaf, cost }
+        };
+    }
+    subtrees
+}
+
+/// Appends the lanes that binary node `n`'s subtree takes in at most `lanes` lanes (the
+/// fewest that reach its least cost): itself, or its children's.
+fn expand(binary: &[Node], subtrees: &[Subtree], n: usize, lanes: usize, out: &mut Vec<usize>) {
+    let cost = &subtrees[n].cost;
+    let used = 1
+        + (0..lanes)
+            .position(|j| cost[j] == cost[lanes - 1])
+            .unwrap_or(0);
+    if used == 1 || binary[n].count > 0 {
+        out.push(n);
+        return;
+    }
+    let (l, r) = (binary[n].start as usize, binary[n].start as usize + 1);
+    let (k, _) = share(&subtrees[l], &subtrees[r], used);
+    expand(binary, subtrees, l, k, out);
+    expand(binary, subtrees, r, used - k, out);
 }
 
 /// Collapses a binary hierarchy (as [`super::build::build`] makes it) into eight-wide nodes
-/// over the same leaves, or over larger ones where `merge` says so: each node takes its
-/// binary node's children and opens the largest interior one until it has eight, so the
-/// tree keeps SAH's grouping. Node 0 is the root; children come after their parents.
+/// over the same leaves, or over larger ones where `merge` says so. Which binary nodes
+/// become lanes of which eight-wide node is the SAH-cheapest choice (see [`subtrees`]),
+/// so nodes are as full as their cost allows: opening the largest child until a node has
+/// eight, as this did before, left most nodes of a large mesh with two to six lanes.
+/// Node 0 is the root; children come after their parents.
 pub(super) fn collapse(binary: &[Node], merge: Option<Merge>) -> Vec<WideNode> {
     if binary.is_empty() {
         return Vec::new();
     }
-    let leaves = leaf_ranges(binary, merge);
-    let is_leaf = |n: usize| leaves[n].is_some();
+    let subtrees = subtrees(binary, merge);
     let mut wide = vec![WideNode::EMPTY];
     // (binary node, the wide node that takes its children)
     let mut todo = vec![(0usize, 0usize)];
+    let mut lanes = Vec::with_capacity(WIDTH);
     while let Some((b, w)) = todo.pop() {
-        let mut lanes = if is_leaf(b) {
-            // A leaf root: one lane.
-            vec![b]
+        lanes.clear();
+        if binary[b].count > 0 {
+            // A leaf root: one lane. (A root that could be merged into one leaf is not:
+            // its own node's visit is paid either way, and it may split for less.)
+            lanes.push(b);
         } else {
-            let l = binary[b].start as usize;
-            vec![l, l + 1]
-        };
-        while lanes.len() < WIDTH {
-            let widest = lanes
-                .iter()
-                .enumerate()
-                .filter(|(_, &n)| !is_leaf(n))
-                .max_by(|(_, &x), (_, &y)| node_area(&binary[x]).total_cmp(&node_area(&binary[y])));
-            let Some((k, &n)) = widest else { break };
-            let l = binary[n].start as usize;
-            lanes[k] = l;
-            lanes.push(l + 1);
+            let (l, r) = (binary[b].start as usize, binary[b].start as usize + 1);
+            let (k, _) = share(&subtrees[l], &subtrees[r], WIDTH);
+            expand(binary, &subtrees, l, k, &mut lanes);
+            expand(binary, &subtrees, r, WIDTH - k, &mut lanes);
         }
         for (lane, &n) in lanes.iter().enumerate() {
-            let node = &binary[n];
-            if let Some((start, count)) = leaves[n] {
-                wide[w].set_lane(lane, node, start, count);
+            let (node, subtree) = (&binary[n], &subtrees[n]);
+            if subtree.leaf {
+                wide[w].set_lane(lane, node, subtree.range.0, subtree.range.1);
             } else {
                 let child = wide.len();
                 wide.push(WideNode::EMPTY);

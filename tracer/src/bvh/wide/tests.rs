@@ -438,3 +438,170 @@ fn the_avx_node_test_gives_the_same_bits_as_sse2() {
     }
     assert!(checked > 10_000, "{checked} lanes entered");
 }
+
+/// The SAH cost of an eight-wide tree as [`collapse`] prices it: each node's box area
+/// times `node_cost`, each leaf's area times its primitives.
+fn wide_cost(wide: &[WideNode], node_cost: f64) -> f64 {
+    let area = |b: Aabb| f64::from(half_area(b.min.into(), b.max.into()));
+    wide.iter()
+        .map(|node| {
+            let leaves = (0..WIDTH).filter(|&l| node.count[l] > 0);
+            node_cost * area(node.bounds())
+                + leaves
+                    .map(|l| f64::from(node.count[l]) * area(node.lane_box(l)))
+                    .sum::<f64>()
+        })
+        .sum()
+}
+
+/// The least cost of any collapse of `binary`, by trying every one: each node's lanes are
+/// any cut of its binary subtree into at most eight subtrees, each a leaf (a binary leaf,
+/// or with `merge` a small enough subtree) or a node again.
+fn cheapest_by_trying_all(binary: &[Node], merge: Option<Merge>) -> f64 {
+    let node_cost = merge.map_or(1.0, |m| m.node_cost);
+    let area = |n: usize| f64::from(node_area(&binary[n]));
+    let count = |n: usize| -> u32 {
+        let node = &binary[n];
+        if node.count > 0 {
+            return node.count;
+        }
+        let mut todo = vec![n];
+        let mut total = 0;
+        while let Some(n) = todo.pop() {
+            let node = &binary[n];
+            if node.count > 0 {
+                total += node.count;
+            } else {
+                todo.extend([node.start as usize, node.start as usize + 1]);
+            }
+        }
+        total
+    };
+    // Every cut of subtree `n` into at most eight subtrees.
+    fn cuts(binary: &[Node], n: usize) -> Vec<Vec<usize>> {
+        let mut all = vec![vec![n]];
+        if binary[n].count == 0 {
+            let l = binary[n].start as usize;
+            for a in cuts(binary, l) {
+                for b in cuts(binary, l + 1) {
+                    if a.len() + b.len() <= WIDTH {
+                        all.push([a.clone(), b].concat());
+                    }
+                }
+            }
+        }
+        all
+    }
+    // The least cost of subtree `n` as a node over a cut of its children, and in one lane.
+    fn as_node(binary: &[Node], n: usize, cost: &dyn Fn(usize) -> (f64, f64, bool)) -> f64 {
+        let l = binary[n].start as usize;
+        let mut best = f64::INFINITY;
+        for a in cuts(binary, l) {
+            for b in cuts(binary, l + 1) {
+                if a.len() + b.len() <= WIDTH {
+                    let lanes: f64 = a.iter().chain(&b).map(|&c| lane(binary, c, cost)).sum();
+                    best = best.min(cost(n).0 + lanes);
+                }
+            }
+        }
+        best
+    }
+    fn lane(binary: &[Node], n: usize, cost: &dyn Fn(usize) -> (f64, f64, bool)) -> f64 {
+        let (_, as_leaf, may_be_leaf) = cost(n);
+        let leaf = if may_be_leaf { as_leaf } else { f64::INFINITY };
+        if binary[n].count > 0 {
+            return leaf;
+        }
+        leaf.min(as_node(binary, n, cost))
+    }
+    let cost = |n: usize| {
+        let c = count(n);
+        let may_be_leaf = binary[n].count > 0 || merge.is_some_and(|m| c <= m.max_leaf);
+        (node_cost * area(n), f64::from(c) * area(n), may_be_leaf)
+    };
+    // The root is a node, over one lane if it is a binary leaf.
+    if binary[0].count > 0 {
+        cost(0).0 + cost(0).1
+    } else {
+        as_node(binary, 0, &cost)
+    }
+}
+
+#[test]
+fn collapse_is_the_cheapest_by_the_surface_area_heuristic() {
+    let mut rng = Rng(9);
+    for n in [2, 3, 9, 14, 17, 20] {
+        let mut prims = random_prims(&mut rng, n);
+        let binary = binary_tree(&mut prims, 1);
+        for (merge, node_cost) in [(None, 1.0), (Some(MERGE), MERGE.node_cost)] {
+            let wide = collapse(&binary, merge);
+            let (got, least) = (
+                wide_cost(&wide, node_cost),
+                cheapest_by_trying_all(&binary, merge),
+            );
+            assert!(
+                (got - least).abs() <= 1e-9 * least,
+                "{n}: {got} against {least}"
+            );
+        }
+    }
+}
+
+/// Lanes a node uses.
+fn used_lanes(node: &WideNode) -> usize {
+    (0..WIDTH).filter(|&l| !node.lane_box(l).is_empty()).count()
+}
+
+#[test]
+fn no_node_fits_into_its_parents_free_lanes() {
+    // A child node whose lanes fit where it sits and in its parent's free lanes costs a
+    // visit that its parent could do: the cheapest collapse has none. Opening the largest
+    // child until a node has eight, on these trees, left such nodes by the thousand.
+    let mut rng = Rng(5);
+    for (n, max_leaf) in [(9, 1), (100, 2), (1000, 2), (5000, 4)] {
+        let mut prims = random_prims(&mut rng, n);
+        let binary = binary_tree(&mut prims, max_leaf);
+        for wide in [collapse(&binary, None), collapse(&binary, Some(MERGE))] {
+            check_collapse(&binary, &wide);
+            for node in &wide {
+                let free = WIDTH - used_lanes(node);
+                for lane in (0..WIDTH).filter(|&l| node.count[l] == 0 && node.start[l] != 0) {
+                    let child = used_lanes(&wide[node.start[lane] as usize]);
+                    assert!(
+                        child > free + 1,
+                        "{n}: a child of {child} lanes, {free} free"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn boxes_whose_areas_overflow_still_collapse_into_a_valid_tree() {
+    // Flat boxes spanning the whole float range: their extent is infinite, their area
+    // inf · 0 = NaN, and so are the costs the collapse compares.
+    let mut rng = Rng(8);
+    let mut prims: Vec<BuildPrim> = (0..300)
+        .map(|i| {
+            let y = rng.next_f32() * 1e30;
+            BuildPrim {
+                min: Vec3::new(-f32::MAX, y, 0.0),
+                max: Vec3::new(f32::MAX, y, 0.0),
+                index: i,
+            }
+        })
+        .collect();
+    let binary = binary_tree(&mut prims, 2);
+    for merge in [None, Some(MERGE)] {
+        let wide = collapse(&binary, merge);
+        check_collapse(&binary, &wide);
+        let leaves = wide_leaves(&wide);
+        let mut next = 0;
+        for (start, count) in leaves {
+            assert_eq!(start, next);
+            next += count;
+        }
+        assert_eq!(next, 300);
+    }
+}
