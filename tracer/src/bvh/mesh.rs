@@ -27,12 +27,11 @@ const PARAMS: BuildParams = BuildParams {
 /// a tree that large each node a ray visits is a trip to memory, and fewer, fuller nodes
 /// over larger leaves are faster: the generated 1M-triangle mesh (104,361 nodes unmerged,
 /// 38,215 merged) traces 14%, 3% and 9% more coherent, incoherent and any-hit rays per
-/// second merged. In a smaller
-/// one the nodes stay in cache and merging only adds triangle tests: 100k, 320k and 605k
-/// triangles traced up to 20% fewer, a 4k-triangle model rendered 9% slower (BENCHMARKS.md,
-/// "Merged leaves in large meshes"; the 605k mesh's tree has 59,359 nodes). A fixed count, not
-/// this machine's cache size: the tree, and so the bits of every hit, must not depend on
-/// the machine.
+/// second merged. In a smaller one the nodes stay in cache and merging only adds triangle
+/// tests: 100k, 320k and 605k triangles traced up to 20% fewer, a 4k-triangle model
+/// rendered 9% slower (BENCHMARKS.md, "Merged leaves in large meshes"; the 605k mesh's tree
+/// has 59,359 nodes). A fixed count, not this machine's cache size: the tree, and so the
+/// bits of every hit, must not depend on the machine.
 const MERGE_ABOVE: usize = 1 << 16;
 
 /// Subtrees of up to a leaf's most triangles become one leaf where the surface area
