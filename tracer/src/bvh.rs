@@ -44,3 +44,5 @@ pub use instance::{Instance, Placement, SceneBvh};
 pub use mesh::MeshBvh;
 pub use motion::{MotionTransform, Segment};
 pub use simd::{allow_avx, avx};
+
+pub(crate) use huge_pages::on_huge_pages;

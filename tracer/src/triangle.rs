@@ -14,8 +14,10 @@ use glam::{DVec2, Mat3A, Vec3, Vec3A};
 use crate::geometry::Ray;
 
 mod lanes;
+mod rows;
 
 pub use lanes::RayLanes;
+pub use rows::{Block, TriangleRows, BLOCK};
 
 /// `gamma(n)` of Higham / pbrt: the bound `n·u / (1 - n·u)` on the relative error of `n`
 /// successive rounded f32 operations, with `u` the unit roundoff.

@@ -12,7 +12,7 @@ const HUGE_PAGES_FROM: usize = 4 << 20;
 /// `v`, moved into memory advised for huge pages if it is large (see [`HUGE_PAGES_FROM`]).
 /// The kernel picks a page's size when the page is first touched, so the elements are
 /// moved into a fresh allocation after the advice, not advised where they lie.
-pub(super) fn on_huge_pages<T>(v: Vec<T>) -> Vec<T> {
+pub(crate) fn on_huge_pages<T>(v: Vec<T>) -> Vec<T> {
     let bytes = std::mem::size_of_val(v.as_slice());
     if bytes < HUGE_PAGES_FROM || !cfg!(target_os = "linux") {
         return v;

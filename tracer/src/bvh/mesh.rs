@@ -10,9 +10,9 @@ use super::node::{
 };
 #[cfg(target_arch = "x86_64")]
 use super::simd;
-use super::wide::{collapse, prefetch, traverse_wide, Merge, WideNode, WideRay};
+use super::wide::{collapse, leaves, prefetch, traverse_wide, Merge, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
-use crate::triangle::{intersect_triangle, RayLanes, RayPrecomputed};
+use crate::triangle::{intersect_triangle, RayLanes, RayPrecomputed, TriangleRows, BLOCK};
 
 /// SAH costs for triangles. A node visit (two slab tests) and a watertight triangle test
 /// cost about the same; leaves of up to 8 triangles let SAH keep flat clusters together.
@@ -44,17 +44,12 @@ const MERGE_LARGE: Merge = Merge {
 
 /// A triangle's vertices and the caller's index of it, in one 40-byte record: a leaf reads
 /// its triangles' ids from the lines it reads their vertices from, not from a second array.
+/// (A deforming mesh's steps; the eight-wide tree's leaves read [`TriangleRows`].)
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C)]
 struct LeafTriangle {
     v: [Vec3; 3],
     id: u32,
-}
-
-impl std::borrow::Borrow<[Vec3; 3]> for LeafTriangle {
-    fn borrow(&self) -> &[Vec3; 3] {
-        &self.v
-    }
 }
 
 /// A mesh's BVH over its triangles in object space, built once and shared by every
@@ -64,21 +59,26 @@ impl std::borrow::Borrow<[Vec3; 3]> for LeafTriangle {
 /// contiguous: traversal reads nodes and positions only, never an index buffer. Triangles
 /// are reported by their index in the slice given to [`MeshBvh::build`].
 ///
-/// Static queries run on eight-wide nodes (`WideNode`, the SAH tree collapsed). A deforming
-/// mesh ([`MeshBvh::build_motion`]) keeps its positions at each of `S` motion steps,
-/// step-major (all triangles at step 0, then all at step 1, ...), so that step 0 reads
-/// exactly like a static BVH; it also keeps the binary tree, whose 32-byte `Node`s hold
-/// the union over the steps, and each binary node's box at every step in a second array
-/// (`StepBox`, 24 bytes per node and step). A ray at time `t` sees each triangle and box
-/// interpolated linearly between the two bracketing steps.
+/// Static queries run on eight-wide nodes (`WideNode`, the SAH tree collapsed) whose
+/// leaves hold their triangles in blocks of four for the lane test ([`TriangleRows`]). A
+/// deforming mesh ([`MeshBvh::build_motion`]) also keeps its positions at each of `S`
+/// motion steps, step-major (all triangles at step 0, then all at step 1, ...), and the
+/// binary tree, whose 32-byte `Node`s hold the union over the steps, and each binary
+/// node's box at every step in a second array (`StepBox`, 24 bytes per node and step). A
+/// ray at time `t` sees each triangle and box interpolated linearly between the two
+/// bracketing steps.
 #[derive(Clone, Default)]
 pub struct MeshBvh {
     /// The eight-wide tree, for static queries (boxes over every step).
     wide: Vec<WideNode>,
+    /// The eight-wide tree's triangles (at step 0) and ids, in leaf order.
+    rows: TriangleRows,
+    /// Number of triangles.
+    count: usize,
     /// The binary tree, for queries at a time; empty for a static mesh.
     nodes: Vec<Node>,
-    /// Vertex positions and ids in leaf order; with motion, `steps` copies of that,
-    /// step-major.
+    /// With motion, vertex positions and ids in leaf order at each step, step-major;
+    /// empty without.
     triangles: Vec<LeafTriangle>,
     /// Number of motion steps: 1 for a static mesh (0 for the default, empty one).
     steps: u32,
@@ -178,29 +178,36 @@ impl MeshBvh {
             })
             .collect();
         let nodes = build::build(&mut prims, &PARAMS);
-        let triangles: Vec<LeafTriangle> = steps
-            .iter()
-            .flat_map(|s| {
-                prims.iter().map(|p| LeafTriangle {
-                    v: s[p.index as usize],
-                    id: p.index,
-                })
-            })
-            .collect();
         let wide = collapse(&nodes, None);
         let wide = if wide.len() > merge_above {
             collapse(&nodes, Some(MERGE_LARGE))
         } else {
             wide
         };
-        let (nodes, step_boxes) = if steps.len() > 1 {
+        let step_0: Vec<([Vec3; 3], u32)> = prims
+            .iter()
+            .map(|p| (first[p.index as usize], p.index))
+            .collect();
+        let rows = TriangleRows::new(&step_0, &leaves(&wide));
+        let (nodes, triangles, step_boxes) = if steps.len() > 1 {
+            let triangles: Vec<LeafTriangle> = steps
+                .iter()
+                .flat_map(|s| {
+                    prims.iter().map(|p| LeafTriangle {
+                        v: s[p.index as usize],
+                        id: p.index,
+                    })
+                })
+                .collect();
             let boxes = step_boxes(&nodes, &triangles, prims.len(), steps.len());
-            (nodes, boxes)
+            (nodes, triangles, boxes)
         } else {
-            (Vec::new(), Vec::new())
+            (Vec::new(), Vec::new(), Vec::new())
         };
         Self {
             wide: on_huge_pages(wide),
+            rows,
+            count: prims.len(),
             nodes: on_huge_pages(nodes),
             triangles: on_huge_pages(triangles),
             steps: step_count,
@@ -220,7 +227,7 @@ impl MeshBvh {
 
     /// Number of triangles in the hierarchy (the usable ones).
     pub fn triangle_count(&self) -> usize {
-        self.triangles.len() / self.steps.max(1) as usize
+        self.count
     }
 
     /// Number of nodes: eight-wide ones, and binary ones for a deforming mesh.
@@ -233,6 +240,7 @@ impl MeshBvh {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(self.wide.as_slice())
+            + self.rows.memory_bytes()
             + std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.step_boxes.as_slice())
             + std::mem::size_of_val(self.triangles.as_slice())
@@ -364,29 +372,30 @@ impl MeshBvh {
             !ANY_HIT,
             |start, count| {
                 let start = start as usize;
-                prefetch(&self.triangles[start]);
+                prefetch(self.rows.at(start));
                 // A merged leaf (up to eight triangles, 320 bytes): the lines from its
                 // fourth triangle on as well.
                 if count > 3 {
-                    prefetch(&self.triangles[start + 3]);
+                    prefetch(self.rows.at(start + 3));
                 }
             },
             |start, count, t_max, _| {
-                let range = start as usize..(start + count) as usize;
+                let (start, count) = (start as usize, count as usize);
                 // Four triangles at a time through the edge test in SIMD lanes; those it
                 // keeps through the whole test, in order.
-                for block in self.triangles[range].chunks(4) {
-                    let mut may_hit = lanes.may_hit(block);
+                for first in (start..start + count).step_by(BLOCK) {
+                    let block = self.rows.block(first, (start + count - first).min(BLOCK));
+                    let mut may_hit = lanes.may_hit(&block);
                     while may_hit != 0 {
                         let i = may_hit.trailing_zeros() as usize;
                         may_hit &= may_hit - 1;
-                        let LeafTriangle { v: tri, id } = &block[i];
+                        let (tri, id) = (block.vertices(i), block.id(i));
                         if let Some((t, b1, b2)) =
                             intersect_triangle(&pre, tri[0], tri[1], tri[2], *t_max)
                         {
-                            if accept(*id, b1, b2) {
+                            if accept(id, b1, b2) {
                                 *t_max = t;
-                                best = Some((t, *id, b1, b2));
+                                best = Some((t, id, b1, b2));
                                 if ANY_HIT {
                                     return true;
                                 }

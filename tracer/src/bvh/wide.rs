@@ -27,7 +27,8 @@ const LANES: usize = 4;
 /// Eight children in 256 bytes (four cache lines): their boxes one lane per child, then
 /// what each is. A lane with `count == 0` is an interior node at index `start`; otherwise
 /// it is a leaf of primitives `start .. start + count`. Unused lanes hold an empty box
-/// (+inf minimum, -inf maximum), which no ray with a finite origin enters.
+/// (+inf minimum, -inf maximum), which no ray with a finite origin enters, and a `start`
+/// and `count` of 0 (node 0, the root, is no node's child).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub(super) struct WideNode {
@@ -228,6 +229,27 @@ pub(super) fn collapse(binary: &[Node], merge: Option<Merge>) -> Vec<WideNode> {
         }
     }
     wide
+}
+
+/// Each leaf's primitives `(start, count)`, in the order of the primitives: depth first,
+/// lanes in order, as the collapse laid the binary tree's ranges out.
+pub(super) fn leaves(nodes: &[WideNode]) -> Vec<(u32, u32)> {
+    fn visit(nodes: &[WideNode], node: usize, out: &mut Vec<(u32, u32)>) {
+        let node = &nodes[node];
+        for lane in 0..WIDTH {
+            match (node.start[lane], node.count[lane]) {
+                // An unused lane: no node is the root's child.
+                (0, 0) => {}
+                (child, 0) => visit(nodes, child as usize, out),
+                leaf => out.push(leaf),
+            }
+        }
+    }
+    let mut out = Vec::new();
+    if !nodes.is_empty() {
+        visit(nodes, 0, &mut out);
+    }
+    out
 }
 
 /// A ray prepared for a node's slab tests, four at once: per axis, its origin and

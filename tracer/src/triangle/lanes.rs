@@ -1,6 +1,7 @@
 //! The first half of the watertight test for four triangles at once, in SIMD lanes: the
 //! three edge functions, which decide most misses. A leaf's triangles go through it four
-//! at a time, and only those it cannot rule out go through the whole test
+//! at a time, read from their block's rows (`triangle/rows.rs`), and only those it cannot
+//! rule out go through the whole test
 //! ([`intersect_triangle`](super::intersect_triangle)), one by one and in order, so a leaf
 //! finds the same hits, with the same bits, as testing each triangle alone.
 //!
@@ -15,10 +16,9 @@
 //! anyway.) The same IEEE operations on every CPU: glam's SSE2 lanes on x86_64, its NEON or
 //! scalar lanes elsewhere.
 
-use std::borrow::Borrow;
+use glam::{BVec4A, Vec4};
 
-use glam::{BVec4A, Mat4, Vec3, Vec3A, Vec4};
-
+use super::rows::Block;
 use super::RayPrecomputed;
 
 /// A ray's side of the lane test: its origin and shear constants in every lane, and which
@@ -46,25 +46,25 @@ impl RayLanes {
         }
     }
 
-    /// A bit per triangle of `tris` (at most four; bit `i` for `tris[i]`) that the ray may
-    /// hit: the others it surely misses.
+    /// A bit per triangle of `block` (bit `i` for its triangle `i`) that the ray may hit:
+    /// the others it surely misses.
     #[inline(always)]
-    pub fn may_hit<T: Borrow<[Vec3; 3]>>(&self, tris: &[T]) -> u32 {
-        debug_assert!(!tris.is_empty() && tris.len() <= 4);
-        // Missing lanes repeat the first triangle and are masked off at the end.
-        let tri = |i: usize| tris.get(i).unwrap_or(&tris[0]).borrow();
-        let [kx, ky, kz] = self.axes;
+    pub fn may_hit(&self, block: &Block) -> u32 {
+        let n = block.count();
+        let [kx, ky, kz] = self.axes.map(|k| block.axis(k));
+        // The last row's lanes past `n` read ids, whose bits may be subnormal floats, which
+        // some CPUs compute with slowly: the last vertex's lanes past `n` are zeroed.
+        let live = Vec4::new(0.0, 1.0, 2.0, 3.0).cmplt(Vec4::splat(n as f32));
         // One vertex of the four triangles, relative to the origin, in the ray's 2D frame.
         let project = |j: usize| {
-            // The four vertices as columns, transposed: x, y and z, each in four lanes
-            // (and a fourth row of zeros, so that `& 3` spares the bounds check).
-            let v = |i: usize| Vec3A::from(tri(i)[j]).extend(0.0);
-            let m = Mat4::from_cols(v(0), v(1), v(2), v(3)).transpose();
-            let coord = [m.x_axis, m.y_axis, m.z_axis, m.w_axis];
-            let z = coord[kz & 3] - self.origin[2];
+            let coord = |at: usize| match j {
+                2 => Vec4::select(live, block.row(j, at), Vec4::ZERO),
+                _ => block.row(j, at),
+            };
+            let z = coord(kz) - self.origin[2];
             (
-                (coord[kx & 3] - self.origin[0]) - self.shear[0] * z,
-                (coord[ky & 3] - self.origin[1]) - self.shear[1] * z,
+                (coord(kx) - self.origin[0]) - self.shear[0] * z,
+                (coord(ky) - self.origin[1]) - self.shear[1] * z,
             )
         };
         let ((ax, ay), (bx, by), (cx, cy)) = (project(0), project(1), project(2));
@@ -76,13 +76,15 @@ impl RayLanes {
         let negative = any([u, v, w].map(|e| e.cmplt(Vec4::ZERO)));
         let positive = any([u, v, w].map(|e| e.cmpgt(Vec4::ZERO)));
         let ruled_out = !zero & negative & positive;
-        !ruled_out.bitmask() & ((1 << tris.len()) - 1)
+        !ruled_out.bitmask() & ((1 << n) - 1)
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::intersect_triangle;
+    use glam::Vec3;
+
+    use super::super::{intersect_triangle, TriangleRows};
     use super::*;
     use crate::geometry::Ray;
     use crate::test_rng::Rng;
@@ -93,9 +95,12 @@ mod tests {
     fn check(ray: &Ray, tris: &[[Vec3; 3]]) -> (usize, usize) {
         let pre = RayPrecomputed::new(ray);
         let lanes = RayLanes::new(&pre);
+        // All in one leaf, in blocks of four from the first.
+        let with_ids: Vec<([Vec3; 3], u32)> = tris.iter().copied().zip(0..).collect();
+        let rows = TriangleRows::new(&with_ids, &[(0, tris.len() as u32)]);
         let (mut missed, mut ruled_out) = (0, 0);
-        for block in tris.chunks(4) {
-            let may = lanes.may_hit(block);
+        for (k, block) in tris.chunks(4).enumerate() {
+            let may = lanes.may_hit(&rows.block(4 * k, block.len()));
             assert_eq!(may >> block.len(), 0, "a bit past the block's triangles");
             for (i, t) in block.iter().enumerate() {
                 let hit = intersect_triangle(&pre, t[0], t[1], t[2], f32::INFINITY);

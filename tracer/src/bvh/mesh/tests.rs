@@ -242,7 +242,8 @@ fn one_motion_step_is_the_static_build() {
     let (a, b) = (MeshBvh::build(&tris), MeshBvh::build_motion(&[tris]));
     assert!(!b.has_motion());
     assert_eq!(a.nodes, b.nodes);
-    assert_eq!(a.triangles, b.triangles);
+    assert_eq!(a.rows, b.rows);
+    assert!(a.triangles.is_empty() && b.triangles.is_empty());
     assert!(b.step_boxes.is_empty());
     assert_eq!(a.memory_bytes(), b.memory_bytes());
 }

@@ -54,14 +54,16 @@ fn collapse_keeps_every_leaf_once_and_boxes_hold_their_children() {
         let binary = binary_tree(&mut prims, 2);
         let wide = collapse(&binary, None);
         check_collapse(&binary, &wide);
-        let leaves = wide_leaves(&wide);
-        assert_eq!(leaves, binary_leaves(&binary), "{n} primitives");
+        // In the order of their primitives.
+        assert_eq!(leaves(&wide), binary_leaves(&binary), "{n} primitives");
         // Merged: every primitive in exactly one leaf still, none larger than asked.
         let merged = collapse(&binary, Some(MERGE));
         check_collapse(&binary, &merged);
-        let leaves = wide_leaves(&merged);
-        assert!(leaves.iter().all(|&(_, count)| count <= MERGE.max_leaf));
-        assert_leaves_cover(&leaves, n as u32);
+        let merged_leaves = leaves(&merged);
+        assert!(merged_leaves
+            .iter()
+            .all(|&(_, count)| count <= MERGE.max_leaf));
+        assert_leaves_cover(&merged_leaves, n as u32);
         // Half as deep: at most about half as many nodes as the binary tree.
         assert!(
             wide.len() <= binary.len().div_ceil(2),
@@ -76,21 +78,7 @@ const MERGE: Merge = Merge {
     node_cost: 4.0,
 };
 
-/// Every leaf of an eight-wide tree, once, as (start, count).
-fn wide_leaves(wide: &[WideNode]) -> Vec<(u32, u32)> {
-    let mut leaves: Vec<_> = wide
-        .iter()
-        .flat_map(|node| {
-            (0..WIDTH)
-                .filter(|&lane| node.count[lane] > 0)
-                .map(|lane| (node.start[lane], node.count[lane]))
-        })
-        .collect();
-    leaves.sort();
-    leaves
-}
-
-/// Sorted `leaves` hold primitives `0..n`, each exactly once.
+/// `leaves`, in order, hold primitives `0..n`, each exactly once.
 fn assert_leaves_cover(leaves: &[(u32, u32)], n: u32) {
     let mut next = 0;
     for &(start, count) in leaves {
@@ -602,6 +590,6 @@ fn boxes_whose_areas_overflow_still_collapse_into_a_valid_tree() {
     for merge in [None, Some(MERGE)] {
         let wide = collapse(&binary, merge);
         check_collapse(&binary, &wide);
-        assert_leaves_cover(&wide_leaves(&wide), 300);
+        assert_leaves_cover(&leaves(&wide), 300);
     }
 }
