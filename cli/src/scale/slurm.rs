@@ -153,8 +153,8 @@ impl Engine for Slurm {
 }
 
 /// This farm's worker jobs in `squeue --array --format=%i|%T|%k` output, oldest first.
-/// Jobs whose state says nothing of their worker (ending, or stopped from outside: a time
-/// limit, a preemption, a cancellation) are left out.
+/// Jobs stopped from outside (a time limit, a preemption, a cancellation) say nothing of
+/// their worker and are left out; an ending job (COMPLETING) counts as running.
 fn parse_squeue(out: &str, marker: &str) -> Vec<WorkerJob> {
     let mut jobs: Vec<((u64, u64), WorkerJob)> = out
         .lines()
@@ -181,9 +181,13 @@ fn job_state(state: &str) -> Option<JobState> {
         "PENDING" => JobState::Pending,
         "COMPLETED" => JobState::Succeeded,
         "FAILED" | "BOOT_FAIL" | "NODE_FAIL" | "OUT_OF_MEMORY" => JobState::Failed,
-        "COMPLETING" | "CANCELLED" | "TIMEOUT" | "PREEMPTED" | "DEADLINE" | "REVOKED"
-        | "SPECIAL_EXIT" => return None,
+        "CANCELLED" | "TIMEOUT" | "PREEMPTED" | "DEADLINE" | "REVOKED" | "SPECIAL_EXIT" => {
+            return None
+        }
         // RUNNING, CONFIGURING, SUSPENDED, REQUEUED, RESIZING, ...: the job holds its place.
+        // So does COMPLETING: it still holds its node, and whether its worker failed is not
+        // known yet; counted as gone, a replacement would be submitted before the failure
+        // that should hold the submissions is seen.
         _ => JobState::Running,
     })
 }
@@ -243,6 +247,7 @@ mod tests {
                 ("9", Running),
                 ("12_2", Running),
                 ("12_10", Pending),
+                ("13_0", Running),
                 ("16_0", Failed),
                 ("16_1", Succeeded)
             ]
