@@ -12,7 +12,7 @@ use super::node::{
 use super::simd;
 use super::wide::{collapse, leaves, prefetch, traverse_wide, Merge, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
-use crate::triangle::{intersect_triangle, RayLanes, RayPrecomputed, TriangleRows, BLOCK};
+use crate::triangle::{intersect_triangle, RayLanes, RayPrecomputed, TriangleRows};
 
 /// SAH costs for triangles. A node visit (two slab tests) and a watertight triangle test
 /// cost about the same; leaves of up to 8 triangles let SAH keep flat clusters together.
@@ -73,8 +73,6 @@ pub struct MeshBvh {
     wide: Vec<WideNode>,
     /// The eight-wide tree's triangles (at step 0) and ids, in leaf order.
     rows: TriangleRows,
-    /// Number of triangles.
-    count: usize,
     /// The binary tree, for queries at a time; empty for a static mesh.
     nodes: Vec<Node>,
     /// With motion, vertex positions and ids in leaf order at each step, step-major;
@@ -184,11 +182,8 @@ impl MeshBvh {
         } else {
             wide
         };
-        let step_0: Vec<([Vec3; 3], u32)> = prims
-            .iter()
-            .map(|p| (first[p.index as usize], p.index))
-            .collect();
-        let rows = TriangleRows::new(&step_0, &leaves(&wide));
+        let step_0 = prims.iter().map(|p| (first[p.index as usize], p.index));
+        let rows = TriangleRows::new(step_0, &leaves(&wide));
         let (nodes, triangles, step_boxes) = if steps.len() > 1 {
             let triangles: Vec<LeafTriangle> = steps
                 .iter()
@@ -207,7 +202,6 @@ impl MeshBvh {
         Self {
             wide: on_huge_pages(wide),
             rows,
-            count: prims.len(),
             nodes: on_huge_pages(nodes),
             triangles: on_huge_pages(triangles),
             steps: step_count,
@@ -227,7 +221,7 @@ impl MeshBvh {
 
     /// Number of triangles in the hierarchy (the usable ones).
     pub fn triangle_count(&self) -> usize {
-        self.count
+        self.rows.count()
     }
 
     /// Number of nodes: eight-wide ones, and binary ones for a deforming mesh.
@@ -380,11 +374,9 @@ impl MeshBvh {
                 }
             },
             |start, count, t_max, _| {
-                let (start, count) = (start as usize, count as usize);
                 // Four triangles at a time through the edge test in SIMD lanes; those it
                 // keeps through the whole test, in order.
-                for first in (start..start + count).step_by(BLOCK) {
-                    let block = self.rows.block(first, (start + count - first).min(BLOCK));
+                for block in self.rows.leaf(start as usize, count as usize) {
                     let mut may_hit = lanes.may_hit(&block);
                     while may_hit != 0 {
                         let i = may_hit.trailing_zeros() as usize;

@@ -84,7 +84,7 @@ impl RayLanes {
 mod tests {
     use glam::Vec3;
 
-    use super::super::{intersect_triangle, TriangleRows};
+    use super::super::{intersect_triangle, TriangleRows, BLOCK};
     use super::*;
     use crate::geometry::Ray;
     use crate::test_rng::Rng;
@@ -96,13 +96,13 @@ mod tests {
         let pre = RayPrecomputed::new(ray);
         let lanes = RayLanes::new(&pre);
         // All in one leaf, in blocks of four from the first.
-        let with_ids: Vec<([Vec3; 3], u32)> = tris.iter().copied().zip(0..).collect();
-        let rows = TriangleRows::new(&with_ids, &[(0, tris.len() as u32)]);
+        let n = tris.len() as u32;
+        let rows = TriangleRows::new(tris.iter().copied().zip(0..n), &[(0, n)]);
         let (mut missed, mut ruled_out) = (0, 0);
-        for (k, block) in tris.chunks(4).enumerate() {
-            let may = lanes.may_hit(&rows.block(4 * k, block.len()));
-            assert_eq!(may >> block.len(), 0, "a bit past the block's triangles");
-            for (i, t) in block.iter().enumerate() {
+        for (block, chunk) in rows.leaf(0, tris.len()).zip(tris.chunks(BLOCK)) {
+            let may = lanes.may_hit(&block);
+            assert_eq!(may >> chunk.len(), 0, "a bit past the block's triangles");
+            for (i, t) in chunk.iter().enumerate() {
                 let hit = intersect_triangle(&pre, t[0], t[1], t[2], f32::INFINITY);
                 let kept = may & (1 << i) != 0;
                 assert!(

@@ -50,33 +50,54 @@ impl TriangleRows {
     ///
     /// # Panics
     /// If the leaves do not cover the triangles in order, each once.
-    pub fn new(triangles: &[([Vec3; 3], u32)], leaves: &[(u32, u32)]) -> Self {
-        let mut words = Vec::with_capacity(WORDS * triangles.len() + PAD);
+    pub fn new(
+        mut triangles: impl ExactSizeIterator<Item = ([Vec3; 3], u32)>,
+        leaves: &[(u32, u32)],
+    ) -> Self {
+        let total = triangles.len();
+        let mut words = Vec::with_capacity(WORDS * total + PAD);
         let mut next = 0;
         for &(start, count) in leaves {
             let start = start as usize;
             assert_eq!(start, next, "leaves out of order, or overlapping");
             next = start + count as usize;
-            for block in triangles[start..next].chunks(BLOCK) {
-                match block.len() {
-                    1 => push_block::<1>(&mut words, block),
-                    2 => push_block::<2>(&mut words, block),
-                    3 => push_block::<3>(&mut words, block),
-                    _ => push_block::<4>(&mut words, block),
+            assert!(next <= total, "leaves past the last triangle");
+            for first in (start..next).step_by(BLOCK) {
+                let t = &mut triangles;
+                match next - first {
+                    1 => push_block::<1>(&mut words, t),
+                    2 => push_block::<2>(&mut words, t),
+                    3 => push_block::<3>(&mut words, t),
+                    _ => push_block::<4>(&mut words, t),
                 }
             }
         }
-        assert_eq!(next, triangles.len(), "leaves leave triangles out");
+        assert_eq!(next, total, "leaves leave triangles out");
         words.resize(words.len() + PAD, 0.0);
         Self {
             words: on_huge_pages(words),
         }
     }
 
-    /// The block of the `n` (1 to [`BLOCK`]) triangles from triangle `first`, which must
-    /// be where a block starts: a leaf's start, or four, eight ... triangles after it.
+    /// Number of triangles.
+    pub fn count(&self) -> usize {
+        self.words.len().saturating_sub(PAD) / WORDS
+    }
+
+    /// The blocks of the leaf of the `count` triangles from triangle `start`, in order:
+    /// four triangles each from its start, the last one the rest.
     #[inline(always)]
-    pub fn block(&self, first: usize, n: usize) -> Block<'_> {
+    pub fn leaf(&self, start: usize, count: usize) -> impl Iterator<Item = Block<'_>> {
+        let end = start + count;
+        (start..end)
+            .step_by(BLOCK)
+            .map(move |first| self.block(first, (end - first).min(BLOCK)))
+    }
+
+    /// The block of the `n` (1 to [`BLOCK`]) triangles from triangle `first`, which must
+    /// be where a block starts (see [`Self::leaf`]).
+    #[inline(always)]
+    fn block(&self, first: usize, n: usize) -> Block<'_> {
         debug_assert!((1..=BLOCK).contains(&n));
         let at = WORDS * first;
         Block {
@@ -98,19 +119,23 @@ impl TriangleRows {
     }
 }
 
-/// Appends the block of the `N` triangles `block` to `words`. (`N` a constant, so that
-/// each row's place is one too: a mesh's triangles are laid out in a few instructions
-/// each.)
-fn push_block<const N: usize>(words: &mut Vec<f32>, block: &[([Vec3; 3], u32)]) {
-    let block: &[([Vec3; 3], u32); N] = block.try_into().expect("a block of N triangles");
+/// Appends the block of the next `N` triangles of `triangles` to `words`. (`N` a constant,
+/// so that each row's place is one too: a mesh's triangles are laid out in a few
+/// instructions each.)
+fn push_block<const N: usize>(
+    words: &mut Vec<f32>,
+    triangles: &mut impl Iterator<Item = ([Vec3; 3], u32)>,
+) {
+    let block: [_; N] =
+        std::array::from_fn(|_| triangles.next().expect("as many triangles as leaves hold"));
     let mut rows = [[0.0; N]; WORDS];
-    for (i, (v, id)) in block.iter().enumerate() {
+    for (i, (v, id)) in block.into_iter().enumerate() {
         for j in 0..3 {
             for axis in 0..3 {
                 rows[3 * j + axis][i] = v[j][axis];
             }
         }
-        rows[9][i] = f32::from_bits(*id);
+        rows[9][i] = f32::from_bits(id);
     }
     words.extend_from_slice(rows.as_flattened());
 }
@@ -186,14 +211,17 @@ mod tests {
                 Some((*start - count, count))
             })
             .collect();
-        let rows = TriangleRows::new(&triangles, &leaves);
+        let rows = TriangleRows::new(triangles.iter().copied(), &leaves);
+        assert_eq!(rows.count(), triangles.len());
         assert_eq!(rows.memory_bytes(), 4 * (WORDS * total as usize + PAD));
         for (start, count) in leaves {
-            for first in (start..start + count).step_by(BLOCK) {
-                let n = ((start + count - first) as usize).min(BLOCK);
-                let block = rows.block(first as usize, n);
-                assert_eq!(block.count(), n);
-                for (i, (v, id)) in triangles[first as usize..][..n].iter().enumerate() {
+            let (start, count) = (start as usize, count as usize);
+            let blocks: Vec<Block> = rows.leaf(start, count).collect();
+            let chunks: Vec<_> = triangles[start..start + count].chunks(BLOCK).collect();
+            assert_eq!(blocks.len(), chunks.len());
+            for (block, chunk) in blocks.iter().zip(chunks) {
+                assert_eq!(block.count(), chunk.len());
+                for (i, (v, id)) in chunk.iter().enumerate() {
                     assert_eq!(block.vertices(i), *v);
                     assert_eq!(block.id(i), *id);
                     for (j, axis) in (0..3).flat_map(|j| (0..3).map(move |axis| (j, axis))) {
@@ -202,19 +230,29 @@ mod tests {
                 }
             }
         }
+        assert_eq!(TriangleRows::default().count(), 0);
+    }
+
+    /// `n` copies of one triangle.
+    fn triangles(n: usize) -> impl ExactSizeIterator<Item = ([Vec3; 3], u32)> {
+        std::iter::repeat_n(([Vec3::ZERO, Vec3::X, Vec3::Y], 0), n)
     }
 
     #[test]
     #[should_panic(expected = "leaves out of order, or overlapping")]
     fn leaves_must_come_in_order() {
-        let triangles = vec![([Vec3::ZERO, Vec3::X, Vec3::Y], 0); 4];
-        TriangleRows::new(&triangles, &[(3, 1), (0, 3)]);
+        TriangleRows::new(triangles(4), &[(3, 1), (0, 3)]);
     }
 
     #[test]
     #[should_panic(expected = "leaves leave triangles out")]
     fn leaves_must_cover_every_triangle() {
-        let triangles = vec![([Vec3::ZERO, Vec3::X, Vec3::Y], 0); 4];
-        TriangleRows::new(&triangles, &[(0, 3)]);
+        TriangleRows::new(triangles(4), &[(0, 3)]);
+    }
+
+    #[test]
+    #[should_panic(expected = "leaves past the last triangle")]
+    fn leaves_must_not_reach_past_the_triangles() {
+        TriangleRows::new(triangles(4), &[(0, 3), (3, 2)]);
     }
 }
