@@ -105,7 +105,8 @@ fn to_unit(x: u32) -> f32 {
 #[derive(Clone, Debug)]
 pub struct PixelSampler {
     pixel_seed: u32,
-    index: u32,
+    /// The sample index with its bits reversed, as every dimension's scramble takes it.
+    index_reversed: u32,
     dimension: u32,
 }
 
@@ -118,7 +119,7 @@ impl PixelSampler {
         );
         Self {
             pixel_seed,
-            index,
+            index_reversed: index.reverse_bits(),
             dimension: 0,
         }
     }
@@ -151,7 +152,7 @@ impl PixelSampler {
     fn next_shuffled(&mut self) -> (u32, u32) {
         let seed = hash_combine(self.pixel_seed, self.dimension);
         self.dimension += 1;
-        (scramble_reversed(self.index.reverse_bits(), seed), seed)
+        (scramble_reversed(self.index_reversed, seed), seed)
     }
 
     /// The first coordinate of the point: van der Corput of the shuffled index, which is

@@ -275,6 +275,10 @@ impl LightSet {
                 })
             }
             Light::Triangle(t) => {
+                // Refused below all the same (`emits_toward`), without the sampling's work.
+                if t.radiance.is_some() && t.faces_away(p) {
+                    return None;
+                }
                 let s = t.sample(p, u)?;
                 let pdf = s.pdf * selection;
                 if !(pdf > 0.0 && pdf.is_finite()) {

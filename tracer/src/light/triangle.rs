@@ -36,6 +36,11 @@ const AREA_SAMPLING_RADII: f32 = 3.0;
 /// by area: the spherical construction's error grows like 1e-7 / sin of that angle, from
 /// about 1e-4 of the irradiance here to tens of percent within 0.01° of 180°.
 const MIN_SPHERICAL_VERTEX_COSINE: f32 = -0.998;
+/// How far, relative to its distance from the triangle, a point must lie behind a
+/// one-sided light for [`TriangleLight::faces_away`]: a thousand times the rounding of a
+/// direction sampled from it (about 1e-7), so no such direction can come out facing the
+/// light's front.
+const BEHIND_MARGIN: f32 = 1e-4;
 
 /// An emissive triangle ready for sampling: its vertices, unit geometric normal
 /// (cross(p1 − p0, p2 − p0), not flipped) and area.
@@ -48,6 +53,8 @@ pub(crate) struct TriangleLight {
     /// triangle may be sampled on the sphere (see [`AREA_SAMPLING_RADII`]).
     centroid: Vec3,
     spherical_within2: f32,
+    /// The squared distance from the centre to the farthest vertex.
+    radius2: f32,
     /// The radiance at every point, where it is the same everywhere.
     pub(crate) radiance: Option<Vec3>,
     /// The front face's normal, and whether the back face emits too.
@@ -92,6 +99,7 @@ impl TriangleLight {
             area,
             centroid,
             spherical_within2: AREA_SAMPLING_RADII * AREA_SAMPLING_RADII * r2,
+            radius2: r2,
             radiance: t.uniform.then_some(t.emission),
             front: if t.mirrored { -normal } else { normal },
             double_sided: t.double_sided,
@@ -104,6 +112,21 @@ impl TriangleLight {
     /// Whether the triangle emits towards a point that sees it in direction `wi`.
     pub(crate) fn emits_toward(&self, wi: Vec3) -> bool {
         self.double_sided || self.front.dot(wi) < 0.0
+    }
+
+    /// Whether `p` lies behind the plane of a one-sided triangle by [`BEHIND_MARGIN`] of
+    /// its distance from every vertex: [`Self::emits_toward`] then refuses every direction
+    /// sampled from `p`, so a light sample may be refused without drawing one (the
+    /// ceiling around a lamp that lights the room below).
+    pub(crate) fn faces_away(&self, p: Vec3) -> bool {
+        if self.double_sided {
+            return false;
+        }
+        // Behind by `h` (the vertices agree on it far within the margin); every vertex is
+        // within `|p - centre| + radius`, whose square is at most twice the sum of theirs.
+        let h = self.front.dot(self.p[0] - p);
+        let reach2 = 2.0 * (p.distance_squared(self.centroid) + self.radius2);
+        h > 0.0 && h * h > BEHIND_MARGIN * BEHIND_MARGIN * reach2
     }
 
     /// Unit directions from `p` to the vertices (zero where `p` is a vertex).
@@ -390,6 +413,43 @@ mod tests {
             }
         }
         sum
+    }
+
+    #[test]
+    fn points_said_to_face_away_get_no_direction_the_light_emits_toward() {
+        // Tilted triangles at several scales, seen from points beside, above and below
+        // them at heights from 1e-9 of their size up, where the rounding of the normal and
+        // of sampled points decides the side.
+        let mut rng = Rng(5);
+        let (mut away, mut below) = (0, 0);
+        for trial in 0..300 {
+            let scale = [1e-4f32, 1.0, 1e5][trial % 3];
+            let t = light([rng.vec3(), rng.vec3(), rng.vec3()].map(|v| (v * 2.0 - 1.0) * scale));
+            let [v0, v1, v2] = t.p;
+            for j in 0..300 {
+                let (a, b) = (rng.next_f32() * 5.0 - 2.0, rng.next_f32() * 5.0 - 2.0);
+                let h = 10f32.powi(-(j % 10)) * scale * (rng.next_f32() - 0.5);
+                let p = v0 + (v1 - v0) * a + (v2 - v0) * b - t.front * h;
+                if !t.faces_away(p) {
+                    below += usize::from(h < 0.0);
+                    continue;
+                }
+                away += 1;
+                assert!(h > 0.0, "{p} is in front of the light");
+                for _ in 0..8 {
+                    if let Some(s) = t.sample(p, rng.vec2()) {
+                        assert!(!t.emits_toward(s.wi), "{p} {}", s.wi);
+                    }
+                }
+            }
+        }
+        // Most points behind are refused up front; none in front.
+        assert!(away > 10_000, "{away}");
+        assert!(below > 40_000, "{below}");
+        let mut two_sided = light([Vec3::ZERO, Vec3::X, Vec3::Z]);
+        two_sided.double_sided = true;
+        assert!(!two_sided.faces_away(Vec3::new(0.2, -1.0, 0.2)));
+        assert!(!two_sided.faces_away(Vec3::new(0.2, 1.0, 0.2)));
     }
 
     #[test]

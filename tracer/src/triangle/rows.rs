@@ -62,13 +62,12 @@ impl TriangleRows {
             assert_eq!(start, next, "leaves out of order, or overlapping");
             next = start + count as usize;
             assert!(next <= total, "leaves past the last triangle");
-            for first in (start..next).step_by(BLOCK) {
-                let t = &mut triangles;
-                match next - first {
-                    1 => push_block::<1>(&mut words, t),
-                    2 => push_block::<2>(&mut words, t),
-                    3 => push_block::<3>(&mut words, t),
-                    _ => push_block::<4>(&mut words, t),
+            for (_, n) in blocks(start, count as usize) {
+                match n {
+                    1 => push_block::<1>(&mut words, &mut triangles),
+                    2 => push_block::<2>(&mut words, &mut triangles),
+                    3 => push_block::<3>(&mut words, &mut triangles),
+                    _ => push_block::<4>(&mut words, &mut triangles),
                 }
             }
         }
@@ -84,14 +83,11 @@ impl TriangleRows {
         self.words.len().saturating_sub(PAD) / WORDS
     }
 
-    /// The blocks of the leaf of the `count` triangles from triangle `start`, in order:
-    /// four triangles each from its start, the last one the rest.
+    /// The blocks of the leaf of the `count` triangles from triangle `start`, in order, as
+    /// [`Self::new`] laid them out.
     #[inline(always)]
     pub fn leaf(&self, start: usize, count: usize) -> impl Iterator<Item = Block<'_>> {
-        let end = start + count;
-        (start..end)
-            .step_by(BLOCK)
-            .map(move |first| self.block(first, (end - first).min(BLOCK)))
+        blocks(start, count).map(|(first, n)| self.block(first, n))
     }
 
     /// The block of the `n` (1 to [`BLOCK`]) triangles from triangle `first`, which must
@@ -117,6 +113,17 @@ impl TriangleRows {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.words.as_slice())
     }
+}
+
+/// The blocks of the leaf of the `count` triangles from triangle `start`, as (first
+/// triangle, triangles): four each from the start, the last one the rest. Where blocks
+/// start is decided here alone, for laying them out and for reading them.
+#[inline(always)]
+fn blocks(start: usize, count: usize) -> impl Iterator<Item = (usize, usize)> {
+    let end = start + count;
+    (start..end)
+        .step_by(BLOCK)
+        .map(move |first| (first, (end - first).min(BLOCK)))
 }
 
 /// Appends the block of the next `N` triangles of `triangles` to `words`. (`N` a constant,
