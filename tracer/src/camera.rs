@@ -36,7 +36,10 @@ pub enum Projection {
 #[derive(Clone, Debug)]
 pub struct Camera {
     /// The projection.
-    pub projection: Projection,
+    projection: Projection,
+    /// Half the film's height: at distance 1 for a perspective camera (`tan(yfov / 2)`),
+    /// `ymag` for an orthographic one. From `projection`, once rather than per ray.
+    half_height: f32,
     /// Camera space to the prepared frame's world space. The camera sits at the origin of
     /// the prepared frame (camera-relative rendering), so this is a pure rotation-scale
     /// matrix plus, at most, a tiny translation.
@@ -64,6 +67,27 @@ impl RigidStep {
 }
 
 impl Camera {
+    /// A camera of `projection` placed by `to_world` (at every time, or at the `motion`
+    /// steps where it moves), rendering an image `aspect` times as wide as high.
+    pub fn new(
+        projection: Projection,
+        to_world: Affine3A,
+        aspect: f32,
+        motion: Option<Arc<[RigidStep]>>,
+    ) -> Camera {
+        let half_height = match projection {
+            Projection::Perspective { yfov, .. } => math::tan(0.5 * yfov),
+            Projection::Orthographic { ymag, .. } => ymag,
+        };
+        Camera {
+            projection,
+            half_height,
+            to_world,
+            aspect,
+            motion,
+        }
+    }
+
     /// Camera space to the prepared frame at shutter time `time` in [0, 1]: the two
     /// bracketing steps' positions interpolated linearly, their rotations by slerp.
     #[inline]
@@ -85,24 +109,31 @@ impl Camera {
     /// The primary ray through film position `film` in [0,1]² (x right, y down) at
     /// shutter time `time` in [0, 1] (ignored by a still camera).
     pub fn generate_ray(&self, film: Vec2, time: f32) -> Ray {
+        self.primary(film, time).0
+    }
+
+    /// [`Camera::generate_ray`] and the camera's view axis at that time (its -Z in the
+    /// prepared frame, unit), from one placement.
+    pub fn primary(&self, film: Vec2, time: f32) -> (Ray, Vec3) {
         let ndc = Vec2::new(2.0 * film.x - 1.0, 1.0 - 2.0 * film.y);
+        let h = self.half_height;
+        // glTF's xmag and ymag fix both extents; the image's aspect wins, so the horizontal
+        // extent follows ymag (as the perspective case follows yfov).
         let (origin, dir) = match self.projection {
-            Projection::Perspective { yfov, .. } => {
-                let h = math::tan(0.5 * yfov);
-                let d = Vec3::new(ndc.x * h * self.aspect, ndc.y * h, -1.0);
-                (Vec3::ZERO, d)
-            }
-            // glTF's xmag and ymag fix both extents; the image's aspect wins, so the
-            // horizontal extent follows ymag (as the perspective case follows yfov).
-            Projection::Orthographic { ymag, .. } => (
-                Vec3::new(ndc.x * ymag * self.aspect, ndc.y * ymag, 0.0),
+            Projection::Perspective { .. } => (
+                Vec3::ZERO,
+                Vec3::new(ndc.x * h * self.aspect, ndc.y * h, -1.0),
+            ),
+            Projection::Orthographic { .. } => (
+                Vec3::new(ndc.x * h * self.aspect, ndc.y * h, 0.0),
                 Vec3::NEG_Z,
             ),
         };
         let to_world = self.to_world_at(time);
         let origin = to_world.transform_point3(origin);
         let dir = to_world.transform_vector3(dir).normalize();
-        Ray { origin, dir, time }
+        let axis = to_world.transform_vector3(Vec3::NEG_Z).normalize();
+        (Ray { origin, dir, time }, axis)
     }
 
     /// Where the camera at shutter time `time` sees the point `p` of the prepared frame,
@@ -123,18 +154,16 @@ impl Camera {
 
     /// The film position of camera-space `local`, a point or (`direction`) a direction.
     fn film_of(&self, local: Vec3, direction: bool) -> Option<Vec2> {
+        let h = self.half_height;
         let ndc = match self.projection {
-            Projection::Perspective { yfov, .. } => {
+            Projection::Perspective { .. } => {
                 if local.z >= 0.0 {
                     return None;
                 }
-                let h = math::tan(0.5 * yfov);
                 Vec2::new(local.x / (h * self.aspect), local.y / h) / -local.z
             }
             Projection::Orthographic { .. } if direction => return None,
-            Projection::Orthographic { ymag, .. } => {
-                Vec2::new(local.x / (ymag * self.aspect), local.y / ymag)
-            }
+            Projection::Orthographic { .. } => Vec2::new(local.x / (h * self.aspect), local.y / h),
         };
         Some(Vec2::new(0.5 * (ndc.x + 1.0), 0.5 * (1.0 - ndc.y)))
     }
@@ -145,15 +174,15 @@ mod tests {
     use super::*;
 
     fn camera(projection: Projection) -> Camera {
-        Camera {
+        Camera::new(
             projection,
-            to_world: Affine3A::from_rotation_translation(
+            Affine3A::from_rotation_translation(
                 Quat::from_rotation_y(0.3),
                 Vec3::new(0.1, -0.2, 0.3),
             ),
-            aspect: 1.5,
-            motion: None,
-        }
+            1.5,
+            None,
+        )
     }
 
     #[test]

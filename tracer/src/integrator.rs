@@ -291,12 +291,7 @@ fn trace_sample_with<W: Carrier>(
     );
     // Owen-scrambled Sobol points stratify this dimension over the pixel's samples too.
     let time = if frame.motion { sampler.next_1d() } else { 0.0 };
-    let ray = frame.camera.generate_ray(film, time);
-    let view_axis = frame
-        .camera
-        .to_world_at(time)
-        .transform_vector3(Vec3::NEG_Z)
-        .normalize();
+    let (ray, view_axis) = frame.camera.primary(film, time);
     let carrier = carrier(&mut sampler);
 
     let mut walk = SampleWalk {

@@ -342,12 +342,12 @@ pub fn prepare_frame(
         });
     }
     let camera_moves = camera_steps.iter().any(|s| *s != camera_steps[0]);
-    let camera = Camera {
+    let camera = Camera::new(
         projection,
-        to_world: Affine3A::from_mat3(DMat3::from_quat(camera_rotation).as_mat3()),
+        Affine3A::from_mat3(DMat3::from_quat(camera_rotation).as_mat3()),
         aspect,
-        motion: camera_moves.then(|| camera_steps.into()),
-    };
+        camera_moves.then(|| camera_steps.into()),
+    );
 
     let (instances, deformed) = place_instances(&scene, &poses, &deforming, &relative);
 

@@ -252,29 +252,28 @@ pub(super) fn leaves(nodes: &[WideNode]) -> Vec<(u32, u32)> {
     out
 }
 
-/// A ray prepared for a node's slab tests, four at once: per axis, its origin and
-/// reciprocal direction in every lane, and which of a node's bound arrays holds the near
-/// planes.
+/// A ray prepared for a node's slab tests: per axis, its origin and reciprocal direction,
+/// and which of a node's bound arrays holds the near planes. Kept as scalars and
+/// broadcast into lanes where a test reads them (one instruction from memory): held as
+/// lanes, eight-wide broadcasts were built and spilled for every ray and instance.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct WideRay {
-    origin: [Vec4; 3],
+    origin: [f32; 3],
     /// 1/dir with IEEE infinities for zero components (of the zero's sign).
-    inv_dir: [Vec4; 3],
+    inv_dir: [f32; 3],
     /// 1 where the direction is negative (the near plane is the box's maximum), else 0.
     near: [usize; 3],
 }
 
 impl WideRay {
     pub fn new(ray: &Ray) -> Self {
-        let (o, inv) = (ray.origin, ray.dir.recip());
+        // The sign bits of the direction, which are those of its reciprocal (1/±0 is ±inf;
+        // a NaN, whose sign says nothing, is no valid ray's).
+        let negative = ray.dir.is_negative_bitmask() as usize;
         Self {
-            origin: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
-            inv_dir: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
-            near: [
-                usize::from(inv.x < 0.0),
-                usize::from(inv.y < 0.0),
-                usize::from(inv.z < 0.0),
-            ],
+            origin: ray.origin.to_array(),
+            inv_dir: ray.dir.recip().to_array(),
+            near: [negative & 1, (negative >> 1) & 1, negative >> 2],
         }
     }
 
@@ -307,8 +306,8 @@ impl WideRay {
         let mut t0 = _mm256_setzero_ps();
         let mut t1 = _mm256_set1_ps(t_max);
         for axis in 0..3 {
-            let origin = _mm256_set1_ps(self.origin[axis].x);
-            let inv_dir = _mm256_set1_ps(self.inv_dir[axis].x);
+            let origin = _mm256_set1_ps(self.origin[axis]);
+            let inv_dir = _mm256_set1_ps(self.inv_dir[axis]);
             // The eight lanes' planes lie in one row of 32 bytes.
             let near = &node.bounds[self.near[axis] & 1][axis];
             let far = &node.bounds[(self.near[axis] ^ 1) & 1][axis];
@@ -355,8 +354,12 @@ impl WideRay {
                 // (`& 1` spares the bounds checks: `near` is 0 or 1.)
                 let near = node.bounds[self.near[axis] & 1][axis][h];
                 let far = node.bounds[(self.near[axis] ^ 1) & 1][axis][h];
-                let near = (near - self.origin[axis]) * self.inv_dir[axis];
-                let far = (far - self.origin[axis]) * self.inv_dir[axis] * FAR_SCALE;
+                let (origin, inv_dir) = (
+                    Vec4::splat(self.origin[axis]),
+                    Vec4::splat(self.inv_dir[axis]),
+                );
+                let near = (near - origin) * inv_dir;
+                let far = (far - origin) * inv_dir * FAR_SCALE;
                 // A NaN distance (0 · inf: the ray lies in the slab's plane) must not
                 // constrain the interval: the accumulator stays.
                 t0 = max_or_acc(t0, near);
