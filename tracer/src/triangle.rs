@@ -9,14 +9,16 @@
 //! never slip between them. Where an edge function rounds to exactly zero the test
 //! recomputes the three in double precision, so that zero only means "exactly on the edge".
 
-use glam::{DVec2, Mat3A, Vec3, Vec3A};
+use std::ops::{Add, Mul, Sub};
+
+use glam::{DVec2, Mat3A, Vec3, Vec3A, Vec4};
 
 use crate::geometry::Ray;
 
 mod lanes;
 mod rows;
 
-pub use lanes::RayLanes;
+pub use lanes::{BlockHits, LaneHit, RayLanes};
 pub use rows::{Block, TriangleRows, BLOCK};
 
 /// `gamma(n)` of Higham / pbrt: the bound `n·u / (1 - n·u)` on the relative error of `n`
@@ -137,54 +139,14 @@ pub fn intersect_triangle(
         return None;
     }
 
-    // Scaled hit distance (the paper's), and bounds on the error of t and of the hit's
-    // position from every rounding above (pbrt-v4, "Ensure that computed triangle t is
-    // conservatively greater than zero"). The constants are named so that they are folded
-    // at compile time.
-    let az = sz * a.z;
-    let bz = sz * b.z;
-    let cz = sz * c.z;
-    let t_scaled = u * az + v * bz + w * cz;
-    let inv_det = 1.0 / det;
-    let t = t_scaled * inv_det;
-    const G2: f32 = gamma(2);
-    const G3: f32 = gamma(3);
-    const G5: f32 = gamma(5);
-    let max_zt = az.abs().max(bz.abs()).max(cz.abs());
-    let max_xt = ax.abs().max(bx.abs()).max(cx.abs());
-    let max_yt = ay.abs().max(by.abs()).max(cy.abs());
-    let delta_z = G3 * max_zt;
-    // x' = x - Sx·z rounds relative to |x| + |z| (|Sx| <= 1), with z in the vertices'
-    // units. pbrt takes the scaled z (in t's units), which is the same only for a unit
-    // direction: an instance scaled by 1e6 has object-space directions of length 1e-6,
-    // and its bound would come out a million times too large (every hit refused).
-    let max_z = a.z.abs().max(b.z.abs()).max(c.z.abs());
-    let delta_x = G5 * (max_xt + max_z);
-    let delta_y = G5 * (max_yt + max_z);
-    let delta_e = 2.0 * (G2 * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
-    let max_e = u.abs().max(v.abs()).max(w.abs());
-    // pbrt's bound on t's error, with the edge functions' errors times `depth`: the
-    // vertices' depth for pbrt's delta_t, the triangle's extent in depth for `delta_hit`.
-    let t_error = |depth: f32| {
-        3.0 * (G3 * max_e * max_zt + delta_e * depth + delta_z * max_e) * inv_det.abs()
-    };
-    // Whether single precision places the hit well enough to keep it. pbrt's delta_t
-    // (below, which rules out hits behind the origin) takes the edge functions' errors
-    // times the vertices' depth; but t is the mean of the depths weighted by the edge
-    // functions, and moves with each by (z_i − t)/det: at most the triangle's extent in
-    // depth over det. The hit's barycentric point moves likewise by the triangle's extent.
-    // On a small triangle far away (any dense mesh seen whole) the extent is a thousandth
-    // of the depth, and the depth-based bound sent nearly every hit to double precision; a
-    // huge triangle seen from close by still goes there. `delta_hit` bounds t's and the
-    // point's error in t's units (a t past 1024 times it is also proven positive), with
-    // each axis's extent taken as at most |b − a| + |c − a|, all three in SIMD lanes.
-    let spread = ((b - a).abs() + (c - a).abs()).element_sum() * sz.abs();
-    let delta_hit = t_error(spread);
-    if t > delta_hit * IMPRECISE {
-        return (t < t_max).then_some((t, v * inv_det, w * inv_det));
+    // Scaled hit distance (the paper's), and bounds on its error (see `Placement`).
+    let hit = Placement::new([ax, bx, cx], [ay, by, cy], [a.z, b.z, c.z], sz, [u, v, w]);
+    let t = hit.t;
+    if t > hit.t_error(hit.spread) * IMPRECISE {
+        return (t < t_max).then_some((t, v * hit.inv_det, w * hit.inv_det));
     }
     // Provably behind the origin or beyond t_max (and NaN): no hit.
-    let delta_t = t_error(max_zt);
+    let delta_t = hit.t_error(hit.max_zt);
     if !(t + delta_t > 0.0 && t - delta_t < t_max) {
         return None;
     }
@@ -197,7 +159,127 @@ pub fn intersect_triangle(
 
 /// When the single-precision bound on the error of `t` and of the hit's position exceeds
 /// this fraction of `t`, the hit is recomputed in double precision.
-const IMPRECISE: f32 = 1024.0;
+pub(crate) const IMPRECISE: f32 = 1024.0;
+
+/// The bounds' `gamma`s, named so that they are folded at compile time.
+const G2: f32 = gamma(2);
+const G3: f32 = gamma(3);
+const G5: f32 = gamma(5);
+
+/// One number, or four in SIMD lanes: what [`Placement`] computes in, so that the lane
+/// test ([`RayLanes::test`]) places a hit with the very bits the whole test would.
+pub(crate) trait Lanes:
+    Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Mul<f32, Output = Self>
+{
+    /// Division, for the reciprocal of the determinant.
+    fn recip(self) -> Self;
+    fn abs(self) -> Self;
+    /// The larger; NaN in either makes it either (no NaN reaches a kept hit: see
+    /// [`Placement`]).
+    fn max(self, other: Self) -> Self;
+}
+
+impl Lanes for f32 {
+    #[inline(always)]
+    fn recip(self) -> f32 {
+        1.0 / self
+    }
+    #[inline(always)]
+    fn abs(self) -> f32 {
+        f32::abs(self)
+    }
+    #[inline(always)]
+    fn max(self, other: f32) -> f32 {
+        f32::max(self, other)
+    }
+}
+
+impl Lanes for Vec4 {
+    #[inline(always)]
+    fn recip(self) -> Vec4 {
+        Vec4::ONE / self
+    }
+    #[inline(always)]
+    fn abs(self) -> Vec4 {
+        Vec4::abs(self)
+    }
+    #[inline(always)]
+    fn max(self, other: Vec4) -> Vec4 {
+        Vec4::max(self, other)
+    }
+}
+
+/// The watertight test's hit distance from the sheared vertices and the edge functions,
+/// with bounds on its error from every rounding before it (pbrt-v4, "Ensure that computed
+/// triangle t is conservatively greater than zero"), for one triangle or four in lanes:
+/// one definition, the same operations in the same order either way (the grouping of each
+/// sum and product is the bits: operands may swap, which IEEE keeps exact, but not
+/// regroup). Any NaN among the
+/// inputs makes `t` NaN, which no comparison keeps, so the lanes' `max` (SSE's, which may
+/// pass a NaN by) and `f32::max` (which drops it) never decide a hit differently.
+pub(crate) struct Placement<T> {
+    /// The hit distance, in the ray direction's units.
+    pub t: T,
+    /// 1 / (u + v + w): the barycentrics are `v · inv_det` and `w · inv_det`.
+    pub inv_det: T,
+    /// The vertices' largest depth, scaled to `t`'s units.
+    pub max_zt: T,
+    /// The triangle's extent, in `t`'s units: at most |b − a| + |c − a| along each axis.
+    pub spread: T,
+    /// Parts of [`Self::t_error`].
+    max_e: T,
+    delta_e: T,
+    delta_z: T,
+}
+
+impl<T: Lanes> Placement<T> {
+    /// From the vertices' sheared `x`, `y` and unscaled `z` (relative to the ray's origin),
+    /// the shear's `sz` and the edge functions `[u, v, w]`.
+    #[inline(always)]
+    pub fn new(x: [T; 3], y: [T; 3], z: [T; 3], sz: T, [u, v, w]: [T; 3]) -> Self {
+        let scaled = z.map(|z| sz * z);
+        let t_scaled = u * scaled[0] + v * scaled[1] + w * scaled[2];
+        let inv_det = (u + v + w).recip();
+        let largest = |c: [T; 3]| c[0].abs().max(c[1].abs()).max(c[2].abs());
+        let max_zt = largest(scaled);
+        let (max_xt, max_yt) = (largest(x), largest(y));
+        // x' = x - Sx·z rounds relative to |x| + |z| (|Sx| <= 1), with z in the vertices'
+        // units. pbrt takes the scaled z (in t's units), which is the same only for a unit
+        // direction: an instance scaled by 1e6 has object-space directions of length 1e-6,
+        // and its bound would come out a million times too large (every hit refused).
+        let max_z = largest(z);
+        let delta_x = (max_xt + max_z) * G5;
+        let delta_y = (max_yt + max_z) * G5;
+        let delta_e = (max_xt * G2 * max_yt + delta_y * max_xt + delta_x * max_yt) * 2.0;
+        let extent = |c: [T; 3]| (c[1] - c[0]).abs() + (c[2] - c[0]).abs();
+        Placement {
+            t: t_scaled * inv_det,
+            inv_det,
+            max_zt,
+            spread: (extent(x) + extent(y) + extent(z)) * sz.abs(),
+            max_e: largest([u, v, w]),
+            delta_e,
+            delta_z: max_zt * G3,
+        }
+    }
+
+    /// pbrt's bound on t's error, with the edge functions' errors times `depth`: the
+    /// vertices' depth ([`Self::max_zt`]) for pbrt's delta_t, which rules out hits behind
+    /// the origin; the triangle's extent ([`Self::spread`]) for whether single precision
+    /// places the hit well enough to keep it. t is the mean of the depths weighted by the
+    /// edge functions, and moves with each by (z_i − t)/det: at most the triangle's extent
+    /// in depth over det, and the hit's barycentric point likewise. On a small triangle far
+    /// away (any dense mesh seen whole) the extent is a thousandth of the depth, where the
+    /// depth-based bound sent nearly every hit to double precision; a huge triangle seen
+    /// from close by still goes there. A t past [`IMPRECISE`] times the extent's bound is
+    /// placed, and proven positive.
+    #[inline(always)]
+    pub fn t_error(&self, depth: T) -> T {
+        (self.max_e * G3 * self.max_zt + self.delta_e * depth + self.delta_z * self.max_e)
+            * 3.0
+            * self.inv_det.abs()
+    }
+}
 
 /// [`intersect_triangle`] for a ray the single-precision test found inside the triangle
 /// but could not place: `t`, `b1` and `b2` recomputed in double precision from the same

@@ -12,7 +12,7 @@ use super::node::{
 use super::simd;
 use super::wide::{collapse, leaves, prefetch, traverse_wide, Merge, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
-use crate::triangle::{intersect_triangle, RayLanes, RayPrecomputed, TriangleRows};
+use crate::triangle::{intersect_triangle, LaneHit, RayLanes, RayPrecomputed, TriangleRows};
 
 /// SAH costs for triangles. A node visit (two slab tests) and a watertight triangle test
 /// cost about the same; leaves of up to 8 triangles let SAH keep flat clusters together.
@@ -374,17 +374,24 @@ impl MeshBvh {
                 }
             },
             |start, count, t_max, _| {
-                // Four triangles at a time through the edge test in SIMD lanes; those it
-                // keeps through the whole test, in order.
+                // Four triangles at a time through the test in SIMD lanes; those it keeps
+                // but cannot decide through the whole test, in order.
                 for block in self.rows.leaf(start as usize, count as usize) {
-                    let mut may_hit = lanes.may_hit(&block);
-                    while may_hit != 0 {
-                        let i = may_hit.trailing_zeros() as usize;
-                        may_hit &= may_hit - 1;
-                        let (tri, id) = (block.vertices(i), block.id(i));
-                        if let Some((t, b1, b2)) =
-                            intersect_triangle(&pre, tri[0], tri[1], tri[2], *t_max)
-                        {
+                    let hits = lanes.test(&block);
+                    let mut candidates = hits.candidates;
+                    while candidates != 0 {
+                        let i = candidates.trailing_zeros() as usize;
+                        candidates &= candidates - 1;
+                        let hit = match hits.decide(i, *t_max) {
+                            LaneHit::Hit(t, b1, b2) => Some((t, b1, b2)),
+                            LaneHit::Miss => None,
+                            LaneHit::WholeTest => {
+                                let tri = block.vertices(i);
+                                intersect_triangle(&pre, tri[0], tri[1], tri[2], *t_max)
+                            }
+                        };
+                        if let Some((t, b1, b2)) = hit {
+                            let id = block.id(i);
                             if accept(id, b1, b2) {
                                 *t_max = t;
                                 best = Some((t, id, b1, b2));

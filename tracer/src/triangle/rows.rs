@@ -1,4 +1,4 @@
-//! Triangles laid out for the lane test ([`RayLanes::may_hit`](super::RayLanes::may_hit)):
+//! Triangles laid out for the lane test ([`RayLanes::test`](super::RayLanes::test)):
 //! each leaf's triangles in blocks of up to four, a block of `n` triangles in `10·n`
 //! words: nine rows of `n` floats, row `3·j + axis` holding coordinate `axis` of vertex `j`
 //! of each triangle, then the `n` triangles' ids (their bits). The lane test loads each
