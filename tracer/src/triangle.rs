@@ -142,19 +142,39 @@ pub fn intersect_triangle(
     // Scaled hit distance (the paper's), and bounds on its error (see `Placement`).
     let hit = Placement::new([ax, bx, cx], [ay, by, cy], [a.z, b.z, c.z], sz, [u, v, w]);
     let t = hit.t;
-    if t > hit.t_error(hit.spread) * IMPRECISE {
-        return (t < t_max).then_some((t, v * hit.inv_det, w * hit.inv_det));
+    let placed = t > hit.t_error(hit.spread) * IMPRECISE;
+    match single_precision_decides(t, placed, || hit.t_error(hit.max_zt), t_max) {
+        Some(true) => Some((t, v * hit.inv_det, w * hit.inv_det)),
+        Some(false) => None,
+        // The bounds grow with the triangle's size and its distance from the origin, not
+        // with t: on a huge triangle seen from close by (a 1e5 floor under a camera 1e-3
+        // above it) single precision can neither place the hit nor prove it in front.
+        // Double precision can.
+        None => precise_hit(ray, v0, v1, v2, t_max),
     }
-    // Provably behind the origin or beyond t_max (and NaN): no hit.
-    let delta_t = hit.t_error(hit.max_zt);
+}
+
+/// The whole test's decision past its edge test from single precision's numbers, for the
+/// scalar test and the lanes alike: whether the triangle is hit below `t_max`, or `None`
+/// where double precision must decide. `placed`: whether `t` lies past [`IMPRECISE`] times
+/// the extent's error bound; `delta_t`: the depth's bound ([`Placement::t_error`] of
+/// `max_zt`), asked only for a hit not placed.
+#[inline(always)]
+pub(crate) fn single_precision_decides(
+    t: f32,
+    placed: bool,
+    delta_t: impl FnOnce() -> f32,
+    t_max: f32,
+) -> Option<bool> {
+    if placed {
+        return Some(t < t_max);
+    }
+    // Provably behind the origin (the surface a ray leaves) or beyond t_max (and NaN).
+    let delta_t = delta_t();
     if !(t + delta_t > 0.0 && t - delta_t < t_max) {
-        return None;
+        return Some(false);
     }
-    // The bounds grow with the triangle's size and its distance from the origin, not with
-    // t: on a huge triangle seen from close by (a 1e5 floor under a camera 1e-3 above it)
-    // single precision can neither place the hit nor prove it in front. Double precision
-    // can.
-    precise_hit(ray, v0, v1, v2, t_max)
+    None
 }
 
 /// When the single-precision bound on the error of `t` and of the hit's position exceeds

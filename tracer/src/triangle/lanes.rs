@@ -27,7 +27,7 @@
 use glam::{BVec4A, Vec4};
 
 use super::rows::Block;
-use super::{Placement, RayPrecomputed, IMPRECISE};
+use super::{single_precision_decides, Placement, RayPrecomputed, IMPRECISE};
 
 /// A ray's side of the lane test: its origin and shear constants in every lane, and which
 /// vertex coordinates become the 2D x, y and the depth (`kx`, `ky`, `kz`).
@@ -82,19 +82,12 @@ impl BlockHits {
             return LaneHit::WholeTest;
         }
         let t = self.t[i];
-        if self.placed & (1 << i) != 0 {
-            return if t < t_max {
-                LaneHit::Hit(t, self.b1[i], self.b2[i])
-            } else {
-                LaneHit::Miss
-            };
+        let placed = self.placed & (1 << i) != 0;
+        match single_precision_decides(t, placed, || self.delta_t[i], t_max) {
+            Some(true) => LaneHit::Hit(t, self.b1[i], self.b2[i]),
+            Some(false) => LaneHit::Miss,
+            None => LaneHit::WholeTest,
         }
-        // Provably behind the origin (the surface a ray leaves) or beyond `t_max` (and NaN).
-        let delta_t = self.delta_t[i];
-        if !(t + delta_t > 0.0 && t - delta_t < t_max) {
-            return LaneHit::Miss;
-        }
-        LaneHit::WholeTest
     }
 }
 
