@@ -29,19 +29,49 @@ pub(crate) const fn gamma(n: i32) -> f32 {
     nu / (1.0 - nu)
 }
 
-/// What the watertight test needs from a ray, computed once per ray: the axis along which
-/// the direction is largest (`kz`), the two others in winding-preserving order and the
-/// shear that maps the direction onto +Z.
+/// The watertight test's frame for a ray direction: the axis along which the direction is
+/// largest (`kz`), the two others in winding-preserving order, and the shear that maps the
+/// direction onto +Z. All the lane test ([`RayLanes`]) needs of a ray besides its origin.
+#[derive(Clone, Copy, Debug)]
+pub struct RayShear {
+    /// `kx`, `ky`, `kz`, each below 3.
+    pub axes: [usize; 3],
+    /// (Sx, Sy, Sz) of the paper.
+    pub shear: Vec3,
+}
+
+impl RayShear {
+    /// The frame of `dir`. A direction that is zero or not finite gets NaN shear constants,
+    /// and no test then reports a hit.
+    #[inline(always)]
+    pub fn new(dir: Vec3) -> Self {
+        // Arithmetic and array indexing rather than branches and `Vec3`'s indexing (a
+        // `match`): a ray's axes are a coin toss to the branch predictor, which mispredicted
+        // here about once per incoherent ray.
+        let d = dir.to_array();
+        let a = dir.abs();
+        // The dimension where the direction is largest, so that the shear is at most 1.
+        let x_largest = a.x >= a.y && a.x >= a.z;
+        let kz = usize::from(!x_largest) * (2 - usize::from(a.y >= a.z));
+        let (kx, ky) = ([1, 2, 0][kz], [2, 0, 1][kz]);
+        // Swapping kx and ky for a negative direction keeps the triangles' winding, so the
+        // sign of the determinant still tells front from back.
+        let (kx, ky) = if d[kz] < 0.0 { (ky, kx) } else { (kx, ky) };
+        Self {
+            axes: [kx, ky, kz],
+            shear: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
+        }
+    }
+}
+
+/// What the whole test ([`intersect_triangle`]) needs from a ray, computed once per ray:
+/// its [`RayShear`], and the permutation and shear as one matrix.
 #[derive(Clone, Copy, Debug)]
 pub struct RayPrecomputed {
     origin: Vec3,
     /// The direction, for the double-precision recomputation of [`precise_hit`].
     dir: Vec3,
-    kx: usize,
-    ky: usize,
-    kz: usize,
-    /// (Sx, Sy, Sz) of the paper.
-    shear: Vec3,
+    frame: RayShear,
     /// The permutation and the x-y shear as one matrix, applied in SIMD lanes: row 0 is
     /// `e_kx − Sx·e_kz`, row 1 `e_ky − Sy·e_kz`, row 2 `e_kz`. Each row has one 1, at most
     /// one shear constant and a 0, so `M·a` rounds as `a[kx] − Sx·a[kz]` does (adding the
@@ -58,28 +88,14 @@ impl RayPrecomputed {
     // rays` counted 5 to 9% more instructions (its fields went through memory).
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
-        // Arithmetic and array indexing rather than branches and `Vec3`'s indexing (a
-        // `match`): a ray's axes are a coin toss to the branch predictor, which mispredicted
-        // here about once per incoherent ray.
-        let d = ray.dir.to_array();
-        let a = ray.dir.abs();
-        // The dimension where the direction is largest, so that the shear is at most 1.
-        let x_largest = a.x >= a.y && a.x >= a.z;
-        let kz = usize::from(!x_largest) * (2 - usize::from(a.y >= a.z));
-        let (kx, ky) = ([1, 2, 0][kz], [2, 0, 1][kz]);
-        // Swapping kx and ky for a negative direction keeps the triangles' winding, so the
-        // sign of the determinant still tells front from back.
-        let (kx, ky) = if d[kz] < 0.0 { (ky, kx) } else { (kx, ky) };
-        let shear = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        let frame = RayShear::new(ray.dir);
+        let ([kx, ky, kz], shear) = (frame.axes, frame.shear);
         let e = |k: usize| Vec3A::AXES[k];
         let rows = [e(kx) - shear.x * e(kz), e(ky) - shear.y * e(kz), e(kz)];
         Self {
             origin: ray.origin,
             dir: ray.dir,
-            kx,
-            ky,
-            kz,
-            shear,
+            frame,
             permute_shear: Mat3A::from_cols(rows[0], rows[1], rows[2]).transpose(),
             origin_a: ray.origin.into(),
         }
@@ -103,7 +119,7 @@ pub fn intersect_triangle(
     v2: Vec3,
     t_max: f32,
 ) -> Option<(f32, f32, f32)> {
-    let sz = ray.shear.z;
+    let sz = ray.frame.shear.z;
 
     // Vertices relative to the ray origin, then permuted and sheared so that the ray is the
     // +Z axis (z not yet scaled by Sz).
@@ -322,7 +338,7 @@ fn precise_hit(
         let nu = n as f64 * U;
         nu / (1.0 - nu)
     }
-    let (kx, ky, kz) = (ray.kx, ray.ky, ray.kz);
+    let [kx, ky, kz] = ray.frame.axes;
     // Arrays, not `DVec3`, so that indexing by axis is a load rather than a `match`.
     let d = ray.dir.as_dvec3().to_array();
     let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);

@@ -314,10 +314,10 @@ impl MeshBvh {
         if !ray_is_valid(ray, t_max) {
             return None;
         }
-        let pre = RayPrecomputed::new(ray);
         let mut t_max = t_max;
         let mut best = None;
         if MOTION && self.has_motion() {
+            let pre = RayPrecomputed::new(ray);
             let steps = self.steps as usize;
             let segment = Segment::new(ray.time, steps);
             let n = self.triangle_count();
@@ -357,7 +357,7 @@ impl MeshBvh {
             );
             return best;
         }
-        let lanes = RayLanes::new(&pre);
+        let lanes = RayLanes::new(ray);
         traverse_wide::<AVX>(
             &self.wide,
             &WideRay::new(ray),
@@ -385,9 +385,12 @@ impl MeshBvh {
                         let hit = match hits.decide(i, *t_max) {
                             LaneHit::Hit(t, b1, b2) => Some((t, b1, b2)),
                             LaneHit::Miss => None,
+                            // Rare (an edge function of zero, a hit single precision
+                            // cannot place): the whole test's matrix is built here.
                             LaneHit::WholeTest => {
-                                let tri = block.vertices(i);
-                                intersect_triangle(&pre, tri[0], tri[1], tri[2], *t_max)
+                                let [v0, v1, v2] = block.vertices(i);
+                                let pre = RayPrecomputed::new(ray);
+                                intersect_triangle(&pre, v0, v1, v2, *t_max)
                             }
                         };
                         if let Some((t, b1, b2)) = hit {

@@ -27,7 +27,8 @@
 use glam::{BVec4A, Vec4};
 
 use super::rows::Block;
-use super::{single_precision_decides, Placement, RayPrecomputed, IMPRECISE};
+use super::{single_precision_decides, Placement, RayShear, IMPRECISE};
+use crate::geometry::Ray;
 
 /// A ray's side of the lane test: its origin and shear constants in every lane, and which
 /// vertex coordinates become the 2D x, y and the depth (`kx`, `ky`, `kz`).
@@ -92,14 +93,16 @@ impl BlockHits {
 }
 
 impl RayLanes {
-    /// The lanes of `ray`, once per ray.
+    /// The lanes of `ray`, once per ray. Only the shear constants: the whole test's matrix
+    /// ([`RayPrecomputed`](super::RayPrecomputed)) is built where a candidate needs that test, a few times in a
+    /// thousand queries (built per query, it cost about 80 instructions each).
     // Inlined into each query, as `RayPrecomputed::new` is.
     #[inline(always)]
-    pub fn new(ray: &RayPrecomputed) -> Self {
-        let axes = [ray.kx, ray.ky, ray.kz];
+    pub fn new(ray: &Ray) -> Self {
+        let RayShear { axes, shear } = RayShear::new(ray.dir);
         Self {
             origin: axes.map(|k| Vec4::splat(ray.origin.to_array()[k])),
-            shear: ray.shear.to_array().map(Vec4::splat),
+            shear: shear.to_array().map(Vec4::splat),
             axes,
         }
     }
@@ -171,7 +174,7 @@ impl RayLanes {
 mod tests {
     use glam::Vec3;
 
-    use super::super::{intersect_triangle, TriangleRows, BLOCK};
+    use super::super::{intersect_triangle, RayPrecomputed, TriangleRows, BLOCK};
     use super::*;
     use crate::geometry::Ray;
     use crate::test_rng::Rng;
@@ -195,7 +198,7 @@ mod tests {
     /// bit for bit.
     fn check(ray: &Ray, tris: &[[Vec3; 3]], t_max: f32) -> Counts {
         let pre = RayPrecomputed::new(ray);
-        let lanes = RayLanes::new(&pre);
+        let lanes = RayLanes::new(ray);
         // All in one leaf, in blocks of four from the first.
         let n = tris.len() as u32;
         let rows = TriangleRows::new(tris.iter().copied().zip(0..n), &[(0, n)]);
