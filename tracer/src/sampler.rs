@@ -10,7 +10,7 @@
 use glam::Vec2;
 
 /// A well-mixed 32-bit hash (Wellons' "lowbias32").
-pub fn hash_u32(mut x: u32) -> u32 {
+pub const fn hash_u32(mut x: u32) -> u32 {
     x ^= x >> 16;
     x = x.wrapping_mul(0x7feb_352d);
     x ^= x >> 15;
@@ -21,11 +21,29 @@ pub fn hash_u32(mut x: u32) -> u32 {
 
 /// Combines a hash with another value (boost's hash_combine, on a mixed value).
 pub fn hash_combine(seed: u32, v: u32) -> u32 {
-    seed ^ (hash_u32(v)
+    combine_hashed(seed, hash_u32(v))
+}
+
+/// [`hash_combine`] of a value whose [`hash_u32`] is `hashed`.
+#[inline(always)]
+fn combine_hashed(seed: u32, hashed: u32) -> u32 {
+    seed ^ (hashed
         .wrapping_add(0x9e37_79b9)
         .wrapping_add(seed << 6)
         .wrapping_add(seed >> 2))
 }
+
+/// [`hash_u32`] of the dimensions below 128 (those of paths up to 25 bounces deep), at
+/// compile time: every dimension a sample draws hashes its number first.
+const DIMENSION_HASHES: [u32; 128] = {
+    let mut h = [0; 128];
+    let mut d = 0;
+    while d < h.len() {
+        h[d] = hash_u32(d as u32);
+        d += 1;
+    }
+    h
+};
 
 /// Laine-Karras style permutation: a nested uniform scramble of the bit-reversed value.
 fn laine_karras_permutation(mut x: u32, seed: u32) -> u32 {
@@ -141,6 +159,9 @@ impl PixelSampler {
     }
 
     /// The next dimension pair as a point in [0,1)².
+    // Inlined, as `next_1d` is: left to itself the compiler called it out of line from one
+    // place in the path loop, and the call cost more than the table below saved.
+    #[inline(always)]
     pub fn next_2d(&mut self) -> Vec2 {
         let (shuffled, seed) = self.next_shuffled();
         let y = scramble_reversed(sobol1_reversed(shuffled), hash_combine(seed, 0x4c95_7f2d));
@@ -149,8 +170,14 @@ impl PixelSampler {
 
     /// Advances to the next dimension: its seed, and the sample index shuffled for it (Owen
     /// scrambled, so that each dimension visits the sequence in its own order).
+    #[inline(always)]
     fn next_shuffled(&mut self) -> (u32, u32) {
-        let seed = hash_combine(self.pixel_seed, self.dimension);
+        let d = self.dimension;
+        let hashed = match DIMENSION_HASHES.get(d as usize) {
+            Some(&h) => h,
+            None => hash_u32(d),
+        };
+        let seed = combine_hashed(self.pixel_seed, hashed);
         self.dimension += 1;
         (scramble_reversed(self.index_reversed, seed), seed)
     }
@@ -163,6 +190,7 @@ impl PixelSampler {
 
     /// The next dimension as a number in [0,1) (the first coordinate of a 2D point, so
     /// that 1D dimensions are stratified too; the second is not computed).
+    #[inline(always)]
     pub fn next_1d(&mut self) -> f32 {
         let (shuffled, seed) = self.next_shuffled();
         to_unit(Self::first(shuffled, seed))
@@ -200,6 +228,30 @@ mod tests {
             );
             for _ in 0..6 {
                 assert_eq!(a.next_1d(), b.next_2d().x);
+            }
+        }
+    }
+
+    /// Each dimension is seeded by `hash_combine(pixel seed, dimension)`, whether its
+    /// hash comes from the table or is computed (past the table's end, and far past it as
+    /// the spectral dimensions are).
+    #[test]
+    fn dimensions_in_and_past_the_table_are_seeded_alike() {
+        let n = DIMENSION_HASHES.len() as u32;
+        for start in [0, n - 2, 0xffff_0000] {
+            let mut s = PixelSampler::new(3, 4, 77, 1, 5);
+            s.start_dimension(start);
+            for d in start..start + 4 {
+                let seed = hash_combine(s.pixel_seed, d);
+                let shuffled = scramble_reversed(s.index_reversed, seed);
+                let y =
+                    scramble_reversed(sobol1_reversed(shuffled), hash_combine(seed, 0x4c95_7f2d));
+                let x = scramble_reversed(shuffled, hash_combine(seed, 0x5851_f42d));
+                assert_eq!(
+                    s.next_2d(),
+                    Vec2::new(to_unit(x), to_unit(y)),
+                    "dimension {d}"
+                );
             }
         }
     }
