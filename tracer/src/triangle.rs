@@ -33,7 +33,7 @@ pub(crate) const fn gamma(n: i32) -> f32 {
 /// largest (`kz`), the two others in winding-preserving order, and the shear that maps the
 /// direction onto +Z. All the lane test ([`RayLanes`]) needs of a ray besides its origin.
 #[derive(Clone, Copy, Debug)]
-pub struct RayShear {
+pub(crate) struct RayShear {
     /// `kx`, `ky`, `kz`, each below 3.
     pub axes: [usize; 3],
     /// (Sx, Sy, Sz) of the paper.

@@ -94,8 +94,9 @@ impl BlockHits {
 
 impl RayLanes {
     /// The lanes of `ray`, once per ray. Only the shear constants: the whole test's matrix
-    /// ([`RayPrecomputed`](super::RayPrecomputed)) is built where a candidate needs that test, a few times in a
-    /// thousand queries (built per query, it cost about 80 instructions each).
+    /// ([`RayPrecomputed`](super::RayPrecomputed)) is built where a candidate needs that
+    /// test, a few times in a thousand queries (built per query, it cost about 80
+    /// instructions each).
     // Inlined into each query, as `RayPrecomputed::new` is.
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
