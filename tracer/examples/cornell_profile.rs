@@ -2,10 +2,11 @@
 //! `render_tile` on all threads: camera paths per second, rays, and a hash of the image,
 //! so that a change meant to leave every pixel alone can show it did.
 //!
-//! `cargo run --release -p tracer --example cornell_profile -- [SPP] [spectral|motion]`
+//! `cargo run --release -p tracer --example cornell_profile -- [SPP] [spectral|motion] [sse2]`
 //! (default 1, RGB; `motion`: the animated demo at frame 12 with its shutter instead, for
-//! what moving frames cost). Under `valgrind --tool=callgrind` it gives the instruction
-//! counts in BENCHMARKS.md.
+//! what moving frames cost; `sse2`: the baseline copies of the hot loops, which a CPU
+//! without AVX runs, see `tracer::simd`). Under `valgrind --tool=callgrind` it gives the
+//! instruction counts in BENCHMARKS.md.
 use std::sync::Arc;
 use std::time::Instant;
 use tracer::film::{SampleRange, TileRect};
@@ -17,6 +18,9 @@ fn main() {
         .map(|s| s.parse().unwrap())
         .unwrap_or(1);
     let mode = std::env::args().nth(2);
+    if std::env::args().skip(2).any(|a| a == "sse2") {
+        tracer::simd::allow_avx(false);
+    }
     let moving = mode.as_deref() == Some("motion");
     let options = FrameOptions {
         width: 256,

@@ -10,7 +10,6 @@
 //! | `mesh` | [`MeshBvh`]: object-space triangles in the BVH's own order, at 1..S steps |
 //! | `instance` | [`Instance`], [`Placement`], [`SceneBvh`]: placed meshes, the BVH over them |
 //! | `motion` | the shutter-time convention; [`MotionTransform`] (lerp, slerp, lerp) |
-//! | `simd` | which node test runs: AVX's eight lanes where the CPU has them, else SSE2's |
 //! | `huge_pages` | large arrays moved onto 2 MiB pages, which few TLB entries cover |
 //!
 //! Both levels are built as binary trees in one flat layout, a node's two children adjacent
@@ -37,12 +36,10 @@ mod instance;
 mod mesh;
 mod motion;
 mod node;
-mod simd;
 mod wide;
 
 pub use instance::{Instance, Placement, SceneBvh};
 pub use mesh::MeshBvh;
 pub use motion::{MotionTransform, Segment};
-pub use simd::{allow_avx, avx};
 
 pub(crate) use huge_pages::on_huge_pages;

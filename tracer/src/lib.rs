@@ -13,6 +13,7 @@
 //! | [`triangle`] | the watertight ray/triangle test |
 //! | [`math`] | sine, power and the rest, the same bits on every machine |
 //! | [`bvh`] | SAH BVH per mesh and the top-level BVH over instances |
+//! | [`simd`] | which compiled copy of the hot loops runs: AVX's where the CPU has it, else SSE2's |
 //! | [`camera`] | perspective and orthographic cameras |
 //! | [`texture`] | images, samplers, KHR_texture_transform, sRGB |
 //! | [`material`] | glTF materials and their evaluation at a hit |
@@ -66,6 +67,7 @@ pub mod sampler;
 pub mod scene;
 pub mod settings;
 pub mod shapes;
+pub mod simd;
 pub mod spectrum;
 #[cfg(test)]
 mod test_rng;

@@ -473,30 +473,30 @@ fn layers_hash(layers: &Layers) -> u64 {
 /// constants were written; CI runs them on whatever CPU it gets.
 #[test]
 fn every_machine_renders_the_same_bits() {
-    // Both BVH node tests: AVX's, where this CPU has it, and SSE2's, which a CPU without
-    // AVX runs (the switch is process-wide; other tests running meanwhile get the same
-    // bits either way, which is what this checks).
-    if !tracer::bvh::avx() {
+    // Both compiled copies of the path loop and the BVH node test: AVX's, where this CPU
+    // has it, and SSE2's, which a CPU without AVX runs (the switch is process-wide; other
+    // tests running meanwhile get the same bits either way, which is what this checks).
+    if !tracer::simd::avx() {
         // Straight to stderr, past the test harness's capture: a skip must be seen.
         use std::io::Write;
         let _ = writeln!(
             std::io::stderr(),
-            "WARNING: this CPU has no AVX: only the SSE2 node test is checked"
+            "WARNING: this CPU has no AVX: only the SSE2 copy is checked"
         );
     }
     for avx in [true, false] {
-        tracer::bvh::allow_avx(avx);
-        let node_test = if tracer::bvh::avx() { "AVX" } else { "SSE2" };
+        tracer::simd::allow_avx(avx);
+        let copy = if tracer::simd::avx() { "AVX" } else { "SSE2" };
         assert_eq!(
             renders_that_touch_every_function(),
             [16026772540914703612, 2190308934475342347],
-            "this machine renders other bits ({node_test} node test) than the machine that \
-             wrote the constants: CPU-dependent maths reached the tracer (a platform sin, exp \
+            "this machine renders other bits ({copy} copy) than the machine that wrote the \
+             constants: CPU-dependent maths reached the tracer (a platform sin, exp \
              or pow, or a SIMD path whose lanes round differently). If the image changed on \
              purpose, these are the new constants."
         );
     }
-    tracer::bvh::allow_avx(true);
+    tracer::simd::allow_avx(true);
 }
 
 /// The hashes of two small renders that touch every transcendental function of the tracer.

@@ -329,9 +329,9 @@ pub fn run(args: RaysArgs) -> anyhow::Result<()> {
         }
     };
     if args.sse2 {
-        tracer::bvh::allow_avx(false);
+        tracer::simd::allow_avx(false);
     }
-    let node_test = if tracer::bvh::avx() { "AVX" } else { "SSE2" };
+    let node_test = if tracer::simd::avx() { "AVX" } else { "SSE2" };
     println!(
         "\n{name}, {} triangles, one thread, {} rays per set, the fastest of {} rounds, \
          Tessera's node test in {node_test} lanes:\n",

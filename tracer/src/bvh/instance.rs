@@ -10,10 +10,10 @@ use super::huge_pages::on_huge_pages;
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
 use super::node::{ray_is_valid, with_stack};
-#[cfg(target_arch = "x86_64")]
-use super::simd;
 use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};
+#[cfg(target_arch = "x86_64")]
+use crate::simd;
 use crate::triangle::gamma;
 
 /// SAH costs for instances: testing one means transforming the ray and entering a mesh
@@ -367,7 +367,7 @@ impl SceneBvh {
         }
     }
 
-    /// [`Self::search_with`] with the node test this process uses (see `bvh/simd.rs`).
+    /// [`Self::search_with`] with the node test this process uses (see `simd.rs`).
     #[inline(always)]
     fn search<'m, const ANY_HIT: bool, const MOTION: bool, M: Fn(u32) -> &'m MeshBvh>(
         &self,

@@ -8,10 +8,10 @@ use super::motion::Segment;
 use super::node::{
     ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
 };
-#[cfg(target_arch = "x86_64")]
-use super::simd;
 use super::wide::{collapse, leaves, prefetch, traverse_wide, Merge, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
+#[cfg(target_arch = "x86_64")]
+use crate::simd;
 use crate::triangle::{intersect_triangle, LaneHit, RayLanes, RayPrecomputed, TriangleRows};
 
 /// SAH costs for triangles. A node visit (two slab tests) and a watertight triangle test
@@ -279,7 +279,7 @@ impl MeshBvh {
         .is_some()
     }
 
-    /// [`Self::search_with`] with the node test this process uses (see `bvh/simd.rs`).
+    /// [`Self::search_with`] with the node test this process uses (see `simd.rs`).
     #[inline(always)]
     fn search<const ANY_HIT: bool, const MOTION: bool>(
         &self,

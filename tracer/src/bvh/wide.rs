@@ -7,7 +7,7 @@
 //! a ray visits is a cache miss, fewer levels are fewer misses (four-wide, as this was
 //! before, traced the incoherent rays of a 1M-triangle mesh 20% slower). The eight lanes
 //! are tested in one AVX register where the CPU has AVX, else as two halves of four in
-//! SSE2 registers, which every x86_64 CPU has (`bvh/simd.rs` picks, once per query). Each
+//! SSE2 registers, which every x86_64 CPU has (`simd.rs` picks, once per query). Each
 //! lane runs the same IEEE operations per axis as [`BoxRay::entry`](super::node::BoxRay)
 //! in either, so a child is entered at the same distance, and hit, exactly when the binary
 //! test says so.
@@ -280,7 +280,7 @@ impl WideRay {
     /// The distances at which the ray enters `node`'s children, and a bit per child that
     /// it enters within `[0, t_max]`: with `AVX`, in one AVX register of eight lanes,
     /// else in SSE2 halves of four. `AVX` is true only in code that
-    /// [`with_avx`](super::simd::with_avx) runs.
+    /// [`with_avx`](crate::simd::with_avx) runs.
     #[inline(always)]
     fn enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> ([f32; WIDTH], u32) {
         #[cfg(target_arch = "x86_64")]

@@ -374,7 +374,7 @@ fn empty_lanes_are_never_entered() {
 /// products in the slab planes), from on a plane, and at random.
 #[test]
 fn the_avx_node_test_gives_the_same_bits_as_sse2() {
-    if !super::super::simd::avx() {
+    if !crate::simd::avx() {
         // Straight to stderr, past the test harness's capture: a skip must be seen.
         use std::io::Write;
         let _ = writeln!(
