@@ -18,16 +18,13 @@ use crate::frame::PreparedFrame;
 use crate::geometry::{offset_ray_origin_bounded, Ray};
 use crate::light::Emitter;
 use crate::material::dispersive_ior;
-use crate::sampler::PixelSampler;
+use crate::sampler::{PixelSampler, BOUNCE_DIMENSIONS};
 use crate::settings::RenderSettings;
 use crate::spectrum::{DenseSpectrum, SampledWavelengths, SigmoidPolynomial};
 
 /// Sampler dimensions used by the camera before the first bounce: pixel position, then
 /// the shutter time (drawn only when something moves, so a still frame skips it).
 const CAMERA_DIMENSIONS: u32 = 3;
-/// Sampler dimensions consumed by each bounce: light choice, light point, lobe choice,
-/// direction, Russian roulette.
-const BOUNCE_DIMENSIONS: u32 = 5;
 /// The sampler dimension of the spectral path's wavelengths, apart from the others so
 /// that the RGB path's are where they were.
 const WAVELENGTH_DIMENSION: u32 = 0xffff_0000;
@@ -390,7 +387,6 @@ fn trace_path<W: Carrier>(
         let depth = s.depth;
         let ray = s.ray;
         let sampler = &mut s.sampler;
-        sampler.start_dimension(CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
         out.rays += 1;
         let Some(hit) = frame.intersect(&ray, f32::INFINITY) else {
             // The environment.
@@ -491,7 +487,6 @@ fn trace_path<W: Carrier>(
                 .eval(nm);
                 sampler.start_dimension(FLUORESCENCE_DIMENSION + 2 * depth);
                 let (u_choice, u_nm) = (sampler.next_1d(), sampler.next_1d());
-                sampler.start_dimension(CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
                 let step = paint.sample(nm, r, u_choice, u_nm);
                 s.throughput = s.throughput * step.weight;
                 s.carrier.shift_hero(step.nm);
@@ -502,6 +497,7 @@ fn trace_path<W: Carrier>(
         if depth == settings.max_depth {
             return;
         }
+        let u = sampler.next_bounce(CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
         let wo_local = sp.frame.to_local(wo);
         let scatter = match sp.coat_normal {
             None => bsdf.at(wo_local),
@@ -509,10 +505,11 @@ fn trace_path<W: Carrier>(
         };
 
         // Next-event estimation.
-        let u_light = sampler.next_1d();
-        let u_point = sampler.next_2d();
         if !bsdf.is_delta() {
-            if let Some(ls) = frame.lights.sample(sp.p, Some(sp.ng), u_light, u_point) {
+            if let Some(ls) = frame
+                .lights
+                .sample(sp.p, Some(sp.ng), u.light, u.light_point)
+            {
                 let wi_local = sp.frame.to_local(ls.wi);
                 let (f, bsdf_pdf) = match &scatter {
                     Some(s) if consistent_side(&sp, ls.wi, wi_local) => {
@@ -565,11 +562,9 @@ fn trace_path<W: Carrier>(
         }
 
         // Continue the path by sampling the BSDF.
-        let u_lobe = sampler.next_1d();
-        let u_dir = sampler.next_2d();
         let Some((scatter, bs)) = scatter
             .as_ref()
-            .and_then(|s| Some((s, s.sample(u_lobe, u_dir)?)))
+            .and_then(|s| Some((s, s.sample(u.lobe, u.direction)?)))
         else {
             return;
         };
@@ -622,7 +617,7 @@ fn trace_path<W: Carrier>(
             .russian_roulette
             .is_some_and(|from| s.depth >= from);
         if roulette && weight < 1.0 {
-            if sampler.next_1d() >= weight {
+            if u.roulette >= weight {
                 return;
             }
             s.throughput /= weight;

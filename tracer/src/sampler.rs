@@ -195,6 +195,87 @@ impl PixelSampler {
         let (shuffled, seed) = self.next_shuffled();
         to_unit(Self::first(shuffled, seed))
     }
+
+    /// What a bounce draws, from dimension `dimension` on: the values of five calls
+    /// `next_1d`, `next_2d`, `next_1d`, `next_2d`, `next_1d`, the same bits, computed
+    /// together in SIMD lanes (the scrambles of all five dimensions in one pass, then the
+    /// seven coordinates in another). Leaves the sampler where those calls would.
+    #[inline(always)]
+    pub fn next_bounce(&mut self, dimension: u32) -> BounceDimensions {
+        let seed: Lanes = std::array::from_fn(|k| {
+            // Lanes past the fifth repeat it: they keep the passes eight wide.
+            let d = dimension + (k as u32).min(BOUNCE_DIMENSIONS - 1);
+            let hashed = match DIMENSION_HASHES.get(d as usize) {
+                Some(&h) => h,
+                None => hash_u32(d),
+            };
+            combine_hashed(self.pixel_seed, hashed)
+        });
+        let shuffled = scramble_reversed_lanes([self.index_reversed; LANES], seed);
+        // Lanes 0..5 the dimensions' first coordinates, 5 and 6 the second ones of the
+        // two 2D dimensions (1 and 3), 7 a copy of 6.
+        let second = |k: usize| {
+            (
+                sobol1_reversed(shuffled[k]),
+                hash_combine(seed[k], 0x4c95_7f2d),
+            )
+        };
+        let (x5, s5) = second(1);
+        let (x6, s6) = second(3);
+        let value = std::array::from_fn(|k| match k {
+            0..5 => shuffled[k],
+            5 => x5,
+            _ => x6,
+        });
+        let value_seed = std::array::from_fn(|k| match k {
+            0..5 => hash_combine(seed[k], 0x5851_f42d),
+            5 => s5,
+            _ => s6,
+        });
+        let u = scramble_reversed_lanes(value, value_seed).map(to_unit);
+        self.dimension = dimension + BOUNCE_DIMENSIONS;
+        BounceDimensions {
+            light: u[0],
+            light_point: Vec2::new(u[1], u[5]),
+            lobe: u[2],
+            direction: Vec2::new(u[3], u[6]),
+            roulette: u[4],
+        }
+    }
+}
+
+/// Sampler dimensions consumed by each bounce: light choice, light point, lobe choice,
+/// direction, Russian roulette ([`PixelSampler::next_bounce`]).
+pub const BOUNCE_DIMENSIONS: u32 = 5;
+
+/// The random numbers of one bounce, in the order the integrator draws them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BounceDimensions {
+    /// Which light next-event estimation samples.
+    pub light: f32,
+    /// The point on that light.
+    pub light_point: Vec2,
+    /// Which lobe of the BSDF the path continues by.
+    pub lobe: f32,
+    /// The direction within that lobe.
+    pub direction: Vec2,
+    /// Russian roulette's draw.
+    pub roulette: f32,
+}
+
+/// The width of [`PixelSampler::next_bounce`]'s passes.
+const LANES: usize = 8;
+type Lanes = [u32; LANES];
+
+/// [`scramble_reversed`] lane by lane, written so that the compiler keeps it in SIMD
+/// registers.
+#[inline(always)]
+fn scramble_reversed_lanes(reversed: Lanes, seed: Lanes) -> Lanes {
+    let mut out = [0; LANES];
+    for k in 0..LANES {
+        out[k] = scramble_reversed(reversed[k], seed[k]);
+    }
+    out
 }
 
 #[cfg(test)]
@@ -252,6 +333,33 @@ mod tests {
                     Vec2::new(to_unit(x), to_unit(y)),
                     "dimension {d}"
                 );
+            }
+        }
+    }
+
+    /// A bounce's dimensions drawn together are those of one call per dimension, in and
+    /// past the dimension hashes' table.
+    #[test]
+    fn a_bounce_drawn_in_lanes_is_its_dimensions_drawn_one_by_one() {
+        let n = DIMENSION_HASHES.len() as u32;
+        for start in [0, 3, n - 3, n, 0xffff_0000] {
+            for index in [0, 1, 77, 4095] {
+                let mut one_by_one = PixelSampler::new(3, 4, index, 1, 5);
+                one_by_one.start_dimension(start);
+                let expected = BounceDimensions {
+                    light: one_by_one.next_1d(),
+                    light_point: one_by_one.next_2d(),
+                    lobe: one_by_one.next_1d(),
+                    direction: one_by_one.next_2d(),
+                    roulette: one_by_one.next_1d(),
+                };
+                let mut together = PixelSampler::new(3, 4, index, 1, 5);
+                assert_eq!(
+                    together.next_bounce(start),
+                    expected,
+                    "dimension {start}, index {index}"
+                );
+                assert_eq!(together.next_1d(), one_by_one.next_1d());
             }
         }
     }
