@@ -32,8 +32,9 @@ pub fn allow_avx(allowed: bool) {
     AVX_OFF.store(!allowed, Ordering::Relaxed);
 }
 
-/// Runs `f` compiled for AVX: what it inlines (a query's loop, a path loop) may use AVX
-/// instructions.
+/// Runs `f` compiled for AVX: what it inlines (a query's loop) may use AVX instructions.
+/// (The path loop has its own AVX function, `integrator::trace_sample_avx`: run through
+/// this, its closure was left out of line, compiled for the baseline.)
 ///
 /// # Safety
 /// The CPU must have AVX ([`avx`] says so).
