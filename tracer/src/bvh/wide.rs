@@ -471,7 +471,7 @@ pub(super) fn traverse_wide<const AVX: bool>(
         // sort below orders them). As Embree's traversal does: most nodes are entered by
         // one or two children, and a push, a sort and a pop mispredict where a compare
         // need not.
-        let next = match hits.count_ones() {
+        let next = match ones_up_to_three(hits) {
             0 => None,
             1 if nearest_first => Some(hits.trailing_zeros() as usize),
             2 if nearest_first => {
@@ -536,6 +536,23 @@ pub(super) fn traverse_wide<const AVX: bool>(
                 return;
             }
         }
+    }
+}
+
+/// How many bits of `bits` are set, counting three for more than two: by clearing the
+/// lowest set bit twice, where `count_ones` is a dozen instructions without the POPCNT
+/// instruction, which the baseline CPU lacks (3% of a closest-hit query's instructions).
+#[inline(always)]
+fn ones_up_to_three(bits: u32) -> u32 {
+    let clear_lowest = |b: u32| b & b.wrapping_sub(1);
+    if bits == 0 {
+        0
+    } else if clear_lowest(bits) == 0 {
+        1
+    } else if clear_lowest(clear_lowest(bits)) == 0 {
+        2
+    } else {
+        3
     }
 }
 

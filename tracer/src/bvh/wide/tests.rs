@@ -358,6 +358,17 @@ fn nan_lanes_keep_the_accumulator() {
 }
 
 #[test]
+fn ones_up_to_three_counts_every_mask_of_a_node() {
+    for bits in 0..1u32 << WIDTH {
+        assert_eq!(
+            ones_up_to_three(bits),
+            bits.count_ones().min(3),
+            "{bits:#b}"
+        );
+    }
+}
+
+#[test]
 fn empty_lanes_are_never_entered() {
     let node = WideNode::EMPTY;
     for dir in [Vec3::X, -Vec3::Y, Vec3::new(0.0, -0.0, 1.0), Vec3::ONE] {
