@@ -8,7 +8,7 @@ use glam::{Affine3A, DVec3, Mat3A, Vec3, Vec4};
 
 use crate::bvh::{Instance, MeshBvh, Placement, SceneBvh};
 use crate::camera::Camera;
-use crate::geometry::Ray;
+use crate::geometry::{hit_point_error, translated_hit_point_error, Ray};
 use crate::light::LightSet;
 use crate::material::{AlphaMode, Material};
 use crate::motion::DeformedMesh;
@@ -135,6 +135,28 @@ impl TriangleAt<'_> {
             .map_or(&self.inst.normal_to_world, |p| &p.normal_to_world)
     }
 
+    /// The world ray in object space (the direction as the transform makes it, not
+    /// renormalised, so that `t` agrees between the spaces).
+    #[inline(always)]
+    pub fn object_ray(&self, ray: &Ray) -> Ray {
+        match &self.moved {
+            None => self.inst.object_ray(ray),
+            Some(p) => p.object_ray(ray),
+        }
+    }
+
+    /// Object-space point `p`, known to within `error` per coordinate, in world space, and
+    /// the bound on its error there ([`hit_point_error`]).
+    #[inline(always)]
+    pub fn world_point(&self, p: Vec3, error: Vec3) -> (Vec3, Vec3) {
+        if self.inst.translated {
+            let t = Vec3::from(self.inst.to_world.translation);
+            return (p + t, translated_hit_point_error(t, p, error));
+        }
+        let m = self.to_world();
+        (m.transform_point3(p), hit_point_error(m, p, error))
+    }
+
     /// Object-space geometric normal by the winding (not normalised), turned for the baked
     /// vertices of a mirrored node (a still instance's mirror is in its normal matrix).
     pub fn face_normal(&self) -> Vec3 {
@@ -151,6 +173,10 @@ impl TriangleAt<'_> {
     /// face right for mirrored instances too (glTF flips the winding when the determinant
     /// is negative). Zero for a degenerate triangle.
     pub fn front_normal(&self) -> Vec3 {
+        if self.inst.translated {
+            // The identity's product, but for the sign of a zero component.
+            return self.face_normal().normalize_or_zero();
+        }
         (*self.normal_to_world() * self.face_normal()).normalize_or_zero()
     }
 

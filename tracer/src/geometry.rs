@@ -244,6 +244,13 @@ pub fn hit_point_error(to_world: &Affine3A, object: Vec3, object_error: Vec3) ->
     m * object_error * (1.0 + gamma(3)) + (m * object.abs() + t) * (2.0 * gamma(3))
 }
 
+/// [`hit_point_error`] for a `to_world` that only translates by `t`: the same numbers
+/// (the identity's products and zero terms are exact), without the matrix.
+pub fn translated_hit_point_error(t: Vec3, object: Vec3, object_error: Vec3) -> Vec3 {
+    use crate::triangle::gamma;
+    object_error * (1.0 + gamma(3)) + (object.abs() + t.abs()) * (2.0 * gamma(3))
+}
+
 /// [`offset_ray_origin`] for a point known to within `error` (per coordinate, see
 /// [`hit_point_error`]): moved along `ng` past the error first (pbrt-v4's
 /// `OffsetRayOrigin`), then by the same ulp steps, but without the absolute floor near the

@@ -48,6 +48,10 @@ pub struct Instance {
     pub bounds: Aabb,
     /// The transform over the shutter; None for a static instance.
     pub motion: Option<Arc<MotionTransform>>,
+    /// Whether the instance is static and `to_world` only translates (a glTF node without
+    /// a rotation or scale, as most are, in the frame's camera-relative space): a ray then
+    /// enters the mesh by adding to its origin alone, not through a matrix.
+    pub translated: bool,
 }
 
 /// An instance's matrices at one time: what shading a hit needs.
@@ -89,6 +93,12 @@ impl Placement {
     fn is_singular(&self) -> bool {
         self.to_object == Affine3A::ZERO
     }
+
+    /// The world ray in object space (the direction transformed, not renormalised).
+    #[inline(always)]
+    pub fn object_ray(&self, ray: &Ray) -> Ray {
+        transform_ray(&self.to_object, ray)
+    }
 }
 
 /// The f32 affine transform of a (camera-relative, f64) matrix, as static instances use.
@@ -116,6 +126,7 @@ impl Instance {
             normal_to_world: p.normal_to_world,
             bounds,
             motion: None,
+            translated: to_world.matrix3 == Mat3A::IDENTITY,
         }
     }
 
@@ -156,6 +167,7 @@ impl Instance {
             normal_to_world: p.normal_to_world,
             bounds: motion.bounds(mesh_bounds),
             motion: Some(Arc::new(motion)),
+            translated: false,
         }
     }
 
@@ -188,6 +200,13 @@ impl Instance {
     /// moving instance). The direction is transformed but not renormalised, so ray
     /// parameters agree between the two spaces.
     pub fn object_ray(&self, ray: &Ray) -> Ray {
+        if self.translated {
+            // What the matrix gives, but for the sign of a zero component.
+            return Ray {
+                origin: ray.origin + Vec3::from(self.to_object.translation),
+                ..*ray
+            };
+        }
         transform_ray(&self.to_object, ray)
     }
 

@@ -6,7 +6,7 @@ use glam::Vec3;
 
 use crate::bsdf::SurfaceParams;
 use crate::frame::PreparedFrame;
-use crate::geometry::{barycentric, hit_point_error, plane_hit_point, Frame, Hit, Ray};
+use crate::geometry::{barycentric, plane_hit_point, Frame, Hit, Ray};
 
 /// Shading and geometric normals closer than this (in cosine: 0.08°) count as one: the
 /// wedge between their tangent planes holds a fraction of order 1e-6 of any lobe, where
@@ -18,7 +18,8 @@ const FLAT_COS: f32 = 1.0 - 1e-6;
 pub(crate) struct SurfacePoint {
     /// Position (camera-relative world space).
     pub p: Vec3,
-    /// Bound on the error of `p`, per coordinate (see [`hit_point_error`]).
+    /// Bound on the error of `p`, per coordinate (see
+    /// [`hit_point_error`](crate::geometry::hit_point_error)).
     pub p_error: Vec3,
     /// Geometric normal, unit, on the side of the surface's front face.
     pub ng: Vec3,
@@ -57,11 +58,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     // Position where the object-space ray meets the triangle's plane, in double precision:
     // exactly on the plane, and not off along it by the rounding of barycentrics times
     // vertices, which on a triangle 1e5 across is centimetres. Then to world.
-    let object_ray = Ray {
-        origin: tri.to_object().transform_point3(ray.origin),
-        dir: tri.to_object().transform_vector3(ray.dir),
-        time: ray.time,
-    };
+    let object_ray = tri.object_ray(ray);
     let (p_object, object_error) =
         plane_hit_point(&object_ray, tri.positions).unwrap_or_else(|| {
             // Interpolated instead: off by the vertices' rounding (pbrt-v4's bound).
@@ -72,8 +69,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
                 weights * crate::triangle::gamma(7),
             )
         });
-    let p = tri.to_world().transform_point3(p_object);
-    let p_error = hit_point_error(tri.to_world(), p_object, object_error);
+    let (p, p_error) = tri.world_point(p_object, object_error);
     let ng_raw = tri.front_normal();
     let ng = if ng_raw == Vec3::ZERO {
         -ray.dir.normalize()

@@ -42,6 +42,39 @@ fn singular_transforms_give_unhittable_instances_without_nan() {
     }
 }
 
+/// An instance that only translates takes the shortcuts its flag allows: rays enter by
+/// their origin alone, and hit points leave with the translation's error bound, the
+/// numbers the matrices give (as floats: a zero may change its sign).
+#[test]
+fn translated_instances_give_the_numbers_of_their_matrices() {
+    use crate::geometry::{hit_point_error, translated_hit_point_error};
+    let mesh = quad_mesh();
+    let mut rng = Rng(11);
+    for _ in 0..1000 {
+        let t = (rng.vec3() - 0.5) * 200.0;
+        let m = Affine3A::from_translation(t);
+        let inst = Instance::new(0, m, &mesh.bounds());
+        assert!(inst.translated);
+        let ray = Ray::new((rng.vec3() - 0.5) * 50.0, rng.vec3() - 0.5);
+        let (fast, matrix) = (inst.object_ray(&ray), transform_ray(&inst.to_object, &ray));
+        assert_eq!((fast.origin, fast.dir), (matrix.origin, matrix.dir));
+        let (p, e) = ((rng.vec3() - 0.5) * 10.0, rng.vec3() * 1e-6);
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        assert_eq!(
+            bits(translated_hit_point_error(t, p, e)),
+            bits(hit_point_error(&m, p, e))
+        );
+    }
+    // A turn, a scale or a motion takes the matrices.
+    let turned = Affine3A::from_rotation_translation(Quat::from_rotation_y(0.3), Vec3::X);
+    assert!(!Instance::new(0, turned, &mesh.bounds()).translated);
+    assert!(!Instance::new(0, Affine3A::from_scale(Vec3::splat(2.0)), &mesh.bounds()).translated);
+    let steps = [DMat4::IDENTITY, DMat4::from_translation(DVec3::X)];
+    assert!(!Instance::moving(0, &steps, &mesh.bounds()).translated);
+    let still = [DMat4::from_translation(DVec3::X); 2];
+    assert!(Instance::moving(0, &still, &mesh.bounds()).translated);
+}
+
 #[test]
 fn t_is_the_same_in_world_and_object_space() {
     let mesh = quad_mesh();
