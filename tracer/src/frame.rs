@@ -304,15 +304,44 @@ impl PreparedFrame {
         !mat.cuts_away(alpha, u)
     }
 
+    /// Whether a hit of triangle `t` of instance `i` counts, in a frame with a filter
+    /// (see [`Self::accepts`]).
+    #[inline(always)]
+    fn counts(&self, ray: &Ray, i: u32, t: u32, b1: f32, b2: f32) -> bool {
+        !self.filtered_instances[i as usize] || self.accepts(ray, i, t, b1, b2)
+    }
+
     /// The closest accepted hit along `ray` before `t_max`.
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<crate::geometry::Hit> {
         let meshes = |m| self.mesh_bvh(m);
         if self.any_hit_filter {
-            self.bvh.intersect(meshes, ray, t_max, |i, t, b1, b2| {
-                !self.filtered_instances[i as usize] || self.accepts(ray, i, t, b1, b2)
-            })
+            let counts = |i, t, b1, b2| self.counts(ray, i, t, b1, b2);
+            self.bvh.intersect(meshes, ray, t_max, counts)
         } else {
             self.bvh.intersect(meshes, ray, t_max, |_, _, _, _| true)
+        }
+    }
+
+    /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: a hit if any)
+    /// for the path loop's AVX copy, into which it inlines (see `SceneBvh::query_avx`).
+    ///
+    /// # Safety
+    /// The CPU must have AVX ([`crate::simd::avx`] says so).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) unsafe fn query_avx<const ANY_HIT: bool>(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+    ) -> Option<crate::geometry::Hit> {
+        let meshes = |m| self.mesh_bvh(m);
+        if self.any_hit_filter {
+            let counts = |i, t, b1, b2| self.counts(ray, i, t, b1, b2);
+            self.bvh.query_avx::<ANY_HIT>(meshes, ray, t_max, counts)
+        } else {
+            self.bvh
+                .query_avx::<ANY_HIT>(meshes, ray, t_max, |_, _, _, _| true)
         }
     }
 
@@ -320,9 +349,8 @@ impl PreparedFrame {
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         let meshes = |m| self.mesh_bvh(m);
         if self.any_hit_filter {
-            self.bvh.occluded(meshes, ray, t_max, |i, t, b1, b2| {
-                !self.filtered_instances[i as usize] || self.accepts(ray, i, t, b1, b2)
-            })
+            let counts = |i, t, b1, b2| self.counts(ray, i, t, b1, b2);
+            self.bvh.occluded(meshes, ray, t_max, counts)
         } else {
             self.bvh.occluded(meshes, ray, t_max, |_, _, _, _| true)
         }

@@ -15,7 +15,7 @@ use surface::{surface_point, SurfacePoint};
 use crate::bsdf::{Bsdf, BsdfAt, SurfaceParams};
 use crate::film::SampleValue;
 use crate::frame::PreparedFrame;
-use crate::geometry::{offset_ray_origin_bounded, Ray};
+use crate::geometry::{offset_ray_origin_bounded, Hit, Ray};
 use crate::light::Emitter;
 use crate::material::dispersive_ior;
 use crate::sampler::{PixelSampler, BOUNCE_DIMENSIONS};
@@ -300,7 +300,7 @@ unsafe fn trace_sample_avx<W: Carrier>(
     index: u32,
     carrier: impl FnOnce(&mut PixelSampler) -> W,
 ) -> SampleValue {
-    trace_sample_with(frame, settings, x, y, index, carrier)
+    trace_sample_with::<W, true>(frame, settings, x, y, index, carrier)
 }
 
 /// [`trace_sample_with`] compiled for the baseline CPU.
@@ -313,12 +313,13 @@ fn trace_sample_baseline<W: Carrier>(
     index: u32,
     carrier: impl FnOnce(&mut PixelSampler) -> W,
 ) -> SampleValue {
-    trace_sample_with(frame, settings, x, y, index, carrier)
+    trace_sample_with::<W, false>(frame, settings, x, y, index, carrier)
 }
 
-/// [`trace_sample`] carrying what `carrier` draws from the sampler.
+/// [`trace_sample`] carrying what `carrier` draws from the sampler. With `AVX` (only in
+/// [`trace_sample_avx`]), its ray queries are the AVX ones, inlined.
 #[inline(always)]
-fn trace_sample_with<W: Carrier>(
+fn trace_sample_with<W: Carrier, const AVX: bool>(
     frame: &PreparedFrame,
     settings: &RenderSettings,
     x: u32,
@@ -363,7 +364,7 @@ fn trace_sample_with<W: Carrier>(
         sampler,
     });
     while let Some(path) = next {
-        trace_path(frame, settings, view_axis, path, &mut walk);
+        trace_path::<W, AVX>(frame, settings, view_axis, path, &mut walk);
         next = walk.pending.pop();
     }
     walk.out.radiance = walk.carrier.to_rgb(walk.radiance);
@@ -374,7 +375,7 @@ fn trace_sample_with<W: Carrier>(
 // Inlined into its one caller, as the compiler chose before the path grew past its limit:
 // 2% fewer instructions on the Cornell box (the sampler's state stays in registers).
 #[inline(always)]
-fn trace_path<W: Carrier>(
+fn trace_path<W: Carrier, const AVX: bool>(
     frame: &PreparedFrame,
     settings: &RenderSettings,
     view_axis: Vec3,
@@ -388,7 +389,7 @@ fn trace_path<W: Carrier>(
         let ray = s.ray;
         let sampler = &mut s.sampler;
         out.rays += 1;
-        let Some(hit) = frame.intersect(&ray, f32::INFINITY) else {
+        let Some(hit) = closest_hit::<AVX>(frame, &ray, f32::INFINITY) else {
             // The environment.
             if s.absorption != Vec3::ZERO {
                 s.throughput *= s.carrier.weight(transmittance(s.absorption, f32::INFINITY));
@@ -546,7 +547,7 @@ fn trace_path<W: Carrier>(
                             _ => f32::INFINITY,
                         };
                         out.rays += 1;
-                        if !frame.occluded(&shadow, t_max) {
+                        if !occluded::<AVX>(frame, &shadow, t_max) {
                             let w = if ls.delta {
                                 1.0
                             } else {
@@ -634,6 +635,30 @@ fn trace_path<W: Carrier>(
             }
         }
     }
+}
+
+/// The closest hit on `ray` before `t_max`; with `AVX` (the path loop's AVX copy) by the
+/// AVX query, inlined.
+#[inline(always)]
+fn closest_hit<const AVX: bool>(frame: &PreparedFrame, ray: &Ray, t_max: f32) -> Option<Hit> {
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        // SAFETY: `AVX` is true only in `trace_sample_avx`, which runs where the CPU has
+        // AVX.
+        return unsafe { frame.query_avx::<false>(ray, t_max) };
+    }
+    frame.intersect(ray, t_max)
+}
+
+/// Whether anything blocks `ray` before `t_max`; with `AVX` as [`closest_hit`].
+#[inline(always)]
+fn occluded<const AVX: bool>(frame: &PreparedFrame, ray: &Ray, t_max: f32) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        // SAFETY: as in `closest_hit`.
+        return unsafe { frame.query_avx::<true>(ray, t_max) }.is_some();
+    }
+    frame.occluded(ray, t_max)
 }
 
 /// The spectrum `id` names among the frame's light spectra (`get`, not an index: the RGB

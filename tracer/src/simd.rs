@@ -6,6 +6,8 @@
 //!   SSE2's two halves of four (the node test must be inlined to pay).
 //! - A camera sample's path loop ([`crate::integrator::trace_sample`]) likewise: AVX's
 //!   three-operand instructions spare the register copies of SSE2's two-operand ones.
+//!   Its AVX copy inlines the AVX queries (`PreparedFrame::query_avx`): no second choice
+//!   and no call per ray.
 //!
 //! Both copies are the same IEEE operations (Rust never fuses a multiply and an add on its
 //! own, and nothing here asks for it), so a tile has the same bits on either:

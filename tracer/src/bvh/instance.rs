@@ -386,6 +386,30 @@ impl SceneBvh {
         }
     }
 
+    /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: any hit found)
+    /// for a caller compiled for AVX, into which it inlines: the path loop's AVX copy
+    /// (`integrator::trace_sample_avx`) queries without asking for the CPU's features
+    /// again and without a call per ray.
+    ///
+    /// # Safety
+    /// The CPU must have AVX ([`simd::avx`] says so).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) unsafe fn query_avx<'m, const ANY_HIT: bool>(
+        &self,
+        mesh: impl Fn(u32) -> &'m MeshBvh,
+        ray: &Ray,
+        t_max: f32,
+        accept: impl FnMut(u32, u32, f32, f32) -> bool,
+    ) -> Option<Hit> {
+        if self.motion {
+            self.search_with::<ANY_HIT, true, true, _>(mesh, ray, t_max, accept)
+        } else {
+            self.search_with::<ANY_HIT, false, true, _>(mesh, ray, t_max, accept)
+        }
+    }
+
     /// [`Self::search_with`] with the node test this process uses (see `simd.rs`).
     #[inline(always)]
     fn search<'m, const ANY_HIT: bool, const MOTION: bool, M: Fn(u32) -> &'m MeshBvh>(
