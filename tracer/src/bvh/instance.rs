@@ -217,7 +217,7 @@ impl Instance {
             None => self.object_ray(ray),
             // Only the inverse is needed here; a singular time gives a zero direction,
             // which hits nothing.
-            Some(motion) => transform_ray(&Placement::new(motion.at(ray.time)).to_object, ray),
+            Some(motion) => Placement::new(motion.at(ray.time)).object_ray(ray),
         }
     }
 }
