@@ -7,7 +7,7 @@ use glam::{Affine3A, Quat, Vec2, Vec3};
 
 use crate::bvh::Segment;
 use crate::geometry::Ray;
-use crate::math;
+use crate::math::{self, SlerpArc};
 
 /// A glTF camera projection.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,7 +48,9 @@ pub struct Camera {
     pub aspect: f32,
     /// Where the camera is at evenly spaced motion steps over the shutter, when it moves
     /// inside it; `None` for a still camera (then `to_world` holds at every time).
-    pub motion: Option<Arc<[RigidStep]>>,
+    motion: Option<Arc<[RigidStep]>>,
+    /// The arc from each motion step's rotation to the next's (empty for a still camera).
+    arcs: Arc<[SlerpArc]>,
 }
 
 /// A camera placement at one motion step: position and orientation, no scale.
@@ -79,13 +81,25 @@ impl Camera {
             Projection::Perspective { yfov, .. } => math::tan(0.5 * yfov),
             Projection::Orthographic { ymag, .. } => ymag,
         };
+        let arcs = motion
+            .as_deref()
+            .unwrap_or_default()
+            .windows(2)
+            .map(|w| SlerpArc::between(w[0].rotation, w[1].rotation))
+            .collect();
         Camera {
             projection,
             half_height,
             to_world,
             aspect,
             motion,
+            arcs,
         }
+    }
+
+    /// Whether the camera moves within the shutter.
+    pub fn moves(&self) -> bool {
+        self.motion.is_some()
     }
 
     /// Camera space to the prepared frame at shutter time `time` in [0, 1]: the two
@@ -98,7 +112,7 @@ impl Camera {
                 let s = Segment::new(time, steps.len());
                 let (a, b) = (&steps[s.index], &steps[s.index + 1]);
                 Affine3A::from_rotation_translation(
-                    math::slerp(a.rotation, b.rotation, s.w1),
+                    self.arcs[s.index].slerp(a.rotation, b.rotation, s.w1),
                     s.lerp(a.position, b.position),
                 )
             }
@@ -183,6 +197,43 @@ mod tests {
             1.5,
             None,
         )
+    }
+
+    /// A moving camera's rotation between two steps is their slerp, from the arc kept for
+    /// that segment: bit for bit the slerp of a fresh arc, in every segment.
+    #[test]
+    fn a_moving_camera_slerps_each_segment_along_its_own_arc() {
+        let steps: Vec<RigidStep> = (0..4)
+            .map(|k| RigidStep {
+                position: Vec3::new(k as f32, 0.5, -1.0),
+                rotation: Quat::from_axis_angle(
+                    Vec3::new(1.0, 2.0, k as f32).normalize(),
+                    0.3 + 0.5 * k as f32,
+                ),
+            })
+            .collect();
+        let projection = Projection::Perspective {
+            yfov: 0.8,
+            aspect_ratio: None,
+            znear: 0.01,
+        };
+        let cam = Camera::new(
+            projection,
+            Affine3A::IDENTITY,
+            1.0,
+            Some(steps.clone().into()),
+        );
+        assert!(cam.moves());
+        for i in 0..=60 {
+            let t = i as f32 / 60.0;
+            let s = Segment::new(t, steps.len());
+            let (a, b) = (&steps[s.index], &steps[s.index + 1]);
+            let expect = Affine3A::from_rotation_translation(
+                SlerpArc::between(a.rotation, b.rotation).slerp(a.rotation, b.rotation, s.w1),
+                s.lerp(a.position, b.position),
+            );
+            assert_eq!(cam.to_world_at(t), expect, "time {t}");
+        }
     }
 
     #[test]

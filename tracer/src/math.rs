@@ -132,30 +132,50 @@ pub fn exp_m1_f64(x: f64) -> f64 {
     libm::expm1(x)
 }
 
-/// `a` to `b` along the great arc (constant angular speed) for unit quaternions on the same
-/// hemisphere. The angle comes from `atan2(|a - b|, |a + b|)`, accurate for tiny angles
-/// where `acos(a·b)` is not.
-#[inline]
-pub fn slerp(a: Quat, b: Quat, u: f32) -> Quat {
-    if u == 0.0 {
-        return a;
+/// The arc between two unit quaternions on the same hemisphere, for slerp: its angle
+/// and the angle's sine, the part of slerp that does not depend on how far along the arc
+/// it goes. The angle comes from `atan2(|a - b|, |a + b|)`, accurate for tiny angles where
+/// `acos(a·b)` is not. Motion steps keep the arc to the next step, so that the slerp of
+/// each ray's time takes two sines, not an arctangent and three.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SlerpArc {
+    theta: f32,
+    sin: f32,
+}
+
+impl SlerpArc {
+    /// The arc from `a` to `b`.
+    pub fn between(a: Quat, b: Quat) -> SlerpArc {
+        let theta = 2.0 * atan2((a - b).length(), (a + b).length());
+        SlerpArc {
+            theta,
+            sin: sin(theta),
+        }
     }
-    if u == 1.0 {
-        return b;
+
+    /// `a` to `b` along the great arc (constant angular speed), for `a` and `b` the ends
+    /// of this arc.
+    #[inline]
+    pub fn slerp(&self, a: Quat, b: Quat, u: f32) -> Quat {
+        if u == 0.0 {
+            return a;
+        }
+        if u == 1.0 {
+            return b;
+        }
+        let (theta, s) = (self.theta, self.sin);
+        let (wa, wb) = if s > 0.0 {
+            (sin((1.0 - u) * theta) / s, sin(u * theta) / s)
+        } else {
+            (1.0 - u, u)
+        };
+        (a * wa + b * wb).normalize()
     }
-    let theta = 2.0 * atan2((a - b).length(), (a + b).length());
-    let s = sin(theta);
-    let (wa, wb) = if s > 0.0 {
-        (sin((1.0 - u) * theta) / s, sin(u * theta) / s)
-    } else {
-        (1.0 - u, u)
-    };
-    (a * wa + b * wb).normalize()
 }
 
 /// `q` or `-q` (the same rotation), whichever lies on `previous`'s hemisphere, so that
-/// [`slerp`] from `previous` takes the shorter arc; `q` itself when there is no previous.
-/// Motion steps are aligned with this once, when prepared, rather than per ray.
+/// [`SlerpArc::slerp`] from `previous` takes the shorter arc; `q` itself when there is no
+/// previous. Motion steps are aligned with this once, when prepared, rather than per ray.
 pub fn same_hemisphere(previous: Option<Quat>, q: Quat) -> Quat {
     match previous {
         Some(p) if p.dot(q) < 0.0 => -q,

@@ -401,7 +401,7 @@ pub fn prepare_frame(
     let environment = frame_environment(options, &scene, punctual.is_empty(), &mut warnings);
     features.environment = !matches!(environment, Environment::Black);
     let lights = LightSet::new(punctual, triangles, environment, bvh.bounds());
-    let motion = bvh.has_motion() || camera.motion.is_some();
+    let motion = bvh.has_motion() || camera.moves();
     features.animation = motion;
 
     let (hit_filter, filtered_instances) = hit_filters(&scene, &bvh, &deformed);

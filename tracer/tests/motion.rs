@@ -279,7 +279,7 @@ fn an_open_shutter_smears_the_edge_over_the_distance_moved() {
 fn a_closed_shutter_takes_the_static_path_with_a_sharp_edge() {
     let frame = prepare(rigid(), Shutter::default());
     assert!(!frame.motion && frame.motion_steps == 1);
-    assert!(!frame.bvh.has_motion() && frame.camera.motion.is_none());
+    assert!(!frame.bvh.has_motion() && !frame.camera.moves());
     let p = profile(&render(&frame, 16));
     let width = crossing(&p, 0.1) - crossing(&p, 0.9);
     assert!(width < 1.0, "edge spread over {width:.2} px: {p:?}");

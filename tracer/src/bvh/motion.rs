@@ -10,6 +10,7 @@ use glam::{Affine3A, DMat3, DMat4, DQuat, DVec3, Mat3A, Quat, Vec3, Vec3A};
 
 use super::instance::transform_bounds;
 use crate::geometry::Aabb;
+use crate::math::SlerpArc;
 
 /// Where a time falls among evenly spaced motion steps: between steps `index` and
 /// `index + 1`, with weights `w0` and `w1` (`w0 + w1 ≈ 1`, both in [0, 1]).
@@ -66,6 +67,8 @@ struct Step {
     /// The stretch: symmetric (it keeps scale and shear) except at singular steps, where it
     /// is `Rᵀ·M` for a rotation borrowed from a neighbour.
     stretch: Mat3A,
+    /// The arc from `rotation` to the next step's (the last step's own, of no length).
+    arc: SlerpArc,
 }
 
 /// A transform known at evenly spaced motion steps and interpolated in between as
@@ -178,7 +181,11 @@ impl MotionTransform {
                 translation: m.w_axis.truncate().as_vec3().into(),
                 rotation,
                 stretch: stretch.as_mat3().into(),
+                arc: SlerpArc::between(rotation, rotation),
             });
+        }
+        for i in 1..out.len() {
+            out[i - 1].arc = SlerpArc::between(out[i - 1].rotation, out[i].rotation);
         }
         MotionTransform { steps: out }
     }
@@ -191,7 +198,7 @@ impl MotionTransform {
     /// The transform at normalised shutter time `time` (clamped to [0, 1]).
     pub fn at(&self, time: f32) -> Affine3A {
         if self.steps.len() == 1 {
-            return compose(&self.steps[0]);
+            return self.steps[0].affine();
         }
         self.interpolate(Segment::new(time, self.steps.len()))
     }
@@ -201,16 +208,16 @@ impl MotionTransform {
     fn interpolate(&self, seg: Segment) -> Affine3A {
         let (a, b) = (&self.steps[seg.index], &self.steps[seg.index + 1]);
         if seg.w1 == 0.0 {
-            return compose(a);
+            return a.affine();
         }
         if seg.w0 == 0.0 {
-            return compose(b);
+            return b.affine();
         }
-        compose(&Step {
-            translation: a.translation * seg.w0 + b.translation * seg.w1,
-            rotation: crate::math::slerp(a.rotation, b.rotation, seg.w1),
-            stretch: a.stretch * seg.w0 + b.stretch * seg.w1,
-        })
+        compose(
+            a.translation * seg.w0 + b.translation * seg.w1,
+            a.arc.slerp(a.rotation, b.rotation, seg.w1),
+            a.stretch * seg.w0 + b.stretch * seg.w1,
+        )
     }
 
     /// Conservative world bounds of `b` (object space) over the whole shutter.
@@ -257,7 +264,7 @@ impl MotionTransform {
         };
         if self.steps.len() == 1 {
             let s = &self.steps[0];
-            return padded(&compose(s), reach(s, s) * AT_ROUNDING);
+            return padded(&s.affine(), reach(s, s) * AT_ROUNDING);
         }
         let mut out = Aabb::EMPTY;
         for k in 0..self.steps.len() - 1 {
@@ -311,10 +318,17 @@ const AT_ROUNDING: f32 = 64.0 * f32::EPSILON;
 
 /// `T·R·S` as an affine transform.
 #[inline]
-fn compose(s: &Step) -> Affine3A {
+fn compose(translation: Vec3A, rotation: Quat, stretch: Mat3A) -> Affine3A {
     Affine3A {
-        matrix3: Mat3A::from_quat(s.rotation) * s.stretch,
-        translation: s.translation,
+        matrix3: Mat3A::from_quat(rotation) * stretch,
+        translation,
+    }
+}
+
+impl Step {
+    /// The step's transform, `T · R · S`.
+    fn affine(&self) -> Affine3A {
+        compose(self.translation, self.rotation, self.stretch)
     }
 }
 
@@ -397,6 +411,35 @@ mod tests {
                 let d = rel_diff(&motion.at(t), &expect);
                 assert!(d < 1e-5, "{n} steps, step {k}: {d}");
             }
+        }
+    }
+
+    /// Between steps, each segment's rotation is the slerp of its own two ends (from the
+    /// arc kept with the earlier step), bit for bit the slerp of a fresh arc.
+    #[test]
+    fn each_segment_slerps_along_its_own_arc() {
+        let mut rng = Rng(5);
+        let steps: Vec<DMat4> = (0..4)
+            .map(|k| {
+                let axis = (rng.vec3() - 0.5).as_dvec3().normalize();
+                trs(
+                    DVec3::splat(1.0 + k as f64),
+                    DQuat::from_axis_angle(axis, 0.4 + k as f64),
+                    DVec3::new(k as f64, 0.0, 0.0),
+                )
+            })
+            .collect();
+        let motion = MotionTransform::new(&steps);
+        for i in 0..=60 {
+            let t = i as f32 / 60.0;
+            let seg = Segment::new(t, steps.len());
+            let (a, b) = (&motion.steps[seg.index], &motion.steps[seg.index + 1]);
+            let expect = compose(
+                a.translation * seg.w0 + b.translation * seg.w1,
+                SlerpArc::between(a.rotation, b.rotation).slerp(a.rotation, b.rotation, seg.w1),
+                a.stretch * seg.w0 + b.stretch * seg.w1,
+            );
+            assert_eq!(motion.at(t), expect, "time {t}");
         }
     }
 
