@@ -313,17 +313,18 @@ impl PreparedFrame {
 
     /// The closest accepted hit along `ray` before `t_max`.
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<crate::geometry::Hit> {
-        let meshes = |m| self.mesh_bvh(m);
-        if self.any_hit_filter {
-            let counts = |i, t, b1, b2| self.counts(ray, i, t, b1, b2);
-            self.bvh.intersect(meshes, ray, t_max, counts)
-        } else {
-            self.bvh.intersect(meshes, ray, t_max, |_, _, _, _| true)
-        }
+        // SAFETY: without `AVX`, nothing is asked of the CPU.
+        unsafe { self.query::<false, false>(ray, t_max) }
+    }
+
+    /// Whether anything accepted blocks `ray` before `t_max`.
+    pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        // SAFETY: as in `intersect`.
+        unsafe { self.query::<true, false>(ray, t_max) }.is_some()
     }
 
     /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: a hit if any)
-    /// for the path loop's AVX copy, into which it inlines (see `SceneBvh::query_avx`).
+    /// for the path loop's AVX copy, into which it inlines (see `SceneBvh::query`).
     ///
     /// # Safety
     /// The CPU must have AVX ([`crate::simd::avx`] says so).
@@ -335,24 +336,31 @@ impl PreparedFrame {
         ray: &Ray,
         t_max: f32,
     ) -> Option<crate::geometry::Hit> {
-        let meshes = |m| self.mesh_bvh(m);
-        if self.any_hit_filter {
-            let counts = |i, t, b1, b2| self.counts(ray, i, t, b1, b2);
-            self.bvh.query_avx::<ANY_HIT>(meshes, ray, t_max, counts)
-        } else {
-            self.bvh
-                .query_avx::<ANY_HIT>(meshes, ray, t_max, |_, _, _, _| true)
-        }
+        // SAFETY: the caller's CPU has AVX.
+        unsafe { self.query::<ANY_HIT, true>(ray, t_max) }
     }
 
-    /// Whether anything accepted blocks `ray` before `t_max`.
-    pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+    /// The query of `SceneBvh::query`, with this frame's meshes and hit filter.
+    ///
+    /// # Safety
+    /// With `AVX`, the CPU must have AVX.
+    #[inline(always)]
+    unsafe fn query<const ANY_HIT: bool, const AVX: bool>(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+    ) -> Option<crate::geometry::Hit> {
         let meshes = |m| self.mesh_bvh(m);
-        if self.any_hit_filter {
-            let counts = |i, t, b1, b2| self.counts(ray, i, t, b1, b2);
-            self.bvh.occluded(meshes, ray, t_max, counts)
-        } else {
-            self.bvh.occluded(meshes, ray, t_max, |_, _, _, _| true)
+        // SAFETY: passed on from the caller.
+        unsafe {
+            if self.any_hit_filter {
+                let counts = |i, t, b1, b2| self.counts(ray, i, t, b1, b2);
+                self.bvh
+                    .query::<ANY_HIT, AVX, _>(meshes, ray, t_max, counts)
+            } else {
+                self.bvh
+                    .query::<ANY_HIT, AVX, _>(meshes, ray, t_max, |_, _, _, _| true)
+            }
         }
     }
 }

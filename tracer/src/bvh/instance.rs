@@ -361,11 +361,8 @@ impl SceneBvh {
         t_max: f32,
         accept: impl FnMut(u32, u32, f32, f32) -> bool,
     ) -> Option<Hit> {
-        if self.motion {
-            self.search::<false, true, _>(mesh, ray, t_max, accept)
-        } else {
-            self.search::<false, false, _>(mesh, ray, t_max, accept)
-        }
+        // SAFETY: without `AVX`, nothing is asked of the CPU.
+        unsafe { self.query::<false, false, _>(mesh, ray, t_max, accept) }
     }
 
     /// Whether anything with `0 < t < t_max` accepted by `accept(instance, triangle, b1,
@@ -377,48 +374,58 @@ impl SceneBvh {
         t_max: f32,
         accept: impl FnMut(u32, u32, f32, f32) -> bool,
     ) -> bool {
-        if self.motion {
-            self.search::<true, true, _>(mesh, ray, t_max, accept)
-                .is_some()
-        } else {
-            self.search::<true, false, _>(mesh, ray, t_max, accept)
-                .is_some()
-        }
+        // SAFETY: as in `intersect`.
+        unsafe { self.query::<true, false, _>(mesh, ray, t_max, accept) }.is_some()
     }
 
-    /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: any hit found)
-    /// for a caller compiled for AVX, into which it inlines: the path loop's AVX copy
-    /// (`integrator::trace_sample_avx`) queries without asking for the CPU's features
-    /// again and without a call per ray.
+    /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: any hit found),
+    /// by the search with or without motion as the scene needs. With `AVX`, for a caller
+    /// compiled for AVX into which it inlines (the path loop's AVX copy,
+    /// `integrator::trace_sample_avx`): nodes are tested in AVX lanes without asking for
+    /// the CPU's features again and without a call per ray. Without, by the node test this
+    /// process uses (see `simd.rs`).
     ///
     /// # Safety
-    /// The CPU must have AVX ([`simd::avx`] says so).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
-    #[inline]
-    pub(crate) unsafe fn query_avx<'m, const ANY_HIT: bool>(
-        &self,
-        mesh: impl Fn(u32) -> &'m MeshBvh,
-        ray: &Ray,
-        t_max: f32,
-        accept: impl FnMut(u32, u32, f32, f32) -> bool,
-    ) -> Option<Hit> {
-        if self.motion {
-            self.search_with::<ANY_HIT, true, true, _>(mesh, ray, t_max, accept)
-        } else {
-            self.search_with::<ANY_HIT, false, true, _>(mesh, ray, t_max, accept)
-        }
-    }
-
-    /// [`Self::search_with`] with the node test this process uses (see `simd.rs`).
+    /// With `AVX`, the CPU must have AVX ([`simd::avx`] says so).
     #[inline(always)]
-    fn search<'m, const ANY_HIT: bool, const MOTION: bool, M: Fn(u32) -> &'m MeshBvh>(
+    pub(crate) unsafe fn query<
+        'm,
+        const ANY_HIT: bool,
+        const AVX: bool,
+        M: Fn(u32) -> &'m MeshBvh,
+    >(
         &self,
         mesh: M,
         ray: &Ray,
         t_max: f32,
         accept: impl FnMut(u32, u32, f32, f32) -> bool,
     ) -> Option<Hit> {
+        if self.motion {
+            self.search::<ANY_HIT, true, AVX, M>(mesh, ray, t_max, accept)
+        } else {
+            self.search::<ANY_HIT, false, AVX, M>(mesh, ray, t_max, accept)
+        }
+    }
+
+    /// [`Self::search_with`] in AVX lanes with `AVX` (the caller has checked the CPU, see
+    /// [`Self::query`]), else with the node test this process uses (see `simd.rs`).
+    #[inline(always)]
+    fn search<
+        'm,
+        const ANY_HIT: bool,
+        const MOTION: bool,
+        const AVX: bool,
+        M: Fn(u32) -> &'m MeshBvh,
+    >(
+        &self,
+        mesh: M,
+        ray: &Ray,
+        t_max: f32,
+        accept: impl FnMut(u32, u32, f32, f32) -> bool,
+    ) -> Option<Hit> {
+        if AVX {
+            return self.search_with::<ANY_HIT, MOTION, true, M>(mesh, ray, t_max, accept);
+        }
         #[cfg(target_arch = "x86_64")]
         if simd::avx() {
             let search = || self.search_with::<ANY_HIT, MOTION, true, M>(mesh, ray, t_max, accept);

@@ -67,8 +67,6 @@ struct Step {
     /// The stretch: symmetric (it keeps scale and shear) except at singular steps, where it
     /// is `Rᵀ·M` for a rotation borrowed from a neighbour.
     stretch: Mat3A,
-    /// The arc from `rotation` to the next step's (the last step's own, of no length).
-    arc: SlerpArc,
 }
 
 /// A transform known at evenly spaced motion steps and interpolated in between as
@@ -87,6 +85,8 @@ struct Step {
 #[derive(Clone, Debug, PartialEq)]
 pub struct MotionTransform {
     steps: Vec<Step>,
+    /// The arc from each step's rotation to the next's, for the slerp between them.
+    arcs: Vec<SlerpArc>,
 }
 
 /// Frobenius norm.
@@ -181,13 +181,13 @@ impl MotionTransform {
                 translation: m.w_axis.truncate().as_vec3().into(),
                 rotation,
                 stretch: stretch.as_mat3().into(),
-                arc: SlerpArc::between(rotation, rotation),
             });
         }
-        for i in 1..out.len() {
-            out[i - 1].arc = SlerpArc::between(out[i - 1].rotation, out[i].rotation);
-        }
-        MotionTransform { steps: out }
+        let arcs = out
+            .windows(2)
+            .map(|w| SlerpArc::between(w[0].rotation, w[1].rotation))
+            .collect();
+        MotionTransform { steps: out, arcs }
     }
 
     /// Number of motion steps.
@@ -215,7 +215,7 @@ impl MotionTransform {
         }
         compose(
             a.translation * seg.w0 + b.translation * seg.w1,
-            a.arc.slerp(a.rotation, b.rotation, seg.w1),
+            self.arcs[seg.index].slerp(a.rotation, b.rotation, seg.w1),
             a.stretch * seg.w0 + b.stretch * seg.w1,
         )
     }
@@ -415,7 +415,7 @@ mod tests {
     }
 
     /// Between steps, each segment's rotation is the slerp of its own two ends (from the
-    /// arc kept with the earlier step), bit for bit the slerp of a fresh arc.
+    /// arc kept for that segment), bit for bit the slerp of a fresh arc.
     #[test]
     fn each_segment_slerps_along_its_own_arc() {
         let mut rng = Rng(5);
