@@ -347,3 +347,57 @@ fn motion_scene_matches_brute_force() {
     }
     assert!(hits > 200, "only {hits} hits");
 }
+
+/// Instances placed alike are hit at the same distances, bit for bit: the closest hit is
+/// that of the smallest instance (then triangle), whichever the traversal meets first.
+#[test]
+fn among_hits_at_one_distance_the_smallest_instance_wins() {
+    let mut rng = Rng(0x5eed);
+    let soup: Vec<[Vec3; 3]> = (0..100)
+        .map(|_| {
+            let c = rng.vec3() * 4.0 - 2.0;
+            [0, 1, 2].map(|_| c + rng.vec3() - 0.5)
+        })
+        .collect();
+    let meshes = [MeshBvh::build(&soup)];
+    let mesh = |m: u32| &meshes[m as usize];
+    let bounds = meshes[0].bounds();
+    // Three placements, each taken by four instances at scattered indices.
+    let placements: Vec<Affine3A> = (0..3)
+        .map(|_| {
+            let axis = (rng.vec3() - 0.5).as_dvec3().normalize();
+            let m = trs(
+                DVec3::splat(0.5 + rng.next_f32() as f64),
+                DQuat::from_axis_angle(axis, rng.next_f32() as f64 * 3.0),
+                (rng.vec3() * 4.0 - 2.0).as_dvec3(),
+            );
+            Affine3A::from_mat4(m.as_mat4())
+        })
+        .collect();
+    let instances: Vec<Instance> = [2, 0, 1, 1, 2, 0, 0, 2, 1, 0, 2, 1]
+        .iter()
+        .map(|&p| Instance::new(0, placements[p], &bounds))
+        .collect();
+    let scene = SceneBvh::build(instances.clone(), mesh);
+    let mut ties = 0;
+    for _ in 0..3000 {
+        // From around the instances, towards them.
+        let origin = rng.vec3() * 16.0 - 8.0;
+        let ray = Ray::new(origin, rng.vec3() * 4.0 - 2.0 - origin);
+        let mut expect: Option<(f32, u32, u32)> = None;
+        for (i, inst) in instances.iter().enumerate() {
+            let limit = expect.map_or(f32::INFINITY, |e| e.0);
+            let object_ray = inst.object_ray(&ray);
+            if let Some((t, tri, ..)) = meshes[0].intersect(&object_ray, limit, |_, _, _| true) {
+                expect = Some((t, i as u32, tri));
+            }
+        }
+        let got = scene
+            .intersect(mesh, &ray, f32::INFINITY, |_, _, _, _| true)
+            .map(|h| (h.t, h.instance, h.triangle));
+        assert_eq!(got, expect, "ray {ray:?}");
+        ties += usize::from(expect.is_some());
+    }
+    // Every hit is a tie: each placement is there four times.
+    assert!(ties > 500, "{ties} rays met a tie");
+}
