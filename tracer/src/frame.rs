@@ -311,8 +311,7 @@ impl PreparedFrame {
         !self.filtered_instances[i as usize] || self.accepts(ray, i, t, b1, b2)
     }
 
-    /// The closest accepted hit along `ray` before `t_max` (at one distance, that of the
-    /// smallest instance, then triangle: see [`SceneBvh::intersect`]).
+    /// The closest accepted hit along `ray` before `t_max`.
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<crate::geometry::Hit> {
         // SAFETY: without `AVX`, nothing is asked of the CPU.
         unsafe { self.query::<false, false>(ray, t_max) }

@@ -9,7 +9,7 @@ use super::build::{self, BuildParams, BuildPrim};
 use super::huge_pages::on_huge_pages;
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
-use super::node::{bound_past, ray_is_valid, wins_tie, with_stack};
+use super::node::{ray_is_valid, with_stack};
 use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};
 #[cfg(target_arch = "x86_64")]
@@ -351,8 +351,7 @@ impl SceneBvh {
     }
 
     /// Closest hit with `0 < t < t_max` for which `accept(instance, triangle, b1, b2)` is
-    /// true, with everything where it is at `ray.time`; of hits at the same distance, that of
-    /// the smallest instance, then triangle. `mesh(i)` is the BVH of mesh `i`
+    /// true, with everything where it is at `ray.time`. `mesh(i)` is the BVH of mesh `i`
     /// (the one given to [`SceneBvh::build`]); `ray.dir` need not be unit length and `t` is
     /// in its units. A rejected hit (an alpha cut-out) is ignored and the search goes on.
     pub fn intersect<'m>(
@@ -482,18 +481,8 @@ impl SceneBvh {
                             stack,
                             |tri, b1, b2| accept(instance, tri, b1, b2),
                         );
-                        let Some((t, triangle, b1, b2)) = hit else {
-                            continue;
-                        };
-                        // The mesh's best may lie at the best distance so far, which the
-                        // bound lets through: it wins by its instance, then triangle. (An
-                        // any-hit search ends at its first hit.)
-                        let better = ANY_HIT
-                            || best.is_none_or(|b: Hit| {
-                                wins_tie(t, (instance, triangle), b.t, (b.instance, b.triangle))
-                            });
-                        if better {
-                            *t_max = bound_past(t);
+                        if let Some((t, triangle, b1, b2)) = hit {
+                            *t_max = t;
                             best = Some(Hit {
                                 t,
                                 instance,

@@ -6,8 +6,7 @@ use super::build::{self, BuildParams, BuildPrim};
 use super::huge_pages::on_huge_pages;
 use super::motion::Segment;
 use super::node::{
-    bound_past, ray_is_valid, traverse, wins_tie, with_stack, BoxRay, Deferred, MotionBoxes, Node,
-    StepBox,
+    ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
 };
 use super::wide::{collapse, leaves, prefetch, traverse_wide, Merge, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
@@ -242,8 +241,7 @@ impl MeshBvh {
     }
 
     /// Closest hit with `0 < t < t_max` for which `accept(triangle, b1, b2)` is true,
-    /// as `(t, triangle, b1, b2)`; of hits at the same distance, that of the smallest
-    /// triangle index. `accept` sees candidate hits in no particular order and
+    /// as `(t, triangle, b1, b2)`. `accept` sees candidate hits in no particular order and
     /// is meant for alpha cut-outs: a rejected hit is ignored and the search goes on.
     /// `ray.dir` need not be unit length; `t` is in its units. A deforming mesh is
     /// intersected as it is at `ray.time`.
@@ -317,7 +315,7 @@ impl MeshBvh {
             return None;
         }
         let mut t_max = t_max;
-        let mut best: Option<(f32, u32, f32, f32)> = None;
+        let mut best = None;
         if MOTION && self.has_motion() {
             let pre = RayPrecomputed::new(ray);
             let steps = self.steps as usize;
@@ -345,10 +343,8 @@ impl MeshBvh {
                         let id = a.id;
                         let [v0, v1, v2] = [0, 1, 2].map(|j| segment.lerp(a.v[j], b.v[j]));
                         if let Some((t, b1, b2)) = intersect_triangle(&pre, v0, v1, v2, *t_max) {
-                            let better = ANY_HIT
-                                || best.is_none_or(|(bt, bid, ..)| wins_tie(t, id, bt, bid));
-                            if better && accept(id, b1, b2) {
-                                *t_max = bound_past(t);
+                            if accept(id, b1, b2) {
+                                *t_max = t;
                                 best = Some((t, id, b1, b2));
                                 if ANY_HIT {
                                     return true;
@@ -399,10 +395,8 @@ impl MeshBvh {
                         };
                         if let Some((t, b1, b2)) = hit {
                             let id = block.id(i);
-                            let better = ANY_HIT
-                                || best.is_none_or(|(bt, bid, ..)| wins_tie(t, id, bt, bid));
-                            if better && accept(id, b1, b2) {
-                                *t_max = bound_past(t);
+                            if accept(id, b1, b2) {
+                                *t_max = t;
                                 best = Some((t, id, b1, b2));
                                 if ANY_HIT {
                                     return true;

@@ -109,25 +109,6 @@ impl BoxRay {
     }
 }
 
-/// The bound a closest-hit search tests below once it holds a hit at `t` (positive and
-/// finite): one ulp past `t`, so that another hit at exactly that distance is still found
-/// and the tie goes by [`wins_tie`]. Which of two coincident surfaces a ray hits is then
-/// the same whatever order a traversal meets them in, so it does not depend on the tree's
-/// layout (nor, for rays traced together, on which rays share a traversal).
-#[inline(always)]
-pub(super) fn bound_past(t: f32) -> f32 {
-    f32::from_bits(t.to_bits() + 1)
-}
-
-/// Whether a hit at `t` with key `key` (its triangle; at the top level its instance, then
-/// its triangle) replaces the best so far, at `best_t` with `best_key`, in a search whose
-/// bound is [`bound_past`] the best (so `t <= best_t`): the closer wins, and at one
-/// distance the smaller key.
-#[inline(always)]
-pub(super) fn wins_tie<K: PartialOrd>(t: f32, key: K, best_t: f32, best_key: K) -> bool {
-    t < best_t || key < best_key
-}
-
 /// `max(acc, x)`, keeping `acc` when `x` is NaN.
 #[inline(always)]
 fn max_or_acc(acc: f32, x: f32) -> f32 {

@@ -313,34 +313,3 @@ fn a_leaf_triangle_is_its_vertices_and_id_in_forty_bytes() {
     // No padding: the 36 bytes of vertices and the id that used to lie in a second array.
     assert_eq!(std::mem::size_of::<LeafTriangle>(), 40);
 }
-
-/// Coincident triangles are hit at the same distance, bit for bit: the closest hit is the
-/// one of smallest index whichever the traversal meets first, so that a hit does not depend
-/// on the tree's layout.
-#[test]
-fn among_hits_at_one_distance_the_smallest_index_wins() {
-    let mut rng = Rng(0x9e3779b97f4a7c15);
-    let base = soup(&mut rng, 300);
-    // Each triangle four times, the copies at scattered indices.
-    let mut tris: Vec<[Vec3; 3]> = (0..4).flat_map(|_| base.iter().copied()).collect();
-    for i in (1..tris.len()).rev() {
-        tris.swap(i, (rng.next_f32() * (i + 1) as f32) as usize % (i + 1));
-    }
-    for bvh in [
-        MeshBvh::build(&tris),
-        MeshBvh::build_merging_above(&[&tris], 0),
-    ] {
-        // Every hit is a tie: each triangle is there four times.
-        let mut ties = 0;
-        for _ in 0..3000 {
-            let ray = Ray::new(rng.vec3() * 14.0 - 2.0, rng.vec3() - 0.5);
-            let expect = brute(&tris, &ray, f32::INFINITY);
-            let got = bvh
-                .intersect(&ray, f32::INFINITY, |_, _, _| true)
-                .map(|h| (h.0, h.1));
-            assert_eq!(got, expect, "ray {} {}", ray.origin, ray.dir);
-            ties += usize::from(expect.is_some());
-        }
-        assert!(ties > 100, "{ties} rays met a tie");
-    }
-}
