@@ -43,6 +43,6 @@ mod wide;
 pub use instance::{Instance, Placement, SceneBvh};
 pub use mesh::MeshBvh;
 pub use motion::{MotionTransform, Segment};
-pub use packet::PACKET;
+pub use packet::{PacketStack, PACKET};
 
 pub(crate) use huge_pages::on_huge_pages;

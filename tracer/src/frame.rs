@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use glam::{Affine3A, DVec3, Mat3A, Vec3, Vec4};
 
-use crate::bvh::{Instance, MeshBvh, Placement, SceneBvh, PACKET};
+use crate::bvh::{Instance, MeshBvh, PacketStack, Placement, SceneBvh, PACKET};
 use crate::camera::Camera;
 use crate::geometry::{hit_point_error, translated_hit_point_error, Ray};
 use crate::light::LightSet;
@@ -325,9 +325,15 @@ impl PreparedFrame {
 
     /// Which rays of `mask` in the packet `rays` something accepted blocks before their
     /// `t_max`: bit `r` for ray `r`, each what [`Self::occluded`] answers for it alone.
-    pub fn occluded_packet(&self, rays: &[Ray; PACKET], t_max: &[f32; PACKET], mask: u32) -> u32 {
+    pub fn occluded_packet(
+        &self,
+        rays: &[Ray; PACKET],
+        t_max: &[f32; PACKET],
+        mask: u32,
+        stack: &mut PacketStack,
+    ) -> u32 {
         // SAFETY: without `AVX`, nothing is asked of the CPU.
-        unsafe { self.occluded_packet_with::<false>(rays, t_max, mask) }
+        unsafe { self.occluded_packet_with::<false>(rays, t_max, mask, stack) }
     }
 
     /// [`Self::occluded_packet`], with `AVX` for the path loop's AVX copy as
@@ -341,6 +347,7 @@ impl PreparedFrame {
         rays: &[Ray; PACKET],
         t_max: &[f32; PACKET],
         mask: u32,
+        stack: &mut PacketStack,
     ) -> u32 {
         let meshes = |m| self.mesh_bvh(m);
         // SAFETY: passed on from the caller.
@@ -348,10 +355,11 @@ impl PreparedFrame {
             if self.any_hit_filter {
                 let counts = |r: usize, i, t, b1, b2| self.counts(&rays[r], i, t, b1, b2);
                 self.bvh
-                    .occluded_packet::<AVX, _>(meshes, rays, t_max, mask, counts)
+                    .occluded_packet::<AVX, _>(meshes, rays, t_max, mask, stack, counts)
             } else {
+                let all = |_, _, _, _, _| true;
                 self.bvh
-                    .occluded_packet::<AVX, _>(meshes, rays, t_max, mask, |_, _, _, _, _| true)
+                    .occluded_packet::<AVX, _>(meshes, rays, t_max, mask, stack, all)
             }
         }
     }

@@ -10,7 +10,7 @@ use super::huge_pages::on_huge_pages;
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
 use super::node::{ray_is_valid, with_stack};
-use super::packet::{each_ray, traverse_packet, with_packet_stack, PACKET};
+use super::packet::{each_ray, traverse_packet, PacketStack, PACKET};
 use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};
 #[cfg(target_arch = "x86_64")]
@@ -382,7 +382,7 @@ impl SceneBvh {
     /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: any hit found),
     /// by the search with or without motion as the scene needs. With `AVX`, for a caller
     /// compiled for AVX into which it inlines (the path loop's AVX copy,
-    /// `integrator::trace_sample_avx`): nodes are tested in AVX lanes without asking for
+    /// `integrator::samples::trace_batch_avx`): nodes are tested in AVX lanes without asking for
     /// the CPU's features again and without a call per ray. Without, by the node test this
     /// process uses (see `simd.rs`).
     ///
@@ -517,6 +517,7 @@ impl SceneBvh {
         rays: &[Ray; PACKET],
         t_max: &[f32; PACKET],
         mask: u32,
+        stack: &mut PacketStack,
         mut accept: impl FnMut(usize, u32, u32, f32, f32) -> bool,
     ) -> u32 {
         if self.motion {
@@ -533,37 +534,38 @@ impl SceneBvh {
             .filter(|&r| ray_is_valid(&rays[r], t_max[r]))
             .fold(0, |m, r| m | 1 << r);
         let wide = std::array::from_fn(|r| WideRay::new(&rays[r]));
-        with_packet_stack(|stack| {
-            traverse_packet::<AVX>(
-                &self.nodes,
-                &wide,
-                t_max,
-                valid,
-                stack,
-                |start, count, rays_in, stack| {
-                    let mut blocked = 0;
-                    for &instance in &self.order[start as usize..(start + count) as usize] {
-                        let live = rays_in & !blocked;
-                        if live == 0 {
-                            break;
-                        }
-                        let inst = &self.instances[instance as usize];
-                        let mut object = *rays;
-                        for r in each_ray(live) {
-                            object[r] = inst.object_ray(&rays[r]);
-                        }
-                        blocked |= mesh(inst.mesh).occluded_packet::<AVX>(
-                            &object,
-                            t_max,
-                            live,
-                            stack,
-                            |r, tri, b1, b2| accept(r, instance, tri, b1, b2),
-                        );
+        traverse_packet::<AVX>(
+            &self.nodes,
+            &wide,
+            t_max,
+            valid,
+            stack.entries(),
+            |start, count, rays_in, stack| {
+                let mut blocked = 0;
+                for &instance in &self.order[start as usize..(start + count) as usize] {
+                    let live = rays_in & !blocked;
+                    if live == 0 {
+                        break;
                     }
-                    blocked
-                },
-            )
-        })
+                    let inst = &self.instances[instance as usize];
+                    let mut object = *rays;
+                    for r in each_ray(live) {
+                        object[r] = inst.object_ray(&rays[r]);
+                    }
+                    let bvh = mesh(inst.mesh);
+                    let accept = |r, tri, b1, b2| accept(r, instance, tri, b1, b2);
+                    blocked |= match AVX {
+                        // SAFETY: passed on from the caller.
+                        #[cfg(target_arch = "x86_64")]
+                        true => unsafe {
+                            bvh.occluded_packet_avx(&object, t_max, live, stack, accept)
+                        },
+                        _ => bvh.occluded_packet::<false>(&object, t_max, live, stack, accept),
+                    };
+                }
+                blocked
+            },
+        )
     }
 }
 

@@ -433,6 +433,27 @@ impl MeshBvh {
         false
     }
 
+    /// [`Self::occluded_packet`] with the node test in AVX lanes, compiled for AVX and out
+    /// of line: inlined into the instance level's leaf, the whole mesh query made that
+    /// closure too large to inline in turn, and it ran compiled for the baseline with each
+    /// node test a call.
+    ///
+    /// # Safety
+    /// The CPU must have AVX ([`simd::avx`] says so).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline(never)]
+    pub(super) unsafe fn occluded_packet_avx(
+        &self,
+        rays: &[Ray; PACKET],
+        t_max: &[f32; PACKET],
+        mask: u32,
+        stack: &mut [PacketEntry],
+        accept: impl FnMut(usize, u32, f32, f32) -> bool,
+    ) -> u32 {
+        self.occluded_packet::<true>(rays, t_max, mask, stack, accept)
+    }
+
     /// Which rays of `mask` in the packet `rays` (object-space, in this mesh's units) hit
     /// an accepted triangle (`accept(ray, triangle, b1, b2)`) with `0 < t < t_max[ray]`:
     /// bit `r` for ray `r`, each bit what [`Self::occluded`] answers for the ray alone. A

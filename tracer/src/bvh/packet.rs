@@ -11,8 +11,6 @@
 //! stack entry, one visit and one load of a leaf's triangles for all the rays that reach
 //! it, and the triangle test with the rays in SIMD lanes.
 
-use std::cell::RefCell;
-
 use super::node::STACK_CAPACITY;
 use super::wide::{WideNode, WideRay, WIDTH};
 
@@ -23,16 +21,33 @@ pub const PACKET: usize = 8;
 /// that entered it (bit `r` for ray `r`).
 pub(super) type PacketEntry = (u32, u32);
 
-thread_local! {
-    /// Each thread's packet stack, as `node::with_stack`'s for single rays (the same bound:
-    /// a node leaves at most seven of its children on the stack).
-    static PACKET_STACK: RefCell<[PacketEntry; STACK_CAPACITY]> =
-        const { RefCell::new([(0, 0); STACK_CAPACITY]) };
+/// A packet query's stack, as `node::with_stack`'s for single rays (the same bound: a node
+/// leaves at most seven of its children on it). Its owner passes it to each query: a
+/// thread-local one, reached through a closure, kept the query out of the AVX copy of the
+/// path loop that calls it.
+pub struct PacketStack(Box<[PacketEntry]>);
+
+impl PacketStack {
+    /// A stack for packet queries on this thread.
+    pub fn new() -> Self {
+        Self(vec![(0, 0); STACK_CAPACITY].into_boxed_slice())
+    }
+
+    pub(super) fn entries(&mut self) -> &mut [PacketEntry] {
+        &mut self.0
+    }
 }
 
-/// Runs a packet query with this thread's packet stack. Packet queries do not nest.
-pub(super) fn with_packet_stack<R>(query: impl FnOnce(&mut [PacketEntry]) -> R) -> R {
-    PACKET_STACK.with_borrow_mut(|stack| query(stack))
+impl Default for PacketStack {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl std::fmt::Debug for PacketStack {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("PacketStack")
+    }
 }
 
 /// The rays of `mask`, lowest first.

@@ -63,7 +63,7 @@ impl Colour for Vec4 {
 
 /// How a path turns RGB quantities into what it carries, and back for the film.
 pub(crate) trait Carrier: Copy {
-    type Colour: Colour;
+    type Colour: super::deferred::Gathered;
     /// Whether it carries wavelengths (so that the RGB path compiles out what only the
     /// spectral path does).
     const SPECTRAL: bool;

@@ -1,6 +1,6 @@
 use glam::{Affine3A, DMat4, DQuat, DVec3, Quat, Vec3};
 
-use super::PACKET;
+use super::{PacketStack, PACKET};
 use crate::bvh::{Instance, MeshBvh, SceneBvh};
 use crate::geometry::Ray;
 use crate::test_rng::Rng;
@@ -95,6 +95,7 @@ fn each_ray_of_a_packet_is_answered_as_alone() {
     let (meshes, instances) = scene(&mut rng);
     let bvh = SceneBvh::build(instances, |m| &meshes[m as usize]);
     let mesh = |m: u32| &meshes[m as usize];
+    let mut stack = PacketStack::new();
     let (mut blocked, mut open) = (0, 0);
     for p in 0..3000 {
         let (rays, t_max) = packet(&mut rng, p % 2 == 0);
@@ -113,11 +114,14 @@ fn each_ray_of_a_packet_is_answered_as_alone() {
             .fold(0, |m, r| m | 1 << r);
         let keep = |_, i, t, b1, b2| !filtered || accept(i, t, b1, b2);
         // SAFETY: without AVX nothing is asked of the CPU; with it, only where it has AVX.
-        let together = unsafe { bvh.occluded_packet::<false, _>(mesh, &rays, &t_max, mask, keep) };
+        let together =
+            unsafe { bvh.occluded_packet::<false, _>(mesh, &rays, &t_max, mask, &mut stack, keep) };
         assert_eq!(together, alone, "packet {p}: {rays:?} to {t_max:?}");
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx() {
-            let avx = unsafe { bvh.occluded_packet::<true, _>(mesh, &rays, &t_max, mask, keep) };
+            let avx = unsafe {
+                bvh.occluded_packet::<true, _>(mesh, &rays, &t_max, mask, &mut stack, keep)
+            };
             assert_eq!(avx, alone, "packet {p}, AVX");
         }
         blocked += alone.count_ones();
@@ -145,6 +149,7 @@ fn a_scene_with_motion_answers_ray_by_ray() {
     let bvh = SceneBvh::build(instances, |m| &meshes[m as usize]);
     assert!(bvh.has_motion());
     let mesh = |m: u32| &meshes[m as usize];
+    let mut stack = PacketStack::new();
     let mut blocked = 0;
     for p in 0..1000 {
         let (mut rays, t_max) = packet(&mut rng, p % 2 == 0);
@@ -156,7 +161,14 @@ fn a_scene_with_motion_answers_ray_by_ray() {
             .fold(0, |m, r| m | 1 << r);
         // SAFETY: without AVX nothing is asked of the CPU.
         let together = unsafe {
-            bvh.occluded_packet::<false, _>(mesh, &rays, &t_max, 0xff, |_, _, _, _, _| true)
+            bvh.occluded_packet::<false, _>(
+                mesh,
+                &rays,
+                &t_max,
+                0xff,
+                &mut stack,
+                |_, _, _, _, _| true,
+            )
         };
         assert_eq!(together, alone, "packet {p}");
         blocked += alone.count_ones();
