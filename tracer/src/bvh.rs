@@ -7,7 +7,6 @@
 //! | `build` | the binned SAH builder shared by both levels (Wald 2007) |
 //! | `node` | the 32-byte node, per-step boxes, the slab test (Ize 2013), the traversal |
 //! | `wide` | the binary tree collapsed eight-wide, its slab test in SIMD lanes, its traversal |
-//! | `packet` | shadow rays eight at a time through the eight-wide trees, each answered as alone |
 //! | `mesh` | [`MeshBvh`]: object-space triangles in the BVH's own order, at 1..S steps |
 //! | `instance` | [`Instance`], [`Placement`], [`SceneBvh`]: placed meshes, the BVH over them |
 //! | `motion` | the shutter-time convention; [`MotionTransform`] (lerp, slerp, lerp) |
@@ -37,12 +36,10 @@ mod instance;
 mod mesh;
 mod motion;
 mod node;
-mod packet;
 mod wide;
 
 pub use instance::{Instance, Placement, SceneBvh};
 pub use mesh::MeshBvh;
 pub use motion::{MotionTransform, Segment};
-pub use packet::{PacketStack, PACKET};
 
 pub(crate) use huge_pages::on_huge_pages;

@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use glam::{Affine3A, DVec3, Mat3A, Vec3, Vec4};
 
-use crate::bvh::{Instance, MeshBvh, PacketStack, Placement, SceneBvh, PACKET};
+use crate::bvh::{Instance, MeshBvh, Placement, SceneBvh};
 use crate::camera::Camera;
 use crate::geometry::{hit_point_error, translated_hit_point_error, Ray};
 use crate::light::LightSet;
@@ -321,47 +321,6 @@ impl PreparedFrame {
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         // SAFETY: as in `intersect`.
         unsafe { self.query::<true, false>(ray, t_max) }.is_some()
-    }
-
-    /// Which rays of `mask` in the packet `rays` something accepted blocks before their
-    /// `t_max`: bit `r` for ray `r`, each what [`Self::occluded`] answers for it alone.
-    pub fn occluded_packet(
-        &self,
-        rays: &[Ray; PACKET],
-        t_max: &[f32; PACKET],
-        mask: u32,
-        stack: &mut PacketStack,
-    ) -> u32 {
-        // SAFETY: without `AVX`, nothing is asked of the CPU.
-        unsafe { self.occluded_packet_with::<false>(rays, t_max, mask, stack) }
-    }
-
-    /// [`Self::occluded_packet`], with `AVX` for the path loop's AVX copy as
-    /// [`Self::query_avx`].
-    ///
-    /// # Safety
-    /// With `AVX`, the CPU must have AVX ([`crate::simd::avx`] says so).
-    #[inline(always)]
-    pub(crate) unsafe fn occluded_packet_with<const AVX: bool>(
-        &self,
-        rays: &[Ray; PACKET],
-        t_max: &[f32; PACKET],
-        mask: u32,
-        stack: &mut PacketStack,
-    ) -> u32 {
-        let meshes = |m| self.mesh_bvh(m);
-        // SAFETY: passed on from the caller.
-        unsafe {
-            if self.any_hit_filter {
-                let counts = |r: usize, i, t, b1, b2| self.counts(&rays[r], i, t, b1, b2);
-                self.bvh
-                    .occluded_packet::<AVX, _>(meshes, rays, t_max, mask, stack, counts)
-            } else {
-                let all = |_, _, _, _, _| true;
-                self.bvh
-                    .occluded_packet::<AVX, _>(meshes, rays, t_max, mask, stack, all)
-            }
-        }
     }
 
     /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: a hit if any)

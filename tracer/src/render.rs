@@ -46,44 +46,25 @@ pub fn render_tile_cancellable(
         .into_par_iter()
         .map(|row| {
             let mut buf = TileBuffer::new(TileRect::new(rect.x, rect.y + row, rect.width, 1));
-            // With a noise target each sample decides whether the pixel takes the next, so
-            // samples go one at a time; otherwise in batches whose shadow rays travel in
-            // packets.
-            let batch = if settings.noise.is_some() {
-                1
-            } else {
-                integrator::SAMPLE_BATCH
-            };
-            let mut values = Vec::with_capacity(batch as usize);
-            let mut scratch = integrator::SampleScratch::new();
             for col in 0..rect.width {
                 if cancel.load(Ordering::Relaxed) {
                     return None;
                 }
-                let pixel = col as usize;
                 let mut streak = 0;
-                let mut first = samples.start;
-                'pixel: while first < samples.end {
-                    let indices = first..(first + batch).min(samples.end);
-                    first = indices.end;
-                    let (x, y) = (rect.x + col, rect.y + row);
-                    let scratch = &mut scratch;
-                    integrator::trace_samples(
+                for index in samples.start..samples.end {
+                    let s = integrator::trace_sample(
                         frame,
                         settings,
-                        x,
-                        y,
-                        indices.clone(),
-                        scratch,
-                        &mut values,
+                        rect.x + col,
+                        rect.y + row,
+                        index,
                     );
-                    for (index, s) in indices.zip(&values) {
-                        buf.add(pixel, index, s);
-                        if let Some(target) = &settings.noise {
-                            let taken = index + 1 - samples.start;
-                            if target.reached(taken, buf.noise(pixel), &mut streak) {
-                                break 'pixel;
-                            }
+                    let pixel = col as usize;
+                    buf.add(pixel, index, &s);
+                    if let Some(target) = &settings.noise {
+                        let taken = index + 1 - samples.start;
+                        if target.reached(taken, buf.noise(pixel), &mut streak) {
+                            break;
                         }
                     }
                 }

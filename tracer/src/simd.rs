@@ -4,7 +4,7 @@
 //! - A BVH query picks once, at its start, and runs a copy of its whole loop compiled for
 //!   that choice: the eight-wide node test in AVX's eight lanes in one register, or in
 //!   SSE2's two halves of four (the node test must be inlined to pay).
-//! - A camera sample's path loop ([`crate::integrator::trace_samples`]) likewise: AVX's
+//! - A camera sample's path loop ([`crate::integrator::trace_sample`]) likewise: AVX's
 //!   three-operand instructions spare the register copies of SSE2's two-operand ones.
 //!   Its AVX copy inlines the AVX queries (`PreparedFrame::query_avx`): no second choice
 //!   and no call per ray.
@@ -35,7 +35,7 @@ pub fn allow_avx(allowed: bool) {
 }
 
 /// Runs `f` compiled for AVX: what it inlines (a query's loop) may use AVX instructions.
-/// (The path loop has its own AVX function, `integrator::samples::trace_batch_avx`: run through
+/// (The path loop has its own AVX function, `integrator::trace_sample_avx`: run through
 /// this, its closure was left out of line, compiled for the baseline.)
 ///
 /// # Safety

@@ -18,7 +18,6 @@ use crate::geometry::Ray;
 mod lanes;
 mod rows;
 
-pub(crate) use lanes::SharedAxes;
 pub use lanes::{BlockHits, LaneHit, RayLanes};
 pub use rows::{Block, TriangleRows, BLOCK};
 

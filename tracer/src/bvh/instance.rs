@@ -10,7 +10,6 @@ use super::huge_pages::on_huge_pages;
 use super::mesh::MeshBvh;
 use super::motion::MotionTransform;
 use super::node::{ray_is_valid, with_stack};
-use super::packet::{each_ray, traverse_packet, PacketStack, PACKET};
 use super::wide::{collapse, traverse_wide, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};
 #[cfg(target_arch = "x86_64")]
@@ -382,7 +381,7 @@ impl SceneBvh {
     /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: any hit found),
     /// by the search with or without motion as the scene needs. With `AVX`, for a caller
     /// compiled for AVX into which it inlines (the path loop's AVX copy,
-    /// `integrator::samples::trace_batch_avx`): nodes are tested in AVX lanes without asking for
+    /// `integrator::trace_sample_avx`): nodes are tested in AVX lanes without asking for
     /// the CPU's features again and without a call per ray. Without, by the node test this
     /// process uses (see `simd.rs`).
     ///
@@ -501,71 +500,6 @@ impl SceneBvh {
             )
         });
         best
-    }
-
-    /// Which rays of `mask` in the packet `rays` [`Self::occluded`] answers true for, with
-    /// `accept(ray, instance, triangle, b1, b2)`: bit `r` for ray `r`, each the answer for
-    /// the ray alone (see `packet.rs`). A scene with motion is searched ray by ray. With
-    /// `AVX` as [`Self::query`].
-    ///
-    /// # Safety
-    /// With `AVX`, the CPU must have AVX ([`simd::avx`] says so).
-    #[inline(always)]
-    pub(crate) unsafe fn occluded_packet<'m, const AVX: bool, M: Fn(u32) -> &'m MeshBvh>(
-        &self,
-        mesh: M,
-        rays: &[Ray; PACKET],
-        t_max: &[f32; PACKET],
-        mask: u32,
-        stack: &mut PacketStack,
-        mut accept: impl FnMut(usize, u32, u32, f32, f32) -> bool,
-    ) -> u32 {
-        if self.motion {
-            return each_ray(mask)
-                .filter(|&r| {
-                    let accept = |i, t, b1, b2| accept(r, i, t, b1, b2);
-                    // SAFETY: passed on from the caller.
-                    unsafe { self.query::<true, AVX, _>(&mesh, &rays[r], t_max[r], accept) }
-                        .is_some()
-                })
-                .fold(0, |m, r| m | 1 << r);
-        }
-        let valid = each_ray(mask)
-            .filter(|&r| ray_is_valid(&rays[r], t_max[r]))
-            .fold(0, |m, r| m | 1 << r);
-        let wide = std::array::from_fn(|r| WideRay::new(&rays[r]));
-        traverse_packet::<AVX>(
-            &self.nodes,
-            &wide,
-            t_max,
-            valid,
-            stack.entries(),
-            |start, count, rays_in, stack| {
-                let mut blocked = 0;
-                for &instance in &self.order[start as usize..(start + count) as usize] {
-                    let live = rays_in & !blocked;
-                    if live == 0 {
-                        break;
-                    }
-                    let inst = &self.instances[instance as usize];
-                    let mut object = *rays;
-                    for r in each_ray(live) {
-                        object[r] = inst.object_ray(&rays[r]);
-                    }
-                    let bvh = mesh(inst.mesh);
-                    let accept = |r, tri, b1, b2| accept(r, instance, tri, b1, b2);
-                    blocked |= match AVX {
-                        // SAFETY: passed on from the caller.
-                        #[cfg(target_arch = "x86_64")]
-                        true => unsafe {
-                            bvh.occluded_packet_avx(&object, t_max, live, stack, accept)
-                        },
-                        _ => bvh.occluded_packet::<false>(&object, t_max, live, stack, accept),
-                    };
-                }
-                blocked
-            },
-        )
     }
 }
 

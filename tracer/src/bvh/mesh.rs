@@ -8,14 +8,11 @@ use super::motion::Segment;
 use super::node::{
     ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
 };
-use super::packet::{each_ray, traverse_packet, PacketEntry, PACKET};
 use super::wide::{collapse, leaves, prefetch, traverse_wide, Merge, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
 #[cfg(target_arch = "x86_64")]
 use crate::simd;
-use crate::triangle::{
-    intersect_triangle, LaneHit, RayLanes, RayPrecomputed, RayShear, SharedAxes, TriangleRows,
-};
+use crate::triangle::{intersect_triangle, LaneHit, RayLanes, RayPrecomputed, TriangleRows};
 
 /// SAH costs for triangles. A node visit (two slab tests) and a watertight triangle test
 /// cost about the same; leaves of up to 8 triangles let SAH keep flat clusters together.
@@ -377,184 +374,41 @@ impl MeshBvh {
                 }
             },
             |start, count, t_max, _| {
-                self.test_leaf::<ANY_HIT>(&lanes, ray, start, count, t_max, &mut best, &mut accept)
-            },
-        );
-        best
-    }
-
-    /// The triangles of leaf `start .. start + count` against one ray, as
-    /// [`Self::search_with`] tests them: the closest accepted hit before `t_max` into
-    /// `best` (lowering `t_max`), and with `ANY_HIT` true as soon as one is found.
-    // The search's state as its traversal holds it: the bound apart from the best hit.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn test_leaf<const ANY_HIT: bool>(
-        &self,
-        lanes: &RayLanes,
-        ray: &Ray,
-        start: u32,
-        count: u32,
-        t_max: &mut f32,
-        best: &mut Option<(f32, u32, f32, f32)>,
-        accept: &mut impl FnMut(u32, f32, f32) -> bool,
-    ) -> bool {
-        // Four triangles at a time through the test in SIMD lanes; those it keeps but
-        // cannot decide through the whole test, in order.
-        for block in self.rows.leaf(start as usize, count as usize) {
-            let hits = lanes.test(&block);
-            let mut candidates = hits.candidates;
-            while candidates != 0 {
-                let i = candidates.trailing_zeros() as usize;
-                candidates &= candidates - 1;
-                let hit = match hits.decide(i, *t_max) {
-                    LaneHit::Hit(t, b1, b2) => Some((t, b1, b2)),
-                    LaneHit::Miss => None,
-                    // Rare (an edge function of zero, a hit single precision cannot
-                    // place): the whole test's matrix is built here.
-                    LaneHit::WholeTest => {
-                        let [v0, v1, v2] = block.vertices(i);
-                        let pre = RayPrecomputed::new(ray);
-                        intersect_triangle(&pre, v0, v1, v2, *t_max)
-                    }
-                };
-                if let Some((t, b1, b2)) = hit {
-                    let id = block.id(i);
-                    if accept(id, b1, b2) {
-                        *t_max = t;
-                        *best = Some((t, id, b1, b2));
-                        if ANY_HIT {
-                            return true;
-                        }
-                    }
-                }
-            }
-        }
-        false
-    }
-
-    /// [`Self::occluded_packet`] with the node test in AVX lanes, compiled for AVX and out
-    /// of line: inlined into the instance level's leaf, the whole mesh query made that
-    /// closure too large to inline in turn, and it ran compiled for the baseline with each
-    /// node test a call.
-    ///
-    /// # Safety
-    /// The CPU must have AVX ([`simd::avx`] says so).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
-    #[inline(never)]
-    pub(super) unsafe fn occluded_packet_avx(
-        &self,
-        rays: &[Ray; PACKET],
-        t_max: &[f32; PACKET],
-        mask: u32,
-        stack: &mut [PacketEntry],
-        accept: impl FnMut(usize, u32, f32, f32) -> bool,
-    ) -> u32 {
-        self.occluded_packet::<true>(rays, t_max, mask, stack, accept)
-    }
-
-    /// Which rays of `mask` in the packet `rays` (object-space, in this mesh's units) hit
-    /// an accepted triangle (`accept(ray, triangle, b1, b2)`) with `0 < t < t_max[ray]`:
-    /// bit `r` for ray `r`, each bit what [`Self::occluded`] answers for the ray alone. A
-    /// static mesh only (a deforming one is searched ray by ray, see
-    /// `SceneBvh::occluded_packet`). With `AVX` as [`Self::search_with`].
-    #[inline(always)]
-    pub(super) fn occluded_packet<const AVX: bool>(
-        &self,
-        rays: &[Ray; PACKET],
-        t_max: &[f32; PACKET],
-        mask: u32,
-        stack: &mut [PacketEntry],
-        mut accept: impl FnMut(usize, u32, f32, f32) -> bool,
-    ) -> u32 {
-        debug_assert!(!self.has_motion(), "a deforming mesh in a packet");
-        let valid = each_ray(mask)
-            .filter(|&r| ray_is_valid(&rays[r], t_max[r]))
-            .fold(0, |m, r| m | 1 << r);
-        let Some(first) = each_ray(valid).next() else {
-            return 0;
-        };
-        // Each ray's slab test and triangle frame; the lanes past `valid` repeat the
-        // first valid ray's, so that they share its axes.
-        let mut wide = [WideRay::new(&rays[first]); PACKET];
-        let mut frames = [RayShear::new(rays[first].dir); PACKET];
-        let mut origins = [rays[first].origin; PACKET];
-        for r in each_ray(valid) {
-            wide[r] = WideRay::new(&rays[r]);
-            frames[r] = RayShear::new(rays[r].dir);
-            origins[r] = rays[r].origin;
-        }
-        // Each half of four rays in lanes where they share their axes; its rays one at a
-        // time where they do not.
-        let halves: [Option<SharedAxes>; 2] = [0, 1].map(|h| {
-            SharedAxes::new(
-                std::array::from_fn(|i| origins[4 * h + i]),
-                std::array::from_fn(|i| frames[4 * h + i]),
-            )
-        });
-        let alone = (0..2)
-            .filter(|&h| halves[h].is_none())
-            .fold(0, |m, h| m | 0xf << (4 * h))
-            & valid;
-        let singles: [Option<RayLanes>; PACKET] = std::array::from_fn(|r| {
-            (alone & 1 << r != 0).then(|| RayLanes::from_shear(origins[r], frames[r]))
-        });
-        traverse_packet::<AVX>(
-            &self.wide,
-            &wide,
-            t_max,
-            valid,
-            stack,
-            |start, count, rays_in, _| {
-                let mut blocked = 0;
-                for (h, half) in halves.iter().enumerate() {
-                    let Some(lanes) = half else { continue };
-                    for block in self.rows.leaf(start as usize, count as usize) {
-                        for i in 0..block.count() {
-                            let live = (rays_in & !blocked) >> (4 * h) & 0xf;
-                            if live == 0 {
-                                break;
+                // Four triangles at a time through the test in SIMD lanes; those it keeps
+                // but cannot decide through the whole test, in order.
+                for block in self.rows.leaf(start as usize, count as usize) {
+                    let hits = lanes.test(&block);
+                    let mut candidates = hits.candidates;
+                    while candidates != 0 {
+                        let i = candidates.trailing_zeros() as usize;
+                        candidates &= candidates - 1;
+                        let hit = match hits.decide(i, *t_max) {
+                            LaneHit::Hit(t, b1, b2) => Some((t, b1, b2)),
+                            LaneHit::Miss => None,
+                            // Rare (an edge function of zero, a hit single precision
+                            // cannot place): the whole test's matrix is built here.
+                            LaneHit::WholeTest => {
+                                let [v0, v1, v2] = block.vertices(i);
+                                let pre = RayPrecomputed::new(ray);
+                                intersect_triangle(&pre, v0, v1, v2, *t_max)
                             }
-                            let vertices = block.vertices(i);
-                            let hits = lanes.test(&vertices, live);
-                            for lane in each_ray(hits.candidates) {
-                                let r = 4 * h + lane;
-                                let hit = match hits.decide(lane, t_max[r]) {
-                                    LaneHit::Hit(t, b1, b2) => Some((t, b1, b2)),
-                                    LaneHit::Miss => None,
-                                    LaneHit::WholeTest => {
-                                        let [v0, v1, v2] = vertices;
-                                        let pre = RayPrecomputed::new(&rays[r]);
-                                        intersect_triangle(&pre, v0, v1, v2, t_max[r])
-                                    }
-                                };
-                                if hit.is_some_and(|(_, b1, b2)| accept(r, block.id(i), b1, b2)) {
-                                    blocked |= 1 << r;
+                        };
+                        if let Some((t, b1, b2)) = hit {
+                            let id = block.id(i);
+                            if accept(id, b1, b2) {
+                                *t_max = t;
+                                best = Some((t, id, b1, b2));
+                                if ANY_HIT {
+                                    return true;
                                 }
                             }
                         }
                     }
                 }
-                for r in each_ray(rays_in & alone) {
-                    let Some(lanes) = &singles[r] else { continue };
-                    let (mut t, mut best) = (t_max[r], None);
-                    let mut accept = |tri, b1, b2| accept(r, tri, b1, b2);
-                    if self.test_leaf::<true>(
-                        lanes,
-                        &rays[r],
-                        start,
-                        count,
-                        &mut t,
-                        &mut best,
-                        &mut accept,
-                    ) {
-                        blocked |= 1 << r;
-                    }
-                }
-                blocked
+                false
             },
-        )
+        );
+        best
     }
 }
 

@@ -59,13 +59,6 @@ impl WideNode {
         })
     }
 
-    /// What child `lane` is: `(start, 0)` for the node at `start`, `(start, count)` for a
-    /// leaf of primitives `start .. start + count`.
-    #[inline(always)]
-    pub fn child(&self, lane: usize) -> (u32, u32) {
-        (self.start[lane], self.count[lane])
-    }
-
     /// The box of child `lane` (empty for an unused lane).
     fn lane_box(&self, lane: usize) -> Aabb {
         let at = |side: usize, axis: usize| self.bounds[side][axis][lane / LANES][lane % LANES];
@@ -289,7 +282,7 @@ impl WideRay {
     /// else in SSE2 halves of four. `AVX` is true only in code that
     /// [`with_avx`](crate::simd::with_avx) runs.
     #[inline(always)]
-    pub fn enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> ([f32; WIDTH], u32) {
+    fn enter<const AVX: bool>(&self, node: &WideNode, t_max: f32) -> ([f32; WIDTH], u32) {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: this code runs where the CPU has AVX (see above).

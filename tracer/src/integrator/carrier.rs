@@ -63,7 +63,7 @@ impl Colour for Vec4 {
 
 /// How a path turns RGB quantities into what it carries, and back for the film.
 pub(crate) trait Carrier: Copy {
-    type Colour: super::deferred::Gathered;
+    type Colour: Colour;
     /// Whether it carries wavelengths (so that the RGB path compiles out what only the
     /// spectral path does).
     const SPECTRAL: bool;

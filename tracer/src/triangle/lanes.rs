@@ -24,7 +24,7 @@
 //! same IEEE operations on every CPU: glam's SSE2 lanes on x86_64, its NEON or scalar
 //! lanes elsewhere.
 
-use glam::{BVec4A, Vec3, Vec4};
+use glam::{BVec4A, Vec4};
 
 use super::rows::Block;
 use super::{single_precision_decides, Placement, RayShear, IMPRECISE};
@@ -100,7 +100,12 @@ impl RayLanes {
     // Inlined into each query, as `RayPrecomputed::new` is.
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
-        Self::from_shear(ray.origin, RayShear::new(ray.dir))
+        let RayShear { axes, shear } = RayShear::new(ray.dir);
+        Self {
+            origin: axes.map(|k| Vec4::splat(ray.origin.to_array()[k])),
+            shear: shear.to_array().map(Vec4::splat),
+            axes,
+        }
     }
 
     /// The lane test of `block`'s triangles (bit or lane `i` for its triangle `i`).
@@ -125,105 +130,44 @@ impl RayLanes {
                 z,
             )
         };
-        placed_hits(
-            [project(0), project(1), project(2)],
-            self.shear[2],
-            (1 << n) - 1,
-        )
-    }
-
-    /// The lanes of a ray whose frame is already known.
-    #[inline(always)]
-    pub(crate) fn from_shear(origin: Vec3, RayShear { axes, shear }: RayShear) -> Self {
-        Self {
-            origin: axes.map(|k| Vec4::splat(origin.to_array()[k])),
-            shear: shear.to_array().map(Vec4::splat),
-            axes,
-        }
-    }
-}
-
-/// The lane test's steps past projecting the vertices, shared by both layouts: from each
-/// vertex's 2D x, y and unscaled depth in lanes, the edge functions, which lanes in `live`
-/// may hit, and the whole test's numbers for those whose edge functions are all non-zero.
-#[inline(always)]
-fn placed_hits(vertices: [(Vec4, Vec4, Vec4); 3], sz: Vec4, live: u32) -> BlockHits {
-    let [(ax, ay, az), (bx, by, bz), (cx, cy, cz)] = vertices;
-    let u = cx * by - cy * bx;
-    let v = ax * cy - ay * cx;
-    let w = bx * ay - by * ax;
-    let any = |m: [BVec4A; 3]| m[0] | m[1] | m[2];
-    let zero = any([u, v, w].map(|e| e.cmpeq(Vec4::ZERO)));
-    let negative = any([u, v, w].map(|e| e.cmplt(Vec4::ZERO)));
-    let positive = any([u, v, w].map(|e| e.cmpgt(Vec4::ZERO)));
-    let ruled_out = !zero & negative & positive;
-    let candidates = !ruled_out.bitmask() & live;
-    let mut hits = BlockHits {
-        candidates,
-        exact: 0,
-        placed: 0,
-        t: [0.0; 4],
-        delta_t: [0.0; 4],
-        b1: [0.0; 4],
-        b2: [0.0; 4],
-    };
-    if candidates == 0 {
-        return hits;
-    }
-    // The whole test's steps past its edge test, for triangles whose edge functions
-    // are all non-zero (the others it recomputes in double precision first).
-    let hit = Placement::new([ax, bx, cx], [ay, by, cy], [az, bz, cz], sz, [u, v, w]);
-    hits.exact = candidates & !zero.bitmask();
-    hits.placed = hits.exact & hit.t.cmpgt(hit.t_error(hit.spread) * IMPRECISE).bitmask();
-    hits.t = hit.t.to_array();
-    hits.delta_t = hit.t_error(hit.max_zt).to_array();
-    hits.b1 = (v * hit.inv_det).to_array();
-    hits.b2 = (w * hit.inv_det).to_array();
-    hits
-}
-
-/// Four rays whose frames share their axes (`kx`, `ky`, `kz`), in SIMD lanes: the lane
-/// test of one triangle against each ray, lane `r` for ray `r`. Per lane these are the
-/// operations [`RayLanes::test`] runs on a triangle's lane, on the same numbers, so a
-/// lane's [`BlockHits::decide`] is that test's for the ray alone. A packet of shadow rays
-/// (`bvh/packet.rs`) tests each triangle once this way rather than each ray on its own.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct SharedAxes(RayLanes);
-
-impl SharedAxes {
-    /// The lanes of four rays (their origins and frames), or `None` where their frames'
-    /// axes differ. A lane with no ray of its own may repeat another's.
-    #[inline(always)]
-    pub fn new(origins: [Vec3; 4], frames: [RayShear; 4]) -> Option<Self> {
-        let axes = frames[0].axes;
-        if frames.iter().any(|f| f.axes != axes) {
-            return None;
-        }
-        let lane = |k: usize| Vec4::from_array(origins.map(|o| o.to_array()[axes[k]]));
-        let shear = |c: usize| Vec4::from_array(frames.map(|f| f.shear.to_array()[c]));
-        Some(Self(RayLanes {
-            origin: [lane(0), lane(1), lane(2)],
-            shear: [shear(0), shear(1), shear(2)],
-            axes,
-        }))
-    }
-
-    /// The lane test of triangle `vertices` against the rays in `live` (bit `r` for lane
-    /// `r`).
-    #[inline(always)]
-    pub fn test(&self, vertices: &[Vec3; 3], live: u32) -> BlockHits {
-        let lanes = &self.0;
-        let [kx, ky, kz] = lanes.axes;
-        let project = |v: &Vec3| {
-            let c = v.to_array();
-            let z = Vec4::splat(c[kz]) - lanes.origin[2];
-            (
-                (Vec4::splat(c[kx]) - lanes.origin[0]) - lanes.shear[0] * z,
-                (Vec4::splat(c[ky]) - lanes.origin[1]) - lanes.shear[1] * z,
-                z,
-            )
+        let ((ax, ay, az), (bx, by, bz), (cx, cy, cz)) = (project(0), project(1), project(2));
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        let any = |m: [BVec4A; 3]| m[0] | m[1] | m[2];
+        let zero = any([u, v, w].map(|e| e.cmpeq(Vec4::ZERO)));
+        let negative = any([u, v, w].map(|e| e.cmplt(Vec4::ZERO)));
+        let positive = any([u, v, w].map(|e| e.cmpgt(Vec4::ZERO)));
+        let ruled_out = !zero & negative & positive;
+        let candidates = !ruled_out.bitmask() & ((1 << n) - 1);
+        let mut hits = BlockHits {
+            candidates,
+            exact: 0,
+            placed: 0,
+            t: [0.0; 4],
+            delta_t: [0.0; 4],
+            b1: [0.0; 4],
+            b2: [0.0; 4],
         };
-        placed_hits(vertices.each_ref().map(project), lanes.shear[2], live)
+        if candidates == 0 {
+            return hits;
+        }
+        // The whole test's steps past its edge test, for triangles whose edge functions
+        // are all non-zero (the others it recomputes in double precision first).
+        let hit = Placement::new(
+            [ax, bx, cx],
+            [ay, by, cy],
+            [az, bz, cz],
+            self.shear[2],
+            [u, v, w],
+        );
+        hits.exact = candidates & !zero.bitmask();
+        hits.placed = hits.exact & hit.t.cmpgt(hit.t_error(hit.spread) * IMPRECISE).bitmask();
+        hits.t = hit.t.to_array();
+        hits.delta_t = hit.t_error(hit.max_zt).to_array();
+        hits.b1 = (v * hit.inv_det).to_array();
+        hits.b2 = (w * hit.inv_det).to_array();
+        hits
     }
 }
 
@@ -231,7 +175,7 @@ impl SharedAxes {
 mod tests {
     use glam::Vec3;
 
-    use super::super::{intersect_triangle, RayPrecomputed, RayShear, TriangleRows, BLOCK};
+    use super::super::{intersect_triangle, RayPrecomputed, TriangleRows, BLOCK};
     use super::*;
     use crate::geometry::Ray;
     use crate::test_rng::Rng;
@@ -292,67 +236,6 @@ mod tests {
             }
         }
         counts
-    }
-
-    /// Four rays that share their frame's axes, tested in lanes against one triangle at a
-    /// time, get in each lane what their own lane test gives that triangle: the same
-    /// candidates and, for each, the same decision, a hit bit for bit.
-    #[test]
-    fn rays_in_lanes_decide_as_each_ray_alone() {
-        let mut rng = Rng(5);
-        let (mut shared, mut hits, mut whole) = (0, 0, 0);
-        for _ in 0..4000 {
-            // Rays from around one point towards around another: mostly one frame.
-            let (from, to) = ((rng.vec3() - 0.5) * 8.0, (rng.vec3() - 0.5) * 8.0);
-            let rays: [Ray; 4] = std::array::from_fn(|_| {
-                let o = from + (rng.vec3() - 0.5) * 0.5;
-                Ray::new(o, to + (rng.vec3() - 0.5) * 3.0 - o)
-            });
-            let frames = rays.map(|r| RayShear::new(r.dir));
-            let Some(lanes) = SharedAxes::new(rays.map(|r| r.origin), frames) else {
-                assert!(frames.iter().any(|f| f.axes != frames[0].axes));
-                continue;
-            };
-            shared += 1;
-            // A triangle around the target, sometimes with a vertex on a ray.
-            let mut tri = [0; 3].map(|_| to + (rng.vec3() - 0.5) * 4.0);
-            if rng.next_f32() < 0.1 {
-                tri[0] = rays[0].origin + rays[0].dir * 0.5;
-            }
-            let rows = TriangleRows::new([(tri, 9)].into_iter(), &[(0, 1)]);
-            let block = rows.leaf(0, 1).next().unwrap();
-            let live = 0b1011;
-            let together = lanes.test(&tri, live);
-            for (r, ray) in rays.iter().enumerate() {
-                let alone = RayLanes::new(ray).test(&block);
-                let bit = |m: u32, i: usize| m >> i & 1;
-                let t_max = [f32::INFINITY, 4.0, 0.5][r % 3];
-                if live >> r & 1 == 0 {
-                    assert_eq!(bit(together.candidates, r), 0, "a lane without a ray");
-                    continue;
-                }
-                assert_eq!(bit(together.candidates, r), bit(alone.candidates, 0));
-                if bit(alone.candidates, 0) == 0 {
-                    continue;
-                }
-                let (a, b) = (together.decide(r, t_max), alone.decide(0, t_max));
-                let bits = |h: LaneHit| match h {
-                    LaneHit::Hit(t, b1, b2) => Some([t, b1, b2].map(f32::to_bits)),
-                    _ => None,
-                };
-                assert_eq!(
-                    (bits(a), a == LaneHit::WholeTest),
-                    (bits(b), b == LaneHit::WholeTest),
-                    "{ray:?} against {tri:?}"
-                );
-                hits += usize::from(bits(a).is_some());
-                whole += usize::from(a == LaneHit::WholeTest);
-            }
-        }
-        assert!(
-            shared > 2000 && hits > 500 && whole > 50,
-            "{shared} {hits} {whole}"
-        );
     }
 
     #[test]
