@@ -66,10 +66,15 @@ async fn a_drained_worker_finishes_the_task_in_hand_then_leaves() {
     // Many samples per tile, so that the drain comes while one renders.
     let job = create_job(&s, &c, &spec(&scene.digest, 2, 256, 1)).await;
     let mut w = pilot(&s, dir.path(), PilotLimits::default());
-    wait_for(&s, &c, job.id, Duration::from_secs(20), |st| {
-        st.tasks.leased >= 1
-    })
-    .await;
+    // The task is in hand once its scene is in the worker's cache. (The server listing a
+    // lease is not enough: a drain that reaches the worker before the lease's answer ends
+    // the poll, and the lease is given back, not worked on.)
+    let cache = dir.path().join("cache");
+    let started = Instant::now();
+    while !cache.is_dir() || cache_entries(&cache).0.is_empty() {
+        assert!(started.elapsed() < Duration::from_secs(20), "no task taken");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
     w.drain();
     let summary = w.finished().await.unwrap();
     assert_eq!(summary.ended, Ending::Drained);
