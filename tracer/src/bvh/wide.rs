@@ -402,20 +402,23 @@ const PREFETCH_ABOVE: usize = 256;
 /// triangles of a leaf) into the cache.
 #[inline(always)]
 pub(super) fn prefetch<T>(item: &T) {
+    let p = (item as *const T).cast::<u8>();
+    prefetch_line(p);
+    // (The address may lie past the end of `item`'s allocation: `wrapping_add` computes it
+    // without the in-bounds promise that `add` makes.)
+    prefetch_line(p.wrapping_add(64));
+}
+
+/// Asks the CPU to start loading the cache line that holds `p`.
+#[inline(always)]
+fn prefetch_line(p: *const u8) {
     #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let p = (item as *const T).cast::<i8>();
-        // SAFETY: a prefetch is a hint; it reads nothing and cannot fault. The second
-        // address may lie past the end of `item`'s allocation: `wrapping_add` computes it
-        // without the in-bounds promise that `add` makes.
-        unsafe {
-            _mm_prefetch::<_MM_HINT_T0>(p);
-            _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64));
-        }
+    // SAFETY: a prefetch is a hint; it reads nothing and cannot fault, wherever `p` points.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast());
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = item;
+    let _ = p;
 }
 
 /// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`;
@@ -508,6 +511,11 @@ pub(super) fn traverse_wide<const AVX: bool>(
         if let Some(lane) = next {
             if node.count[lane] == 0 {
                 current = node.start[lane];
+                if prefetching {
+                    // Its children's line (the last of four): its address is known now, and
+                    // read only once the boxes, which the node test loads at once, are in.
+                    prefetch_line((&nodes[current as usize].start as *const u32).cast());
+                }
                 continue;
             }
             // A leaf goes through the stack after all: the leaf's code is then inlined once.
