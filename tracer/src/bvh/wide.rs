@@ -396,7 +396,7 @@ fn min_or_acc(acc: Vec4, x: Vec4) -> Vec4 {
 /// Hierarchies of more nodes than this (32 KiB, a core's L1 data cache) prefetch the
 /// children a ray enters; smaller ones stay in the cache, where a prefetch only costs
 /// instructions (1.1% more on the Cornell box).
-const PREFETCH_ABOVE: usize = 256;
+pub(super) const PREFETCH_ABOVE: usize = 256;
 
 /// Asks the CPU to start loading the two cache lines from `item` on (a node, or the first
 /// triangles of a leaf) into the cache.

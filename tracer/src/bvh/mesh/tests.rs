@@ -1,5 +1,6 @@
 use super::*;
 
+use crate::bvh::wide::PREFETCH_ABOVE;
 use crate::test_rng::Rng;
 
 fn soup(rng: &mut Rng, n: usize) -> Vec<[Vec3; 3]> {
@@ -105,6 +106,21 @@ fn matches_brute_force_on_a_soup() {
     let tris = soup(&mut rng, 3000);
     let bvh = MeshBvh::build(&tris);
     assert_eq!(bvh.triangle_count(), 3000);
+    assert_matches_brute_force(&bvh, &tris, &mut rng);
+}
+
+#[test]
+fn trees_that_prefetch_find_the_same_hits() {
+    // Past `PREFETCH_ABOVE` nodes the traversal prefetches the nodes and leaves it will
+    // visit: hints that must not change what it finds.
+    let mut rng = Rng(0x9e3779b97f4a7c15);
+    let tris = soup(&mut rng, 8000);
+    let bvh = MeshBvh::build(&tris);
+    assert!(
+        bvh.node_count() > PREFETCH_ABOVE,
+        "{} nodes",
+        bvh.node_count()
+    );
     assert_matches_brute_force(&bvh, &tris, &mut rng);
 }
 
