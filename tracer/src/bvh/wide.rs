@@ -423,10 +423,12 @@ fn prefetch_line(p: *const u8) {
 
 /// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`;
 /// `leaf` and `stack` work as for the binary [`traverse`](super::node::traverse). Stack
-/// entries name a node's lane (`8·node + lane`). In a large tree `prefetch_leaf(start,
-/// count)` is called for each leaf entered, when it is pushed, so that its primitives can
-/// be on their way into the cache by the time it is visited; not for a leaf that a
-/// closest-hit search visits at once (a node's only child entered, or the nearer of two).
+/// entries name a node's lane (`8·node + lane`). In a large tree each child node entered is
+/// prefetched when it is pushed, and `prefetch_leaf(start, count)` is called for each leaf
+/// entered, so that its primitives can be on their way into the cache by the time it is
+/// visited; not for a leaf that a closest-hit search visits at once (a node's only child
+/// entered, or the nearer of two), and of a node it moves to at once, only the line of its
+/// lanes' `start` and `count`.
 ///
 /// With `nearest_first` (a constant in each query, which this is inlined into), a node's
 /// children are visited nearest first (at equal distances the later lane first), and one
@@ -512,8 +514,9 @@ pub(super) fn traverse_wide<const AVX: bool>(
             if node.count[lane] == 0 {
                 current = node.start[lane];
                 if prefetching {
-                    // Its children's line (the last of four): its address is known now, and
-                    // read only once the boxes, which the node test loads at once, are in.
+                    // The line of its lanes' `start` and `count` (the last of its four):
+                    // read only once its node test has picked a lane, it would miss after
+                    // the boxes' miss; asked for now, the two misses overlap.
                     prefetch_line((&nodes[current as usize].start as *const u32).cast());
                 }
                 continue;
