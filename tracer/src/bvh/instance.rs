@@ -5,12 +5,12 @@ use std::sync::Arc;
 
 use glam::{Affine3A, DMat4, Mat3A, Vec3};
 
-use super::build::{self, BuildParams, BuildPrim};
+use super::build::{self, half_area, BuildParams, BuildPrim};
 use super::huge_pages::on_huge_pages;
-use super::mesh::MeshBvh;
+use super::mesh::{MeshBvh, Part};
 use super::motion::MotionTransform;
 use super::node::{ray_is_valid, with_stack};
-use super::wide::{collapse, traverse_wide, WideNode, WideRay};
+use super::wide::{collapse, traverse_wide, Walk, WideNode, WideRay};
 use crate::geometry::{Aabb, Hit, Ray};
 #[cfg(target_arch = "x86_64")]
 use crate::simd;
@@ -251,6 +251,48 @@ pub(super) fn transform_bounds(m: &Affine3A, b: &Aabb) -> Aabb {
     out
 }
 
+/// A leaf entry of the top level: an instance's mesh, whole or one lane of its root.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    instance: u32,
+    part: Part,
+}
+
+/// The most instances the top level opens (see [`opened`]).
+const OPEN_AT_MOST: usize = 16;
+
+/// The instances whose meshes the top level lists by their root's lanes instead of whole:
+/// of the [`OPEN_AT_MOST`] largest static ones (by the area of their world boxes), those
+/// whose box holds the centre of another instance's box. A mesh around others (the walls
+/// of a room around its furniture) is entered by every ray that enters them, and by every
+/// ray that starts inside it, whether or not the ray comes near a wall; its lanes' boxes,
+/// a wall each, are entered only by the rays that reach them. Sorted.
+fn opened<'m>(instances: &[Instance], mesh: &impl Fn(u32) -> &'m MeshBvh) -> Vec<u32> {
+    let hittable = || (0..instances.len()).filter(|&i| instances[i].is_hittable());
+    let mut largest: Vec<usize> = hittable()
+        .filter(|&i| !instances[i].has_motion() && !mesh(instances[i].mesh).has_motion())
+        .collect();
+    let area = |i: usize| {
+        let b = instances[i].bounds;
+        half_area(b.min.into(), b.max.into())
+    };
+    largest.sort_by(|&a, &b| area(b).total_cmp(&area(a)).then(a.cmp(&b)));
+    largest.truncate(OPEN_AT_MOST);
+    let mut opened: Vec<u32> = largest
+        .into_iter()
+        .filter(|&i| {
+            let b = instances[i].bounds;
+            hittable().any(|j| {
+                let c = instances[j].bounds.center();
+                j != i && c.cmpge(b.min).all() && c.cmple(b.max).all()
+            })
+        })
+        .map(|i| i as u32)
+        .collect();
+    opened.sort_unstable();
+    opened
+}
+
 /// The top-level BVH over a prepared frame's instances, built with a binned SAH over
 /// their world bounds (over the whole shutter for moving ones). Hits name instances by
 /// their index in the list given to [`SceneBvh::build`], which [`SceneBvh::instances`]
@@ -264,8 +306,8 @@ pub struct SceneBvh {
     instances: Vec<Instance>,
     /// The eight-wide tree over the instances' bounds.
     nodes: Vec<WideNode>,
-    /// Instance indices in leaf order.
-    order: Vec<u32>,
+    /// What the tree's leaves hold, in leaf order: instances, and parts of opened ones.
+    entries: Vec<Entry>,
     /// Whether an instance moves or a mesh it places deforms.
     motion: bool,
 }
@@ -297,24 +339,44 @@ impl SceneBvh {
         let motion = instances
             .iter()
             .any(|inst| inst.has_motion() || mesh(inst.mesh).has_motion());
+        let opened = opened(&instances, &mesh);
+        let mut entries = Vec::new();
+        let mut boxes = Vec::new();
+        for (i, inst) in instances.iter().enumerate() {
+            if !inst.is_hittable() {
+                continue;
+            }
+            let instance = i as u32;
+            if opened.contains(&instance) {
+                for (bounds, part) in mesh(inst.mesh).root_parts() {
+                    entries.push(Entry { instance, part });
+                    boxes.push(transform_bounds(&inst.to_world, &bounds));
+                }
+            } else {
+                entries.push(Entry {
+                    instance,
+                    part: Part::Whole,
+                });
+                boxes.push(inst.bounds);
+            }
+        }
         // Bounds that overflowed to infinity are clamped so that centroids stay finite.
         let limit = Vec3::splat(f32::MAX);
-        let mut prims: Vec<BuildPrim> = instances
+        let mut prims: Vec<BuildPrim> = boxes
             .iter()
             .enumerate()
-            .filter(|(_, inst)| inst.is_hittable())
-            .map(|(i, inst)| BuildPrim {
-                min: inst.bounds.min.clamp(-limit, limit),
-                max: inst.bounds.max.clamp(-limit, limit),
+            .map(|(i, b)| BuildPrim {
+                min: b.min.clamp(-limit, limit),
+                max: b.max.clamp(-limit, limit),
                 index: i as u32,
             })
             .collect();
         let nodes = collapse(&build::build(&mut prims, &PARAMS), None);
-        let order = prims.iter().map(|p| p.index).collect();
+        let entries = prims.iter().map(|p| entries[p.index as usize]).collect();
         SceneBvh {
             instances: on_huge_pages(instances),
             nodes: on_huge_pages(nodes),
-            order: on_huge_pages(order),
+            entries: on_huge_pages(entries),
             motion,
         }
     }
@@ -347,7 +409,7 @@ impl SceneBvh {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(self.instances.as_slice())
             + std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.order.as_slice())
+            + std::mem::size_of_val(self.entries.as_slice())
     }
 
     /// Closest hit with `0 < t < t_max` for which `accept(instance, triangle, b1, b2)` is
@@ -464,10 +526,14 @@ impl SceneBvh {
                 &WideRay::new(ray),
                 &mut t_max,
                 stack,
-                !ANY_HIT,
+                Walk {
+                    root_lane: None,
+                    nearest_first: !ANY_HIT,
+                },
                 |_, _| {},
                 |start, count, t_max, stack| {
-                    for &instance in &self.order[start as usize..(start + count) as usize] {
+                    for entry in &self.entries[start as usize..(start + count) as usize] {
+                        let instance = entry.instance;
                         let inst = &self.instances[instance as usize];
                         let bvh = mesh(inst.mesh);
                         let object_ray = if MOTION {
@@ -479,6 +545,7 @@ impl SceneBvh {
                             &object_ray,
                             *t_max,
                             stack,
+                            entry.part,
                             |tri, b1, b2| accept(instance, tri, b1, b2),
                         );
                         if let Some((t, triangle, b1, b2)) = hit {

@@ -8,7 +8,7 @@ use super::motion::Segment;
 use super::node::{
     ray_is_valid, traverse, with_stack, BoxRay, Deferred, MotionBoxes, Node, StepBox,
 };
-use super::wide::{collapse, leaves, prefetch, traverse_wide, Merge, WideNode, WideRay};
+use super::wide::{collapse, leaves, prefetch, traverse_wide, Merge, Walk, WideNode, WideRay};
 use crate::geometry::{Aabb, Ray};
 #[cfg(target_arch = "x86_64")]
 use crate::simd;
@@ -290,11 +290,13 @@ impl MeshBvh {
     ) -> Option<(f32, u32, f32, f32)> {
         #[cfg(target_arch = "x86_64")]
         if simd::avx() {
-            let search = || self.search_with::<ANY_HIT, MOTION, true>(ray, t_max, stack, accept);
+            let search = || {
+                self.search_with::<ANY_HIT, MOTION, true>(ray, t_max, stack, Part::Whole, accept)
+            };
             // SAFETY: the CPU has AVX (`simd::avx`).
             return unsafe { simd::with_avx(search) };
         }
-        self.search_with::<ANY_HIT, MOTION, false>(ray, t_max, stack, accept)
+        self.search_with::<ANY_HIT, MOTION, false>(ray, t_max, stack, Part::Whole, accept)
     }
 
     /// The closest accepted hit, or with `ANY_HIT` the first one found (traversal stops
@@ -303,12 +305,15 @@ impl MeshBvh {
     /// time 0: step 0 comes first and the eight-wide boxes span every step). Const parameters,
     /// so each query compiles to its own loop and a static scene pays nothing for motion.
     /// With `AVX` (only where [`simd::with_avx`] runs it), nodes are tested in AVX lanes.
+    /// `part` says whether the whole tree is searched or one lane of its root (see
+    /// [`Self::root_parts`]).
     #[inline(always)]
     pub(super) fn search_with<const ANY_HIT: bool, const MOTION: bool, const AVX: bool>(
         &self,
         ray: &Ray,
         t_max: f32,
         stack: &mut [Deferred],
+        part: Part,
         mut accept: impl FnMut(u32, f32, f32) -> bool,
     ) -> Option<(f32, u32, f32, f32)> {
         if !ray_is_valid(ray, t_max) {
@@ -317,6 +322,7 @@ impl MeshBvh {
         let mut t_max = t_max;
         let mut best = None;
         if MOTION && self.has_motion() {
+            debug_assert_eq!(part, Part::Whole, "a deforming mesh is searched whole");
             let pre = RayPrecomputed::new(ray);
             let steps = self.steps as usize;
             let segment = Segment::new(ray.time, steps);
@@ -363,7 +369,13 @@ impl MeshBvh {
             &WideRay::new(ray),
             &mut t_max,
             stack,
-            !ANY_HIT,
+            Walk {
+                root_lane: match part {
+                    Part::Whole => None,
+                    Part::Lane(lane) => Some(lane),
+                },
+                nearest_first: !ANY_HIT,
+            },
             |start, count| {
                 let start = start as usize;
                 prefetch(self.rows.at(start));
@@ -410,6 +422,28 @@ impl MeshBvh {
         );
         best
     }
+
+    /// The lanes of the root of a static mesh's tree, each with its box: parts that the
+    /// instance level may list on their own. None for a deforming mesh, whose search at a
+    /// time takes its binary tree whole.
+    pub(super) fn root_parts(&self) -> Vec<(Aabb, Part)> {
+        match self.wide.first() {
+            Some(root) if !self.has_motion() => root
+                .lanes()
+                .map(|(lane, bounds)| (bounds, Part::Lane(lane)))
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+}
+
+/// What a search of a mesh's tree covers: all of it, or what one lane of its root holds
+/// (a child node's subtree, or a leaf), which the instance level lists on its own for an
+/// instance it opens (see `SceneBvh::build`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Part {
+    Whole,
+    Lane(u32),
 }
 
 /// Every node's box at every step (node-major; see `MotionBoxes`), from the step-major

@@ -68,6 +68,13 @@ impl WideNode {
         }
     }
 
+    /// The used lanes, each with its box.
+    pub fn lanes(&self) -> impl Iterator<Item = (u32, Aabb)> + '_ {
+        (0..WIDTH)
+            .filter(|&lane| self.start[lane] | self.count[lane] != 0)
+            .map(|lane| (lane as u32, self.lane_box(lane)))
+    }
+
     fn set_lane(&mut self, lane: usize, node: &Node, start: u32, count: u32) {
         for axis in 0..3 {
             self.bounds[0][axis][lane / LANES][lane % LANES] = node.min[axis];
@@ -421,8 +428,19 @@ fn prefetch_line(p: *const u8) {
     let _ = p;
 }
 
-/// Visits the leaves of an eight-wide hierarchy whose boxes the ray enters before `t_max`;
-/// `leaf` and `stack` work as for the binary [`traverse`](super::node::traverse). Stack
+/// What a traversal searches, and in what order it visits a node's children (see
+/// [`traverse_wide`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Walk {
+    /// The one lane of the root whose subtree (or leaf) is searched; `None`: the whole tree.
+    pub root_lane: Option<u32>,
+    /// Nearest first, for a closest-hit search; else in reverse lane order.
+    pub nearest_first: bool,
+}
+
+/// Visits the leaves of an eight-wide hierarchy (under `walk.root_lane` alone, if given)
+/// whose boxes the ray enters before `t_max`; `leaf` and `stack` work as for the binary
+/// [`traverse`](super::node::traverse). Stack
 /// entries name a node's lane (`8·node + lane`). In a large tree each child node entered is
 /// prefetched when it is pushed, and `prefetch_leaf(start, count)` is called for each leaf
 /// entered, so that its primitives can be on their way into the cache by the time it is
@@ -430,7 +448,7 @@ fn prefetch_line(p: *const u8) {
 /// entered, or the nearer of two), and of a node it moves to at once, only the line of its
 /// lanes' `start` and `count`.
 ///
-/// With `nearest_first` (a constant in each query, which this is inlined into), a node's
+/// With `walk.nearest_first` (a constant in each query, which this is inlined into), a node's
 /// children are visited nearest first (at equal distances the later lane first), and one
 /// that a closer hit has ruled out since it was pushed is skipped: what a closest-hit
 /// search needs. Without, they are visited in reverse lane order, unsorted, as Embree's
@@ -442,13 +460,14 @@ pub(super) fn traverse_wide<const AVX: bool>(
     ray: &WideRay,
     t_max: &mut f32,
     stack: &mut [Deferred],
-    nearest_first: bool,
+    walk: Walk,
     prefetch_leaf: impl Fn(u32, u32),
     mut leaf: impl FnMut(u32, u32, &mut f32, &mut [Deferred]) -> bool,
 ) {
     if nodes.is_empty() {
         return;
     }
+    let nearest_first = walk.nearest_first;
     let prefetching = nodes.len() > PREFETCH_ABOVE;
     // Fetch each child pushed as it is pushed: in a large tree each node is a cache miss,
     // and misses issued together overlap.
@@ -468,63 +487,74 @@ pub(super) fn traverse_wide<const AVX: bool>(
     // Entries `..len` of `stack` are this traversal's; a leaf gets the rest.
     let mut len = 0;
     let mut current = 0u32;
+    // One lane of the root searched alone is where the pop below starts (at no distance,
+    // so that no hit found before rules it out: the caller has tested its box).
+    let mut pop_first = false;
+    if let Some(lane) = walk.root_lane {
+        stack[0] = (lane, f32::NEG_INFINITY);
+        len = 1;
+        pop_first = true;
+    }
     loop {
-        let node = &nodes[current as usize];
-        let (entry, hits) = ray.enter::<AVX>(node, *t_max);
-        // The lane to visit next when this node decides it without the stack: its only
-        // child entered, or the nearer of two (at equal distances the later lane, as the
-        // sort below orders them). As Embree's traversal does: most nodes are entered by
-        // one or two children, and a push, a sort and a pop mispredict where a compare
-        // need not.
-        let next = match ones_up_to_three(hits) {
-            0 => None,
-            1 if nearest_first => Some(hits.trailing_zeros() as usize),
-            2 if nearest_first => {
-                let (a, b) = (
-                    hits.trailing_zeros() as usize,
-                    31 - hits.leading_zeros() as usize,
-                );
-                let (near, far) = if entry[a] < entry[b] { (a, b) } else { (b, a) };
-                fetch(node, far);
-                stack[len] = (current * WIDTH as u32 + far as u32, entry[far]);
-                len += 1;
-                Some(near)
-            }
-            _ => {
-                // Push the children entered; nearest first, kept in falling order of
-                // distance above `first`, so that the nearest is popped first.
-                let first = len;
-                let mut hits = hits;
-                while hits != 0 {
-                    let lane = hits.trailing_zeros();
-                    hits &= hits - 1;
-                    fetch(node, lane as usize);
-                    stack[len] = (current * WIDTH as u32 + lane, entry[lane as usize]);
-                    let mut i = len;
+        if !pop_first {
+            let node = &nodes[current as usize];
+            let (entry, hits) = ray.enter::<AVX>(node, *t_max);
+            // The lane to visit next when this node decides it without the stack: its only
+            // child entered, or the nearer of two (at equal distances the later lane, as the
+            // sort below orders them). As Embree's traversal does: most nodes are entered by
+            // one or two children, and a push, a sort and a pop mispredict where a compare
+            // need not.
+            let next = match ones_up_to_three(hits) {
+                0 => None,
+                1 if nearest_first => Some(hits.trailing_zeros() as usize),
+                2 if nearest_first => {
+                    let (a, b) = (
+                        hits.trailing_zeros() as usize,
+                        31 - hits.leading_zeros() as usize,
+                    );
+                    let (near, far) = if entry[a] < entry[b] { (a, b) } else { (b, a) };
+                    fetch(node, far);
+                    stack[len] = (current * WIDTH as u32 + far as u32, entry[far]);
                     len += 1;
-                    while nearest_first && i > first && stack[i - 1].1 < stack[i].1 {
-                        stack.swap(i - 1, i);
-                        i -= 1;
+                    Some(near)
+                }
+                _ => {
+                    // Push the children entered; nearest first, kept in falling order of
+                    // distance above `first`, so that the nearest is popped first.
+                    let first = len;
+                    let mut hits = hits;
+                    while hits != 0 {
+                        let lane = hits.trailing_zeros();
+                        hits &= hits - 1;
+                        fetch(node, lane as usize);
+                        stack[len] = (current * WIDTH as u32 + lane, entry[lane as usize]);
+                        let mut i = len;
+                        len += 1;
+                        while nearest_first && i > first && stack[i - 1].1 < stack[i].1 {
+                            stack.swap(i - 1, i);
+                            i -= 1;
+                        }
                     }
+                    None
                 }
-                None
-            }
-        };
-        if let Some(lane) = next {
-            if node.count[lane] == 0 {
-                current = node.start[lane];
-                if prefetching {
-                    // The line of its lanes' `start` and `count` (the last of its four):
-                    // read only once its node test has picked a lane, it would miss after
-                    // the boxes' miss; asked for now, the two misses overlap.
-                    prefetch_line((&nodes[current as usize].start as *const u32).cast());
+            };
+            if let Some(lane) = next {
+                if node.count[lane] == 0 {
+                    current = node.start[lane];
+                    if prefetching {
+                        // The line of its lanes' `start` and `count` (the last of its four):
+                        // read only once its node test has picked a lane, it would miss after
+                        // the boxes' miss; asked for now, the two misses overlap.
+                        prefetch_line((&nodes[current as usize].start as *const u32).cast());
+                    }
+                    continue;
                 }
-                continue;
+                // A leaf goes through the stack after all: the leaf's code is then inlined once.
+                stack[len] = (current * WIDTH as u32 + lane as u32, entry[lane]);
+                len += 1;
             }
-            // A leaf goes through the stack after all: the leaf's code is then inlined once.
-            stack[len] = (current * WIDTH as u32 + lane as u32, entry[lane]);
-            len += 1;
         }
+        pop_first = false;
         // Pop the next child that a closer hit has not ruled out: a leaf is handled here,
         // an interior node is tested next.
         loop {

@@ -347,3 +347,143 @@ fn motion_scene_matches_brute_force() {
     }
     assert!(hits > 200, "only {hits} hits");
 }
+
+/// A room's walls, a quad per side of the cube [-10, 10]³ (two triangles each).
+fn room() -> Vec<[Vec3; 3]> {
+    let mut walls = Vec::new();
+    for axis in 0..3 {
+        for side in [-10.0f32, 10.0] {
+            let corner = |u: f32, v: f32| {
+                let mut p = [0.0; 3];
+                p[axis] = side;
+                p[(axis + 1) % 3] = u;
+                p[(axis + 2) % 3] = v;
+                Vec3::from_array(p)
+            };
+            let [a, b, c, d] =
+                [(-10., -10.), (10., -10.), (10., 10.), (-10., 10.)].map(|(u, v)| corner(u, v));
+            walls.push([a, b, c]);
+            walls.push([a, c, d]);
+        }
+    }
+    walls
+}
+
+/// A room around its furniture is listed by its root's lanes (the furniture, inside no
+/// other instance, whole), and the scene finds what testing every instance finds: from
+/// inside the room and from outside, closest hits and occlusion, static and moving.
+#[test]
+fn a_room_around_others_is_opened_and_finds_the_same_hits() {
+    let mut rng = Rng(0x5eed);
+    // Enough triangles that the root's lanes hold nodes as well as leaves.
+    let soup: Vec<[Vec3; 3]> = (0..400)
+        .map(|_| {
+            let c = rng.vec3() * 2.0 - 1.0;
+            [
+                c + (rng.vec3() - 0.5) * 0.4,
+                c + (rng.vec3() - 0.5) * 0.4,
+                c + (rng.vec3() - 0.5) * 0.4,
+            ]
+        })
+        .collect();
+    let meshes = [MeshBvh::build(&room()), MeshBvh::build(&soup)];
+    let mut instances = vec![Instance::new(
+        0,
+        Affine3A::from_mat4(trs(DVec3::ONE, DQuat::from_rotation_y(0.3), DVec3::X).as_mat4()),
+        &meshes[0].bounds(),
+    )];
+    for i in 0..16 {
+        let place = trs(
+            DVec3::splat(0.5 + rng.next_f32() as f64),
+            DQuat::from_axis_angle(DVec3::Y, rng.next_f32() as f64 * 3.0),
+            (rng.vec3() * 12.0 - 6.0).as_dvec3(),
+        );
+        instances.push(if i % 4 == 3 {
+            let later = place * DMat4::from_translation(DVec3::new(0.0, 1.0, 0.0));
+            Instance::moving(1, &[place, later], &meshes[1].bounds())
+        } else {
+            Instance::new(1, Affine3A::from_mat4(place.as_mat4()), &meshes[1].bounds())
+        });
+    }
+    let mesh = |m: u32| &meshes[m as usize];
+    // The room, and pieces of furniture whose boxes hold another's centre.
+    let open = opened(&instances, &mesh);
+    assert!(
+        open.contains(&0) && open.len() < instances.len(),
+        "{open:?}"
+    );
+    let scene = SceneBvh::build(instances.clone(), mesh);
+    assert!(meshes[0].root_parts().len() >= 2);
+    // Eight lanes of leaves of at most eight triangles could not hold them all: some of
+    // the furniture's root lanes are nodes, searched as subtrees.
+    assert!(meshes[1].triangle_count() > 8 * 8);
+    let entries: usize = (0..instances.len() as u32)
+        .map(|i| match open.contains(&i) {
+            true => mesh(instances[i as usize].mesh).root_parts().len(),
+            false => 1,
+        })
+        .sum();
+    assert_eq!(scene.entries.len(), entries);
+    let mut hits = 0;
+    for k in 0..4000 {
+        let from = if k % 2 == 0 { 8.0 } else { 40.0 };
+        let mut ray = Ray::new(rng.vec3() * 2.0 * from - from, rng.vec3() - 0.5);
+        ray.time = rng.next_f32();
+        let t_max = if k % 3 == 0 { 5.0 } else { f32::INFINITY };
+        let mut expect: Option<(f32, u32, u32)> = None;
+        for (i, inst) in instances.iter().enumerate() {
+            let limit = expect.map_or(t_max, |e| e.0);
+            let object_ray = transform_ray(&inst.placement(ray.time).to_object, &ray);
+            if let Some((t, tri, ..)) =
+                mesh(inst.mesh).intersect(&object_ray, limit, |_, _, _| true)
+            {
+                expect = Some((t, i as u32, tri));
+            }
+        }
+        let got = scene
+            .intersect(mesh, &ray, t_max, |_, _, _, _| true)
+            .map(|h| (h.t, h.instance, h.triangle));
+        assert_eq!(got, expect, "ray {ray:?}");
+        let occluded = scene.occluded(mesh, &ray, t_max, |_, _, _, _| true);
+        assert_eq!(occluded, expect.is_some());
+        hits += expect.is_some_and(|e| e.1 > 0) as u32;
+    }
+    assert!(hits > 100, "only {hits} hits on the furniture");
+}
+
+/// Only the largest static instances that hold another's centre are opened: not one
+/// beside the others, not a moving one, and none past `OPEN_AT_MOST`.
+#[test]
+fn only_large_static_instances_around_others_are_opened() {
+    let meshes = [MeshBvh::build(&room()), quad_mesh()];
+    let mesh = |m: u32| &meshes[m as usize];
+    let at = |m: u32, scale: f64, x: f64| {
+        let place = trs(
+            DVec3::splat(scale),
+            DQuat::IDENTITY,
+            DVec3::new(x, 3.0, 3.0),
+        );
+        Instance::new(
+            m,
+            Affine3A::from_mat4(place.as_mat4()),
+            &meshes[m as usize].bounds(),
+        )
+    };
+    // A room, a room far beside it (around nothing), and a quad inside the first (whose
+    // box, off the room's centre, holds no other's centre).
+    let rooms = vec![at(0, 1.0, 0.0), at(0, 1.0, 100.0), at(1, 1.0, 2.0)];
+    assert_eq!(opened(&rooms, &mesh), [0]);
+    // Moving, the room is not opened.
+    let mut moving = rooms.clone();
+    let place = trs(DVec3::ONE, DQuat::IDENTITY, DVec3::new(0.0, 3.0, 3.0));
+    let later = trs(DVec3::ONE, DQuat::IDENTITY, DVec3::new(1.0, 3.0, 3.0));
+    moving[0] = Instance::moving(0, &[place, later], &meshes[0].bounds());
+    assert_eq!(opened(&moving, &mesh), Vec::<u32>::new());
+    // Nested rooms, each around a quad: the largest `OPEN_AT_MOST` are opened.
+    let mut nested: Vec<Instance> = (0..OPEN_AT_MOST + 4)
+        .map(|i| at(0, 1.0 + i as f64, 0.0))
+        .collect();
+    nested.push(at(1, 1.0, 2.0));
+    let want: Vec<u32> = (4..OPEN_AT_MOST as u32 + 4).collect();
+    assert_eq!(opened(&nested, &mesh), want);
+}

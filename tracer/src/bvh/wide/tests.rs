@@ -161,7 +161,10 @@ fn visits_the_same_leaves_at_the_same_distances_as_the_binary_traversal() {
                 &WideRay::new(&ray),
                 &mut { t_max },
                 &mut stack,
-                nearest_first,
+                Walk {
+                    root_lane: None,
+                    nearest_first,
+                },
                 |_, _| {},
                 |s, c, _, _| {
                     seen_wide.push((s, c));
@@ -229,7 +232,10 @@ fn a_closest_hit_search_visits_leaves_nearest_first_and_ties_by_lane() {
             &wide_ray,
             &mut { f32::INFINITY },
             &mut stack,
-            true,
+            Walk {
+                root_lane: None,
+                nearest_first: true,
+            },
             |_, _| {},
             |s, c, _, _| {
                 order.push((s, c));
@@ -267,7 +273,10 @@ fn a_closer_hit_prunes_and_any_hit_stops() {
         &ray,
         &mut t_max,
         &mut stack[1..],
-        true,
+        Walk {
+            root_lane: None,
+            nearest_first: true,
+        },
         |_, _| {},
         |start, _, t_max, _| {
             order.push(prims[start as usize].index);
@@ -285,7 +294,10 @@ fn a_closer_hit_prunes_and_any_hit_stops() {
         &ray,
         &mut t_max,
         &mut stack[1..],
-        true,
+        Walk {
+            root_lane: None,
+            nearest_first: true,
+        },
         |_, _| {},
         |_, _, _, _| {
             visits += 1;
@@ -334,7 +346,10 @@ fn a_path_as_deep_as_the_build_allows_fits_one_level_of_the_stack() {
             &ray,
             &mut t_max,
             &mut stack,
-            true,
+            Walk {
+                root_lane: None,
+                nearest_first: true,
+            },
             |_, _| {},
             |_, _, _, _| {
                 leaves += 1;
