@@ -310,6 +310,8 @@ pub struct SceneBvh {
     entries: Vec<Entry>,
     /// Whether an instance moves or a mesh it places deforms.
     motion: bool,
+    /// Whether an entry is a part of an instance's mesh (an instance was opened).
+    opened: bool,
 }
 
 impl std::fmt::Debug for SceneBvh {
@@ -378,6 +380,7 @@ impl SceneBvh {
             nodes: on_huge_pages(nodes),
             entries: on_huge_pages(entries),
             motion,
+            opened: !opened.is_empty(),
         }
     }
 
@@ -441,7 +444,9 @@ impl SceneBvh {
     }
 
     /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: any hit found),
-    /// by the search with or without motion as the scene needs. With `AVX`, for a caller
+    /// by the search with or without motion, and with or without opened instances, as the
+    /// scene needs (each its own loop: a scene pays for neither unless it has it). With
+    /// `AVX`, for a caller
     /// compiled for AVX into which it inlines (the path loop's AVX copy,
     /// `integrator::trace_sample_avx`): nodes are tested in AVX lanes without asking for
     /// the CPU's features again and without a call per ray. Without, by the node test this
@@ -462,10 +467,13 @@ impl SceneBvh {
         t_max: f32,
         accept: impl FnMut(u32, u32, f32, f32) -> bool,
     ) -> Option<Hit> {
-        if self.motion {
-            self.search::<ANY_HIT, true, AVX, M>(mesh, ray, t_max, accept)
-        } else {
-            self.search::<ANY_HIT, false, AVX, M>(mesh, ray, t_max, accept)
+        match (self.motion, self.opened) {
+            (false, false) => {
+                self.search::<ANY_HIT, false, false, AVX, M>(mesh, ray, t_max, accept)
+            }
+            (false, true) => self.search::<ANY_HIT, false, true, AVX, M>(mesh, ray, t_max, accept),
+            (true, false) => self.search::<ANY_HIT, true, false, AVX, M>(mesh, ray, t_max, accept),
+            (true, true) => self.search::<ANY_HIT, true, true, AVX, M>(mesh, ray, t_max, accept),
         }
     }
 
@@ -476,6 +484,7 @@ impl SceneBvh {
         'm,
         const ANY_HIT: bool,
         const MOTION: bool,
+        const OPENED: bool,
         const AVX: bool,
         M: Fn(u32) -> &'m MeshBvh,
     >(
@@ -486,26 +495,30 @@ impl SceneBvh {
         accept: impl FnMut(u32, u32, f32, f32) -> bool,
     ) -> Option<Hit> {
         if AVX {
-            return self.search_with::<ANY_HIT, MOTION, true, M>(mesh, ray, t_max, accept);
+            return self.search_with::<ANY_HIT, MOTION, OPENED, true, M>(mesh, ray, t_max, accept);
         }
         #[cfg(target_arch = "x86_64")]
         if simd::avx() {
-            let search = || self.search_with::<ANY_HIT, MOTION, true, M>(mesh, ray, t_max, accept);
+            let search =
+                || self.search_with::<ANY_HIT, MOTION, OPENED, true, M>(mesh, ray, t_max, accept);
             // SAFETY: the CPU has AVX (`simd::avx`).
             return unsafe { simd::with_avx(search) };
         }
-        self.search_with::<ANY_HIT, MOTION, false, M>(mesh, ray, t_max, accept)
+        self.search_with::<ANY_HIT, MOTION, OPENED, false, M>(mesh, ray, t_max, accept)
     }
 
     /// The closest accepted hit, or with `ANY_HIT` the first one found. With `MOTION`,
     /// moving instances are placed and deforming meshes interpolated at `ray.time`; the
-    /// top level's boxes cover the shutter either way. With `AVX` (only where
-    /// [`simd::with_avx`] runs it), nodes are tested in AVX lanes at both levels.
+    /// top level's boxes cover the shutter either way. With `OPENED`, entries may be parts
+    /// of an instance's mesh (see [`opened`]); without, every entry is a whole mesh. With
+    /// `AVX` (only where [`simd::with_avx`] runs it), nodes are tested in AVX lanes at both
+    /// levels.
     #[inline(always)]
     fn search_with<
         'm,
         const ANY_HIT: bool,
         const MOTION: bool,
+        const OPENED: bool,
         const AVX: bool,
         M: Fn(u32) -> &'m MeshBvh,
     >(
@@ -545,7 +558,7 @@ impl SceneBvh {
                             &object_ray,
                             *t_max,
                             stack,
-                            entry.part,
+                            if OPENED { entry.part } else { Part::Whole },
                             |tri, b1, b2| accept(instance, tri, b1, b2),
                         );
                         if let Some((t, triangle, b1, b2)) = hit {
