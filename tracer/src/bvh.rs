@@ -14,7 +14,9 @@
 //!
 //! Both levels are built as binary trees in one flat layout, a node's two children adjacent
 //! and stored after it, and queried as those trees collapsed eight-wide: slab tests in
-//! SIMD lanes check a node's eight children.
+//! SIMD lanes check a node's eight children. The top level lists most instances whole, but
+//! a large static one around others (a room around its furniture) by the lanes of its
+//! mesh's root, each with its own world box, so that rays enter only the walls they reach.
 //!
 //! Motion blur: time is the normalised shutter position in [0, 1], and motion is given at
 //! `S` evenly spaced steps (step `k` at `k / (S - 1)`).

@@ -269,17 +269,22 @@ const OPEN_AT_MOST: usize = 16;
 /// a wall each, are entered only by the rays that reach them. Sorted.
 fn opened<'m>(instances: &[Instance], mesh: &impl Fn(u32) -> &'m MeshBvh) -> Vec<u32> {
     let hittable = || (0..instances.len()).filter(|&i| instances[i].is_hittable());
-    let mut largest: Vec<usize> = hittable()
+    // (area, index), largest first: chosen in linear time, for scenes of millions.
+    let mut largest: Vec<(f32, usize)> = hittable()
         .filter(|&i| !instances[i].has_motion() && !mesh(instances[i].mesh).has_motion())
+        .map(|i| {
+            let b = instances[i].bounds;
+            (half_area(b.min.into(), b.max.into()), i)
+        })
         .collect();
-    let area = |i: usize| {
-        let b = instances[i].bounds;
-        half_area(b.min.into(), b.max.into())
-    };
-    largest.sort_by(|&a, &b| area(b).total_cmp(&area(a)).then(a.cmp(&b)));
-    largest.truncate(OPEN_AT_MOST);
+    let larger = |a: &(f32, usize), b: &(f32, usize)| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1));
+    if largest.len() > OPEN_AT_MOST {
+        largest.select_nth_unstable_by(OPEN_AT_MOST, larger);
+        largest.truncate(OPEN_AT_MOST);
+    }
     let mut opened: Vec<u32> = largest
         .into_iter()
+        .map(|(_, i)| i)
         .filter(|&i| {
             let b = instances[i].bounds;
             hittable().any(|j| {

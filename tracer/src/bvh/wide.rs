@@ -440,8 +440,8 @@ pub(super) struct Walk {
 
 /// Visits the leaves of an eight-wide hierarchy (under `walk.root_lane` alone, if given)
 /// whose boxes the ray enters before `t_max`; `leaf` and `stack` work as for the binary
-/// [`traverse`](super::node::traverse). Stack
-/// entries name a node's lane (`8·node + lane`). In a large tree each child node entered is
+/// [`traverse`](super::node::traverse). Stack entries name a node's lane
+/// (`8·node + lane`). In a large tree each child node entered is
 /// prefetched when it is pushed, and `prefetch_leaf(start, count)` is called for each leaf
 /// entered, so that its primitives can be on their way into the cache by the time it is
 /// visited; not for a leaf that a closest-hit search visits at once (a node's only child
@@ -487,8 +487,8 @@ pub(super) fn traverse_wide<const AVX: bool>(
     // Entries `..len` of `stack` are this traversal's; a leaf gets the rest.
     let mut len = 0;
     let mut current = 0u32;
-    // One lane of the root searched alone is where the pop below starts (at no distance,
-    // so that no hit found before rules it out: the caller has tested its box).
+    // One lane of the root searched alone is where the pop below starts, at a distance
+    // that nothing rules out: whoever asked for it has tested its box.
     let mut pop_first = false;
     if let Some(lane) = walk.root_lane {
         stack[0] = (lane, f32::NEG_INFINITY);
