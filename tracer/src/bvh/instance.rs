@@ -263,19 +263,22 @@ const OPEN_AT_MOST: usize = 16;
 
 /// The instances whose meshes the top level lists by their root's lanes instead of whole:
 /// of the [`OPEN_AT_MOST`] largest static ones (by the area of their world boxes), those
-/// whose box holds the centre of another instance's box. A mesh around others (the walls
+/// whose box holds the centre of a smaller instance's box. A mesh around others (the walls
 /// of a room around its furniture) is entered by every ray that enters them, and by every
 /// ray that starts inside it, whether or not the ray comes near a wall; its lanes' boxes,
-/// a wall each, are entered only by the rays that reach them. Sorted.
+/// a wall each, are entered only by the rays that reach them. (A piece of furniture whose
+/// box holds the room's centre is not opened: a ray that hits it would enter several of
+/// its faces, each an entry of its own.) Sorted.
 fn opened<'m>(instances: &[Instance], mesh: &impl Fn(u32) -> &'m MeshBvh) -> Vec<u32> {
     let hittable = || (0..instances.len()).filter(|&i| instances[i].is_hittable());
+    let area = |i: usize| {
+        let b = instances[i].bounds;
+        half_area(b.min.into(), b.max.into())
+    };
     // (area, index), largest first: chosen in linear time, for scenes of millions.
     let mut largest: Vec<(f32, usize)> = hittable()
         .filter(|&i| !instances[i].has_motion() && !mesh(instances[i].mesh).has_motion())
-        .map(|i| {
-            let b = instances[i].bounds;
-            (half_area(b.min.into(), b.max.into()), i)
-        })
+        .map(|i| (area(i), i))
         .collect();
     let larger = |a: &(f32, usize), b: &(f32, usize)| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1));
     if largest.len() > OPEN_AT_MOST {
@@ -284,14 +287,14 @@ fn opened<'m>(instances: &[Instance], mesh: &impl Fn(u32) -> &'m MeshBvh) -> Vec
     }
     let mut opened: Vec<u32> = largest
         .into_iter()
-        .map(|(_, i)| i)
-        .filter(|&i| {
+        .filter(|&(size, i)| {
             let b = instances[i].bounds;
             hittable().any(|j| {
                 let c = instances[j].bounds.center();
-                j != i && c.cmpge(b.min).all() && c.cmple(b.max).all()
+                area(j) < size && c.cmpge(b.min).all() && c.cmple(b.max).all()
             })
         })
+        .map(|(_, i)| i)
         .map(|i| i as u32)
         .collect();
     opened.sort_unstable();

@@ -451,8 +451,8 @@ fn a_room_around_others_is_opened_and_finds_the_same_hits() {
     assert!(hits > 100, "only {hits} hits on the furniture");
 }
 
-/// Only the largest static instances that hold another's centre are opened: not one
-/// beside the others, not a moving one, and none past `OPEN_AT_MOST`.
+/// Only the largest static instances that hold a smaller one's centre are opened: not one
+/// beside the others, not one inside, not a moving one, and none past `OPEN_AT_MOST`.
 #[test]
 fn only_large_static_instances_around_others_are_opened() {
     let meshes = [MeshBvh::build(&room()), quad_mesh()];
@@ -473,6 +473,9 @@ fn only_large_static_instances_around_others_are_opened() {
     // box, off the room's centre, holds no other's centre).
     let rooms = vec![at(0, 1.0, 0.0), at(0, 1.0, 100.0), at(1, 1.0, 2.0)];
     assert_eq!(opened(&rooms, &mesh), [0]);
+    // A quad at the room's centre holds that centre, but is not around the room.
+    let centred = vec![at(0, 1.0, 0.0), at(1, 1.0, 0.0)];
+    assert_eq!(opened(&centred, &mesh), [0]);
     // Moving, the room is not opened.
     let mut moving = rooms.clone();
     let place = trs(DVec3::ONE, DQuat::IDENTITY, DVec3::new(0.0, 3.0, 3.0));
