@@ -294,8 +294,7 @@ fn opened<'m>(instances: &[Instance], mesh: &impl Fn(u32) -> &'m MeshBvh) -> Vec
                 area(j) < size && c.cmpge(b.min).all() && c.cmple(b.max).all()
             })
         })
-        .map(|(_, i)| i)
-        .map(|i| i as u32)
+        .map(|(_, i)| i as u32)
         .collect();
     opened.sort_unstable();
     opened
@@ -454,8 +453,7 @@ impl SceneBvh {
     /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: any hit found),
     /// by the search with or without motion, and with or without opened instances, as the
     /// scene needs (each its own loop: a scene pays for neither unless it has it). With
-    /// `AVX`, for a caller
-    /// compiled for AVX into which it inlines (the path loop's AVX copy,
+    /// `AVX`, for a caller compiled for AVX into which it inlines (the path loop's AVX copy,
     /// `integrator::trace_sample_avx`): nodes are tested in AVX lanes without asking for
     /// the CPU's features again and without a call per ray. Without, by the node test this
     /// process uses (see `simd.rs`).
