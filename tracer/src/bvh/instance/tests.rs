@@ -277,19 +277,48 @@ fn a_moving_instance_is_hit_where_it_is_at_the_ray_time() {
     assert_eq!(hit(0.5, 10.0, 1.0), None);
 }
 
+/// `n` random triangles, their vertices within `size / 2` of a centre in
+/// [-`spread`, `spread`]³.
+fn soup(rng: &mut Rng, n: usize, spread: f32, size: f32) -> Vec<[Vec3; 3]> {
+    (0..n)
+        .map(|_| {
+            let c = rng.vec3() * (2.0 * spread) - spread;
+            [(); 3].map(|_| c + (rng.vec3() - 0.5) * size)
+        })
+        .collect()
+}
+
+/// Checks that `scene` finds, for `ray` before `t_max`, the closest hit that testing every
+/// instance (placed at the ray's time) finds, and that it is occluded exactly then;
+/// returns the instance hit.
+fn check_against_every_instance<'m>(
+    scene: &SceneBvh,
+    instances: &[Instance],
+    mesh: impl Fn(u32) -> &'m MeshBvh + Copy,
+    ray: &Ray,
+    t_max: f32,
+) -> Option<u32> {
+    let mut expect: Option<(f32, u32, u32)> = None;
+    for (i, inst) in instances.iter().enumerate() {
+        let limit = expect.map_or(t_max, |e| e.0);
+        let object_ray = transform_ray(&inst.placement(ray.time).to_object, ray);
+        if let Some((t, tri, ..)) = mesh(inst.mesh).intersect(&object_ray, limit, |_, _, _| true) {
+            expect = Some((t, i as u32, tri));
+        }
+    }
+    let got = scene
+        .intersect(mesh, ray, t_max, |_, _, _, _| true)
+        .map(|h| (h.t, h.instance, h.triangle));
+    assert_eq!(got, expect, "ray {ray:?}");
+    let occluded = scene.occluded(mesh, ray, t_max, |_, _, _, _| true);
+    assert_eq!(occluded, expect.is_some(), "ray {ray:?}");
+    expect.map(|e| e.1)
+}
+
 #[test]
 fn motion_scene_matches_brute_force() {
     let mut rng = Rng(0xfeed);
-    let soup: Vec<[Vec3; 3]> = (0..200)
-        .map(|_| {
-            let c = rng.vec3() * 4.0 - 2.0;
-            [
-                c + rng.vec3() - 0.5,
-                c + rng.vec3() - 0.5,
-                c + rng.vec3() - 0.5,
-            ]
-        })
-        .collect();
+    let soup = soup(&mut rng, 200, 2.0, 1.0);
     let wobble: Vec<Vec<[Vec3; 3]>> = (0..3)
         .map(|_| {
             soup.iter()
@@ -326,24 +355,8 @@ fn motion_scene_matches_brute_force() {
     for _ in 0..3000 {
         let mut ray = Ray::new(rng.vec3() * 40.0 - 20.0, rng.vec3() - 0.5);
         ray.time = rng.next_f32();
-        let mut expect: Option<(f32, u32, u32)> = None;
-        for (i, inst) in instances.iter().enumerate() {
-            let to_object = inst.placement(ray.time).to_object;
-            let limit = expect.map_or(f32::INFINITY, |e| e.0);
-            let object_ray = transform_ray(&to_object, &ray);
-            if let Some((t, tri, ..)) =
-                mesh(inst.mesh).intersect(&object_ray, limit, |_, _, _| true)
-            {
-                expect = Some((t, i as u32, tri));
-            }
-        }
-        let got = scene
-            .intersect(mesh, &ray, f32::INFINITY, |_, _, _, _| true)
-            .map(|h| (h.t, h.instance, h.triangle));
-        assert_eq!(got, expect, "ray {ray:?}");
-        let occluded = scene.occluded(mesh, &ray, f32::INFINITY, |_, _, _, _| true);
-        assert_eq!(occluded, expect.is_some());
-        hits += expect.is_some() as u32;
+        let hit = check_against_every_instance(&scene, &instances, mesh, &ray, f32::INFINITY);
+        hits += hit.is_some() as u32;
     }
     assert!(hits > 200, "only {hits} hits");
 }
@@ -369,23 +382,14 @@ fn room() -> Vec<[Vec3; 3]> {
     walls
 }
 
-/// A room around its furniture is listed by its root's lanes (the furniture, inside no
-/// other instance, whole), and the scene finds what testing every instance finds: from
-/// inside the room and from outside, closest hits and occlusion, static and moving.
+/// A room around its furniture is listed by its root's lanes (and so are pieces of
+/// furniture around smaller ones), and the scene finds what testing every instance finds:
+/// from inside the room and from outside, closest hits and occlusion, static and moving.
 #[test]
 fn a_room_around_others_is_opened_and_finds_the_same_hits() {
     let mut rng = Rng(0x5eed);
     // Enough triangles that the root's lanes hold nodes as well as leaves.
-    let soup: Vec<[Vec3; 3]> = (0..400)
-        .map(|_| {
-            let c = rng.vec3() * 2.0 - 1.0;
-            [
-                c + (rng.vec3() - 0.5) * 0.4,
-                c + (rng.vec3() - 0.5) * 0.4,
-                c + (rng.vec3() - 0.5) * 0.4,
-            ]
-        })
-        .collect();
+    let soup = soup(&mut rng, 400, 1.0, 0.4);
     let meshes = [MeshBvh::build(&room()), MeshBvh::build(&soup)];
     let mut instances = vec![Instance::new(
         0,
@@ -430,23 +434,8 @@ fn a_room_around_others_is_opened_and_finds_the_same_hits() {
         let mut ray = Ray::new(rng.vec3() * 2.0 * from - from, rng.vec3() - 0.5);
         ray.time = rng.next_f32();
         let t_max = if k % 3 == 0 { 5.0 } else { f32::INFINITY };
-        let mut expect: Option<(f32, u32, u32)> = None;
-        for (i, inst) in instances.iter().enumerate() {
-            let limit = expect.map_or(t_max, |e| e.0);
-            let object_ray = transform_ray(&inst.placement(ray.time).to_object, &ray);
-            if let Some((t, tri, ..)) =
-                mesh(inst.mesh).intersect(&object_ray, limit, |_, _, _| true)
-            {
-                expect = Some((t, i as u32, tri));
-            }
-        }
-        let got = scene
-            .intersect(mesh, &ray, t_max, |_, _, _, _| true)
-            .map(|h| (h.t, h.instance, h.triangle));
-        assert_eq!(got, expect, "ray {ray:?}");
-        let occluded = scene.occluded(mesh, &ray, t_max, |_, _, _, _| true);
-        assert_eq!(occluded, expect.is_some());
-        hits += expect.is_some_and(|e| e.1 > 0) as u32;
+        let hit = check_against_every_instance(&scene, &instances, mesh, &ray, t_max);
+        hits += hit.is_some_and(|i| i > 0) as u32;
     }
     assert!(hits > 100, "only {hits} hits on the furniture");
 }
