@@ -18,7 +18,7 @@ use crate::frame::PreparedFrame;
 use crate::geometry::{offset_ray_origin_bounded, Hit, Ray};
 use crate::light::Emitter;
 use crate::material::dispersive_ior;
-use crate::sampler::{PixelSampler, BOUNCE_DIMENSIONS};
+use crate::sampler::{BounceDimensions, PixelSampler, BOUNCE_DIMENSIONS};
 use crate::settings::RenderSettings;
 use crate::spectrum::{DenseSpectrum, SampledWavelengths, SigmoidPolynomial};
 
@@ -498,7 +498,7 @@ fn trace_path<W: Carrier, const AVX: bool>(
         if depth == settings.max_depth {
             return;
         }
-        let u = sampler.next_bounce(CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
+        let u = next_bounce::<AVX>(sampler, CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
         let wo_local = sp.frame.to_local(wo);
         let scatter = match sp.coat_normal {
             None => bsdf.at(wo_local),
@@ -648,6 +648,18 @@ fn closest_hit<const AVX: bool>(frame: &PreparedFrame, ray: &Ray, t_max: f32) ->
         return unsafe { frame.query_avx::<false>(ray, t_max) };
     }
     frame.intersect(ray, t_max)
+}
+
+/// A bounce's sampler dimensions from `dimension` on; with `AVX`, in SSE lanes (a CPU with
+/// AVX has SSE4.1 and SSSE3).
+#[inline(always)]
+fn next_bounce<const AVX: bool>(sampler: &mut PixelSampler, dimension: u32) -> BounceDimensions {
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        // SAFETY: as in `closest_hit`; AVX implies SSE4.1 and SSSE3.
+        return unsafe { sampler.next_bounce_sse41(dimension) };
+    }
+    sampler.next_bounce(dimension)
 }
 
 /// Whether anything blocks `ray` before `t_max`; with `AVX` as [`closest_hit`].

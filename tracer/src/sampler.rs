@@ -9,6 +9,9 @@
 
 use glam::Vec2;
 
+#[cfg(target_arch = "x86_64")]
+mod sse;
+
 /// A well-mixed 32-bit hash (Wellons' "lowbias32").
 pub const fn hash_u32(mut x: u32) -> u32 {
     x ^= x >> 16;
@@ -114,8 +117,11 @@ fn sobol1_reversed(index: u32) -> u32 {
 
 /// 32-bit fixed point to a float in [0, 1): keep 24 bits so the result is never 1.0.
 fn to_unit(x: u32) -> f32 {
-    (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+    (x >> 8) as f32 * TO_UNIT
 }
+
+/// The step between 24-bit fixed-point values ([`to_unit`]).
+const TO_UNIT: f32 = 1.0 / (1u32 << 24) as f32;
 
 /// The random numbers of one camera sample of one pixel. Each call consumes the next
 /// dimension, so the order of calls must itself be deterministic (it is: the integrator
@@ -198,43 +204,88 @@ impl PixelSampler {
 
     /// What a bounce draws, from dimension `dimension` on: the values of five calls
     /// `next_1d`, `next_2d`, `next_1d`, `next_2d`, `next_1d`, the same bits, computed
-    /// together in SIMD lanes (the scrambles of all five dimensions in one pass, then the
-    /// seven coordinates in another). Leaves the sampler where those calls would.
+    /// together in lanes: the scrambles of the five dimensions in one pass, then the seven
+    /// coordinates in another. Leaves the sampler where those calls would.
     #[inline(always)]
     pub fn next_bounce(&mut self, dimension: u32) -> BounceDimensions {
-        let seed: Lanes = std::array::from_fn(|k| {
-            // Lanes past the fifth repeat it: they keep the passes eight wide.
-            let d = dimension + (k as u32).min(BOUNCE_DIMENSIONS - 1);
-            let hashed = match DIMENSION_HASHES.get(d as usize) {
-                Some(&h) => h,
-                None => hash_u32(d),
-            };
-            combine_hashed(self.pixel_seed, hashed)
-        });
-        let shuffled = scramble_reversed_lanes([self.index_reversed; LANES], seed);
-        // Lanes 0..5 the dimensions' first coordinates, 5 and 6 the second ones of the
-        // two 2D dimensions (1 and 3), 7 a copy of 6.
-        let second = |k: usize| {
-            (
-                sobol1_reversed(shuffled[k]),
-                hash_combine(seed[k], 0x4c95_7f2d),
-            )
-        };
-        let (x5, s5) = second(1);
-        let (x6, s6) = second(3);
-        let value = std::array::from_fn(|k| match k {
-            0..5 => shuffled[k],
-            5 => x5,
-            _ => x6,
-        });
-        let value_seed = std::array::from_fn(|k| match k {
-            0..5 => hash_combine(seed[k], 0x5851_f42d),
-            5 => s5,
-            _ => s6,
-        });
-        let u = scramble_reversed_lanes(value, value_seed).map(to_unit);
+        let hashed = bounce_hashes(dimension);
         self.dimension = dimension + BOUNCE_DIMENSIONS;
-        BounceDimensions {
+        let seed = hashed.map(|h| combine_hashed(self.pixel_seed, h));
+        let shuffled = seed.map(|s| scramble_reversed(self.index_reversed, s));
+        let value: Lanes = std::array::from_fn(|k| {
+            if k < FIRST_LANES {
+                shuffled[k]
+            } else {
+                sobol1_reversed(shuffled[k])
+            }
+        });
+        let u: [f32; LANES] = std::array::from_fn(|k| {
+            to_unit(scramble_reversed(
+                value[k],
+                combine_hashed(seed[k], lane_seed(k)),
+            ))
+        });
+        BounceDimensions::from_lanes(u)
+    }
+
+    /// [`Self::next_bounce`] with its lanes in SSE registers (`sampler/sse.rs`): the same
+    /// bits. Left to itself, the compiler computed some lanes in SSE and the rest one at a
+    /// time, in twice the instructions.
+    ///
+    /// # Safety
+    /// The CPU must have SSE4.1 and SSSE3 (every CPU with AVX has).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) unsafe fn next_bounce_sse41(&mut self, dimension: u32) -> BounceDimensions {
+        let hashed = bounce_hashes(dimension);
+        self.dimension = dimension + BOUNCE_DIMENSIONS;
+        // SAFETY: the caller's promise.
+        unsafe { sse::bounce(self.pixel_seed, self.index_reversed, hashed) }
+    }
+}
+
+/// Which of a bounce's dimensions each lane of [`PixelSampler::next_bounce`] draws: lanes
+/// 0 to 4 the five dimensions' first coordinates, lanes 5 and 6 the second coordinates of
+/// the two 2D ones (1 and 3), and lane 7 lane 6 again. Every lane does the same work, so
+/// that the passes run in SIMD lanes whole.
+const LANE_DIMENSION: Lanes = [0, 1, 2, 3, 4, 1, 3, 3];
+
+/// Lanes of [`LANE_DIMENSION`] that hold first coordinates.
+const FIRST_LANES: usize = BOUNCE_DIMENSIONS as usize;
+
+/// The [`hash_u32`] of the constants that seed a dimension's first and second coordinates
+/// (`hash_combine` with the dimension's seed; see [`PixelSampler::next_2d`]).
+const FIRST_COORDINATE: u32 = hash_u32(0x5851_f42d);
+const SECOND_COORDINATE: u32 = hash_u32(0x4c95_7f2d);
+
+/// The hash that seeds the coordinate lane `k` draws.
+#[inline(always)]
+fn lane_seed(k: usize) -> u32 {
+    if k < FIRST_LANES {
+        FIRST_COORDINATE
+    } else {
+        SECOND_COORDINATE
+    }
+}
+
+/// The dimension hashes of a bounce's lanes from `dimension` on: from the table where all
+/// five are in it (one branch, not one per lane).
+#[inline(always)]
+fn bounce_hashes(dimension: u32) -> Lanes {
+    match DIMENSION_HASHES
+        .get(dimension as usize..)
+        .and_then(|h| h.get(..FIRST_LANES))
+    {
+        Some(h) => LANE_DIMENSION.map(|k| h[k as usize]),
+        None => LANE_DIMENSION.map(|k| hash_u32(dimension + k)),
+    }
+}
+
+impl BounceDimensions {
+    /// The dimensions from the coordinates in the lanes of [`LANE_DIMENSION`].
+    #[inline(always)]
+    fn from_lanes(u: [f32; LANES]) -> Self {
+        Self {
             light: u[0],
             light_point: Vec2::new(u[1], u[5]),
             lobe: u[2],
@@ -266,17 +317,6 @@ pub struct BounceDimensions {
 /// The width of [`PixelSampler::next_bounce`]'s passes.
 const LANES: usize = 8;
 type Lanes = [u32; LANES];
-
-/// [`scramble_reversed`] lane by lane, written so that the compiler keeps it in SIMD
-/// registers.
-#[inline(always)]
-fn scramble_reversed_lanes(reversed: Lanes, seed: Lanes) -> Lanes {
-    let mut out = [0; LANES];
-    for k in 0..LANES {
-        out[k] = scramble_reversed(reversed[k], seed[k]);
-    }
-    out
-}
 
 #[cfg(test)]
 mod tests {
@@ -342,8 +382,8 @@ mod tests {
     #[test]
     fn a_bounce_drawn_in_lanes_is_its_dimensions_drawn_one_by_one() {
         let n = DIMENSION_HASHES.len() as u32;
-        for start in [0, 3, n - 3, n, 0xffff_0000] {
-            for index in [0, 1, 77, 4095] {
+        for start in [0, 3, n - 6, n - 5, n - 4, n, 0xffff_0000] {
+            for index in [0, 1, 77, 4095, 0x8000_0001, u32::MAX] {
                 let mut one_by_one = PixelSampler::new(3, 4, index, 1, 5);
                 one_by_one.start_dimension(start);
                 let expected = BounceDimensions {
@@ -353,13 +393,19 @@ mod tests {
                     direction: one_by_one.next_2d(),
                     roulette: one_by_one.next_1d(),
                 };
-                let mut together = PixelSampler::new(3, 4, index, 1, 5);
-                assert_eq!(
-                    together.next_bounce(start),
-                    expected,
-                    "dimension {start}, index {index}"
-                );
-                assert_eq!(together.next_1d(), one_by_one.next_1d());
+                let next = one_by_one.next_1d();
+                let mut portable = PixelSampler::new(3, 4, index, 1, 5);
+                let key = format!("dimension {start}, index {index}");
+                assert_eq!(portable.next_bounce(start), expected, "{key}");
+                assert_eq!(portable.next_1d(), next, "{key}");
+                #[cfg(target_arch = "x86_64")]
+                if is_x86_feature_detected!("sse4.1") && is_x86_feature_detected!("ssse3") {
+                    let mut sse = PixelSampler::new(3, 4, index, 1, 5);
+                    // SAFETY: the CPU has SSE4.1 and SSSE3.
+                    let drawn = unsafe { sse.next_bounce_sse41(start) };
+                    assert_eq!(drawn, expected, "SSE, {key}");
+                    assert_eq!(sse.next_1d(), next, "SSE, {key}");
+                }
             }
         }
     }
