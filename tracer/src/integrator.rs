@@ -2,6 +2,8 @@
 //! sampling (power heuristic), Russian roulette and splitting, and no NaN or infinity on
 //! the film; in RGB, or at four sampled wavelengths (the spectral path, `carrier.rs`).
 
+use std::ops::Range;
+
 use glam::{Vec2, Vec3};
 
 mod carrier;
@@ -239,6 +241,9 @@ pub fn carries_wavelengths(frame: &PreparedFrame, settings: &RenderSettings) -> 
 
 /// Traces camera sample `index` of pixel (`x`, `y`): in RGB, or at four wavelengths where
 /// [`carries_wavelengths`] says so.
+///
+/// # Panics
+/// If `index` is `u32::MAX`, past every [`SampleRange`](crate::film::SampleRange).
 pub fn trace_sample(
     frame: &PreparedFrame,
     settings: &RenderSettings,
@@ -246,45 +251,62 @@ pub fn trace_sample(
     y: u32,
     index: u32,
 ) -> SampleValue {
-    if carries_wavelengths(frame, settings) {
-        trace_sample_in(
-            frame,
-            settings,
-            x,
-            y,
-            index,
-            |sampler: &mut PixelSampler| {
-                sampler.start_dimension(WAVELENGTH_DIMENSION);
-                SampledWavelengths::sample_visible(sampler.next_1d())
-            },
-        )
-    } else {
-        trace_sample_in(frame, settings, x, y, index, |_: &mut PixelSampler| Rgb)
-    }
+    let end = index.checked_add(1).expect("a sample index below u32::MAX");
+    let mut value = SampleValue::default();
+    trace_samples(frame, settings, x, y, index..end, &mut |_, v| {
+        value = *v;
+        false
+    });
+    value
 }
 
-/// [`trace_sample_with`] in the copy this process runs: compiled for AVX where the CPU
-/// has it (3% fewer instructions on the Cornell box, the same bits; see [`crate::simd`]).
-// One function per carrier and copy, each with its path loop inlined: both carriers' loops
-// in one function cost the RGB path 1.6% more instructions on the Cornell box.
-#[inline(always)]
-fn trace_sample_in<W: Carrier>(
+/// Traces camera samples `samples` of pixel (`x`, `y`) in order, as [`trace_sample`]
+/// each, handing each to `each` with its index until `each` returns false. One call for
+/// a pixel's run of samples: the path loop's set-up (the frame's and the settings' values
+/// it keeps at hand, about 90 instructions) is paid once per run, not once per sample.
+/// (`each` is called through a pointer: a closure of its own type would compile the path
+/// loop once more for each caller.)
+pub fn trace_samples(
     frame: &PreparedFrame,
     settings: &RenderSettings,
     x: u32,
     y: u32,
-    index: u32,
-    carrier: impl FnOnce(&mut PixelSampler) -> W,
-) -> SampleValue {
+    samples: Range<u32>,
+    each: &mut dyn FnMut(u32, &SampleValue) -> bool,
+) {
+    if carries_wavelengths(frame, settings) {
+        let carrier = |sampler: &mut PixelSampler| {
+            sampler.start_dimension(WAVELENGTH_DIMENSION);
+            SampledWavelengths::sample_visible(sampler.next_1d())
+        };
+        trace_samples_in(frame, settings, (x, y), samples, carrier, each)
+    } else {
+        trace_samples_in(frame, settings, (x, y), samples, |_| Rgb, each)
+    }
+}
+
+/// [`trace_samples_with`] in the copy this process runs: compiled for AVX where the CPU
+/// has it (3% fewer instructions on the Cornell box, the same bits; see [`crate::simd`]).
+// One function per carrier and copy, each with its path loop inlined: both carriers' loops
+// in one function cost the RGB path 1.6% more instructions on the Cornell box.
+#[inline(always)]
+fn trace_samples_in<W: Carrier>(
+    frame: &PreparedFrame,
+    settings: &RenderSettings,
+    pixel: (u32, u32),
+    samples: Range<u32>,
+    carrier: impl Fn(&mut PixelSampler) -> W,
+    each: &mut dyn FnMut(u32, &SampleValue) -> bool,
+) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx() {
         // SAFETY: the CPU has AVX (`simd::avx`).
-        return unsafe { trace_sample_avx(frame, settings, x, y, index, carrier) };
+        return unsafe { trace_samples_avx(frame, settings, pixel, samples, carrier, each) };
     }
-    trace_sample_baseline(frame, settings, x, y, index, carrier)
+    trace_samples_baseline(frame, settings, pixel, samples, carrier, each)
 }
 
-/// [`trace_sample_with`] compiled for AVX (a closure run by [`crate::simd::with_avx`] was
+/// [`trace_samples_with`] compiled for AVX (a closure run by [`crate::simd::with_avx`] was
 /// left out of line, compiled for the baseline).
 ///
 /// # Safety
@@ -292,32 +314,50 @@ fn trace_sample_in<W: Carrier>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 #[inline(never)]
-unsafe fn trace_sample_avx<W: Carrier>(
+unsafe fn trace_samples_avx<W: Carrier>(
     frame: &PreparedFrame,
     settings: &RenderSettings,
-    x: u32,
-    y: u32,
-    index: u32,
-    carrier: impl FnOnce(&mut PixelSampler) -> W,
-) -> SampleValue {
-    trace_sample_with::<W, true>(frame, settings, x, y, index, carrier)
+    pixel: (u32, u32),
+    samples: Range<u32>,
+    carrier: impl Fn(&mut PixelSampler) -> W,
+    each: &mut dyn FnMut(u32, &SampleValue) -> bool,
+) {
+    trace_samples_with::<W, true>(frame, settings, pixel, samples, carrier, each)
 }
 
-/// [`trace_sample_with`] compiled for the baseline CPU.
+/// [`trace_samples_with`] compiled for the baseline CPU.
 #[inline(never)]
-fn trace_sample_baseline<W: Carrier>(
+fn trace_samples_baseline<W: Carrier>(
     frame: &PreparedFrame,
     settings: &RenderSettings,
-    x: u32,
-    y: u32,
-    index: u32,
-    carrier: impl FnOnce(&mut PixelSampler) -> W,
-) -> SampleValue {
-    trace_sample_with::<W, false>(frame, settings, x, y, index, carrier)
+    pixel: (u32, u32),
+    samples: Range<u32>,
+    carrier: impl Fn(&mut PixelSampler) -> W,
+    each: &mut dyn FnMut(u32, &SampleValue) -> bool,
+) {
+    trace_samples_with::<W, false>(frame, settings, pixel, samples, carrier, each)
+}
+
+/// The run of [`trace_samples`], each sample by [`trace_sample_with`].
+#[inline(always)]
+fn trace_samples_with<W: Carrier, const AVX: bool>(
+    frame: &PreparedFrame,
+    settings: &RenderSettings,
+    (x, y): (u32, u32),
+    samples: Range<u32>,
+    carrier: impl Fn(&mut PixelSampler) -> W,
+    each: &mut dyn FnMut(u32, &SampleValue) -> bool,
+) {
+    for index in samples {
+        let value = trace_sample_with::<W, AVX>(frame, settings, x, y, index, &carrier);
+        if !each(index, &value) {
+            return;
+        }
+    }
 }
 
 /// [`trace_sample`] carrying what `carrier` draws from the sampler. With `AVX` (only in
-/// [`trace_sample_avx`]), its ray queries are the AVX ones, inlined.
+/// [`trace_samples_avx`]), its ray queries are the AVX ones.
 #[inline(always)]
 fn trace_sample_with<W: Carrier, const AVX: bool>(
     frame: &PreparedFrame,
@@ -643,7 +683,7 @@ fn trace_path<W: Carrier, const AVX: bool>(
 fn closest_hit<const AVX: bool>(frame: &PreparedFrame, ray: &Ray, t_max: f32) -> Option<Hit> {
     #[cfg(target_arch = "x86_64")]
     if AVX {
-        // SAFETY: `AVX` is true only in `trace_sample_avx`, which runs where the CPU has
+        // SAFETY: `AVX` is true only in `trace_samples_avx`, which runs where the CPU has
         // AVX.
         return unsafe { frame.query_avx::<false>(ray, t_max) };
     }

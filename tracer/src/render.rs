@@ -50,24 +50,16 @@ pub fn render_tile_cancellable(
                 if cancel.load(Ordering::Relaxed) {
                     return None;
                 }
-                let mut streak = 0;
-                for index in samples.start..samples.end {
-                    let s = integrator::trace_sample(
-                        frame,
-                        settings,
-                        rect.x + col,
-                        rect.y + row,
-                        index,
-                    );
-                    let pixel = col as usize;
-                    buf.add(pixel, index, &s);
-                    if let Some(target) = &settings.noise {
+                let (pixel, mut streak) = (col as usize, 0);
+                let (x, y) = (rect.x + col, rect.y + row);
+                let run = samples.start..samples.end;
+                integrator::trace_samples(frame, settings, x, y, run, &mut |index, s| {
+                    buf.add(pixel, index, s);
+                    settings.noise.as_ref().is_none_or(|target| {
                         let taken = index + 1 - samples.start;
-                        if target.reached(taken, buf.noise(pixel), &mut streak) {
-                            break;
-                        }
-                    }
-                }
+                        !target.reached(taken, buf.noise(pixel), &mut streak)
+                    })
+                });
             }
             Some(buf)
         })

@@ -4,10 +4,10 @@
 //! - A BVH query picks once, at its start, and runs a copy of its whole loop compiled for
 //!   that choice: the eight-wide node test in AVX's eight lanes in one register, or in
 //!   SSE2's two halves of four (the node test must be inlined to pay).
-//! - A camera sample's path loop ([`crate::integrator::trace_sample`]) likewise: AVX's
+//! - A pixel's run of camera samples ([`crate::integrator::trace_samples`]) likewise: AVX's
 //!   three-operand instructions spare the register copies of SSE2's two-operand ones.
-//!   Its AVX copy inlines the AVX queries (`PreparedFrame::query_avx`): no second choice
-//!   and no call per ray.
+//!   Its AVX copy calls the AVX queries (`PreparedFrame::query_avx`) straight away, with
+//!   no second choice per ray.
 //!
 //! Both copies are the same IEEE operations (Rust never fuses a multiply and an add on its
 //! own, and nothing here asks for it), so a tile has the same bits on either:
@@ -35,7 +35,7 @@ pub fn allow_avx(allowed: bool) {
 }
 
 /// Runs `f` compiled for AVX: what it inlines (a query's loop) may use AVX instructions.
-/// (The path loop has its own AVX function, `integrator::trace_sample_avx`: run through
+/// (The path loop has its own AVX function, `integrator::trace_samples_avx`: run through
 /// this, its closure was left out of line, compiled for the baseline.)
 ///
 /// # Safety

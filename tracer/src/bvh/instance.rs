@@ -454,7 +454,7 @@ impl SceneBvh {
     /// by the search with or without motion, and with or without opened instances, as the
     /// scene needs (each its own loop: a scene pays for neither unless it has it). With
     /// `AVX`, for a caller compiled for AVX into which it inlines (the path loop's AVX copy,
-    /// `integrator::trace_sample_avx`): nodes are tested in AVX lanes without asking for
+    /// `integrator::trace_samples_avx`): nodes are tested in AVX lanes without asking for
     /// the CPU's features again and without a call per ray. Without, by the node test this
     /// process uses (see `simd.rs`).
     ///
