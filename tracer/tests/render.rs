@@ -221,6 +221,40 @@ fn any_tile_split_is_bit_identical_to_the_whole_frame() {
     assert_eq!(whole.dropped, 0);
 }
 
+/// `render_tile` traces each pixel's samples as one run (`trace_samples`): a run must be
+/// its samples traced one by one, whatever came before in it (split paths among them),
+/// and end where its callback says.
+#[test]
+fn a_pixels_run_of_samples_is_its_samples_traced_one_by_one() {
+    use tracer::film::SampleValue;
+    use tracer::integrator::{trace_sample, trace_samples};
+
+    let f = demo_frame();
+    for spectral in [false, true] {
+        let settings = RenderSettings {
+            spectral,
+            ..RenderSettings::default()
+        };
+        for (x, y) in [(3, 4), (12, 12), (20, 7)] {
+            let mut run: Vec<(u32, SampleValue)> = Vec::new();
+            trace_samples(&f, &settings, x, y, 5..17, &mut |i, v| {
+                run.push((i, *v));
+                true
+            });
+            let one_by_one: Vec<(u32, SampleValue)> = (5..17)
+                .map(|i| (i, trace_sample(&f, &settings, x, y, i)))
+                .collect();
+            assert!(run == one_by_one, "pixel {x},{y}, spectral {spectral}");
+            let mut stopped = Vec::new();
+            trace_samples(&f, &settings, x, y, 5..17, &mut |i, _| {
+                stopped.push(i);
+                i < 8
+            });
+            assert_eq!(stopped, [5, 6, 7, 8]);
+        }
+    }
+}
+
 /// The Cornell box (nothing moves) as frame `number`.
 #[test]
 fn a_fixed_pattern_gives_a_still_scene_the_same_noise_on_every_frame() {
