@@ -170,7 +170,10 @@ impl PixelSampler {
     #[inline(always)]
     pub fn next_2d(&mut self) -> Vec2 {
         let (shuffled, seed) = self.next_shuffled();
-        let y = scramble_reversed(sobol1_reversed(shuffled), hash_combine(seed, 0x4c95_7f2d));
+        let y = scramble_reversed(
+            sobol1_reversed(shuffled),
+            combine_hashed(seed, SECOND_COORDINATE),
+        );
         Vec2::new(to_unit(Self::first(shuffled, seed)), to_unit(y))
     }
 
@@ -191,7 +194,7 @@ impl PixelSampler {
     /// The first coordinate of the point: van der Corput of the shuffled index, which is
     /// that index reversed, scrambled (whose reversal undoes that one).
     fn first(shuffled: u32, seed: u32) -> u32 {
-        scramble_reversed(shuffled, hash_combine(seed, 0x5851_f42d))
+        scramble_reversed(shuffled, combine_hashed(seed, FIRST_COORDINATE))
     }
 
     /// The next dimension as a number in [0,1) (the first coordinate of a 2D point, so
@@ -253,8 +256,8 @@ const LANE_DIMENSION: Lanes = [0, 1, 2, 3, 4, 1, 3, 3];
 /// Lanes of [`LANE_DIMENSION`] that hold first coordinates.
 const FIRST_LANES: usize = BOUNCE_DIMENSIONS as usize;
 
-/// The [`hash_u32`] of the constants that seed a dimension's first and second coordinates
-/// (`hash_combine` with the dimension's seed; see [`PixelSampler::next_2d`]).
+/// The hashes that seed a dimension's first and second coordinates, combined with the
+/// dimension's seed.
 const FIRST_COORDINATE: u32 = hash_u32(0x5851_f42d);
 const SECOND_COORDINATE: u32 = hash_u32(0x4c95_7f2d);
 
