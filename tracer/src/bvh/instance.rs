@@ -453,10 +453,10 @@ impl SceneBvh {
     /// [`Self::intersect`] (`ANY_HIT` false) or [`Self::occluded`] (true: any hit found),
     /// by the search with or without motion, and with or without opened instances, as the
     /// scene needs (each its own loop: a scene pays for neither unless it has it). With
-    /// `AVX`, for a caller compiled for AVX into which it inlines (the path loop's AVX copy,
-    /// `integrator::trace_samples_avx`): nodes are tested in AVX lanes without asking for
-    /// the CPU's features again and without a call per ray. Without, by the node test this
-    /// process uses (see `simd.rs`).
+    /// `AVX`, for a caller compiled for AVX into which it inlines (`PreparedFrame::query_avx`,
+    /// which the path loop's AVX copy calls once per ray): nodes are tested in AVX lanes
+    /// without asking for the CPU's features again. Without, by the node test this process
+    /// uses (see `simd.rs`).
     ///
     /// # Safety
     /// With `AVX`, the CPU must have AVX ([`simd::avx`] says so).
