@@ -103,9 +103,10 @@ pub(crate) struct TriangleAt<'a> {
     pub deformed: Option<&'a DeformedMesh>,
     /// The instance.
     inst: &'a Instance,
-    /// Its transforms at the ray's time when it moves; a still instance's are its own
-    /// (not copied: this is on every hit's path).
-    moved: Option<Placement>,
+    /// Its transforms at the ray's time when it moves, held by the caller; a still
+    /// instance's are its own. (Borrowed, not held: a placement held here made the whole
+    /// struct a copy on the stack at every hit.)
+    moved: Option<&'a Placement>,
     /// The ray's shutter time.
     pub time: f32,
 }
@@ -114,24 +115,19 @@ impl TriangleAt<'_> {
     /// Object space to world space.
     #[inline(always)]
     pub fn to_world(&self) -> &Affine3A {
-        self.moved
-            .as_ref()
-            .map_or(&self.inst.to_world, |p| &p.to_world)
+        self.moved.map_or(&self.inst.to_world, |p| &p.to_world)
     }
 
     /// World space to object space.
     #[inline(always)]
     pub fn to_object(&self) -> &Affine3A {
-        self.moved
-            .as_ref()
-            .map_or(&self.inst.to_object, |p| &p.to_object)
+        self.moved.map_or(&self.inst.to_object, |p| &p.to_object)
     }
 
     /// The normal matrix (inverse transpose of `to_world`'s linear part).
     #[inline(always)]
     pub fn normal_to_world(&self) -> &Mat3A {
         self.moved
-            .as_ref()
             .map_or(&self.inst.normal_to_world, |p| &p.normal_to_world)
     }
 
@@ -139,7 +135,7 @@ impl TriangleAt<'_> {
     /// renormalised, so that `t` agrees between the spaces).
     #[inline(always)]
     pub fn object_ray(&self, ray: &Ray) -> Ray {
-        match &self.moved {
+        match self.moved {
             None => self.inst.object_ray(ray),
             Some(p) => p.object_ray(ray),
         }
@@ -228,9 +224,16 @@ impl PreparedFrame {
         }
     }
 
-    /// Triangle `triangle` of instance `instance` at shutter time `time`.
+    /// Triangle `triangle` of instance `instance` at shutter time `time`; `moved` holds the
+    /// instance's placement at that time if it moves.
     #[inline(always)]
-    pub(crate) fn triangle_at(&self, instance: u32, triangle: u32, time: f32) -> TriangleAt<'_> {
+    pub(crate) fn triangle_at<'a>(
+        &'a self,
+        instance: u32,
+        triangle: u32,
+        time: f32,
+        moved: &'a mut Option<Placement>,
+    ) -> TriangleAt<'a> {
         let inst = &self.bvh.instances()[instance as usize];
         let mesh = self.source_mesh(inst.mesh);
         let (prim_index, t) = mesh.locate(triangle);
@@ -249,7 +252,10 @@ impl PreparedFrame {
             positions,
             deformed,
             inst,
-            moved: inst.motion.is_some().then(|| inst.placement(time)),
+            moved: match inst.motion {
+                Some(_) => Some(moved.insert(inst.placement(time))),
+                None => None,
+            },
             time,
         }
     }
@@ -278,7 +284,8 @@ impl PreparedFrame {
         let prim = &mesh.primitives[p];
         let mat = self.material(prim.material);
         if !mat.double_sided && !mat.transmits() {
-            let tri = self.triangle_at(instance, triangle, ray.time);
+            let mut moved = None;
+            let tri = self.triangle_at(instance, triangle, ray.time, &mut moved);
             let facing = tri
                 .face_normal()
                 .dot(tri.to_object().transform_vector3(ray.dir));

@@ -746,7 +746,8 @@ fn emitted_toward(
     time: f32,
 ) -> Vec3 {
     let scene = &*frame.scene;
-    let tri = frame.triangle_at(instance, triangle, time);
+    let mut moved = None;
+    let tri = frame.triangle_at(instance, triangle, time, &mut moved);
     let material = frame.material(tri.prim.material);
     if !material.double_sided && tri.front_normal().dot(wi) >= 0.0 {
         return Vec3::ZERO;

@@ -51,7 +51,8 @@ pub(crate) struct SurfacePoint {
 #[inline(always)]
 pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> SurfacePoint {
     let scene = &*frame.scene;
-    let tri = frame.triangle_at(hit.instance, hit.triangle, ray.time);
+    let mut moved = None;
+    let tri = frame.triangle_at(hit.instance, hit.triangle, ray.time, &mut moved);
     let (prim, t) = (tri.prim, tri.t);
     let (b1, b2) = (hit.b1, hit.b2);
 
