@@ -260,6 +260,10 @@ pub struct Bsdf {
     /// Whether any microfacet lobe is present (metal, specular layer, rough interface): a
     /// Lambertian surface (specular 0) skips their tables and evaluation.
     microfacet: bool,
+    /// Whether the base (what lies under any layers) is a diffuse reflector alone
+    /// ([`Bsdf::is_lambertian`] without diffuse transmission): its f and pdf are the
+    /// diffuse lobe's.
+    diffuse_only: bool,
     /// Conductor-table position for α (meaningful when not smooth).
     cond: tables::ConductorCoord,
     /// Dielectric-table positions for (α, η), outside and inside (meaningful when the
@@ -413,7 +417,7 @@ impl Bsdf {
         let w_glass = (1.0 - metallic) * transmission;
         let microfacet = !smooth
             && (metallic > 0.0 || w_plastic * spec > 0.0 || (w_glass > 0.0 && !glass_smooth));
-        Self {
+        let mut bsdf = Self {
             params,
             base,
             diffuse_r,
@@ -433,6 +437,7 @@ impl Bsdf {
             glass_smooth,
             thin,
             microfacet,
+            diffuse_only: false,
             // Table positions only where a lobe looks them up: a Lambertian surface, the
             // commonest, needs none.
             cond: if microfacet {
@@ -449,7 +454,9 @@ impl Bsdf {
             layers,
             film,
             meta,
-        }
+        };
+        bsdf.diffuse_only = bsdf.is_lambertian() && bsdf.p_dt == 0.0;
+        bsdf
     }
 
     /// The albedo curve a material with these (untextured) parameters should carry: one
@@ -551,11 +558,44 @@ impl Bsdf {
         }
     }
 
-    /// f for `wo.z > 0` (both directions already off the tangent plane).
+    /// The diffuse lobe's f towards `wi`, reflected or transmitted.
+    #[inline(always)]
+    fn diffuse_f(&self, wi: Vec3, at: &AtWo) -> Vec3 {
+        let colour = if wi.z > 0.0 {
+            self.diffuse_r
+        } else {
+            self.diffuse_t
+        };
+        self.w_plastic * at.diffuse_w * FRAC_1_PI * colour
+    }
+
+    /// The density of the diffuse lobe's samples at `wi`, reflected or transmitted.
+    #[inline(always)]
+    fn diffuse_pdf(&self, wi: Vec3, at: &AtWo) -> f32 {
+        let p_diff = at.p[1];
+        if wi.z > 0.0 {
+            p_diff * (1.0 - self.p_dt) * wi.z * FRAC_1_PI
+        } else {
+            p_diff * self.p_dt * -wi.z * FRAC_1_PI
+        }
+    }
+
+    /// f for `wo.z > 0` (both directions already off the tangent plane). A diffuse
+    /// reflector's, the commonest, inline where it is called; any other's out of line.
+    #[inline(always)]
     fn eval_local(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3 {
+        if self.diffuse_only {
+            return self.diffuse_f(wi, at);
+        }
+        self.eval_general(wo, wi, at)
+    }
+
+    /// [`Bsdf::eval_local`] for any BSDF.
+    #[inline(never)]
+    fn eval_general(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3 {
         let (mu_o, mu_i) = (wo.z, wi.z);
         if mu_i > 0.0 {
-            let mut f = self.w_plastic * at.diffuse_w * FRAC_1_PI * self.diffuse_r;
+            let mut f = self.diffuse_f(wi, at);
             // (`smooth` implies `glass_smooth`: all microfacet lobes are delta together.)
             if self.microfacet {
                 let wm = (wo + wi).normalize_or(Vec3::Z);
@@ -574,7 +614,7 @@ impl Bsdf {
             }
             f
         } else {
-            let diffuse = self.w_plastic * at.diffuse_w * FRAC_1_PI * self.diffuse_t;
+            let diffuse = self.diffuse_f(wi, at);
             if self.w_glass == 0.0 || self.glass_smooth {
                 return diffuse;
             }
@@ -629,11 +669,21 @@ impl Bsdf {
     /// trapped (rough glass of high IOR: about 200 bounces by total internal reflection,
     /// and the lost samples made the weights of the others heavy-tailed). A direction is
     /// thus reached two ways, and its density is the sum over both.
+    #[inline(always)]
     fn pdf_local(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> f32 {
-        let [p_ggx, p_diff, p_glass] = at.p;
+        if self.diffuse_only {
+            return self.diffuse_pdf(wi, at);
+        }
+        self.pdf_general(wo, wi, at)
+    }
+
+    /// [`Bsdf::pdf_local`] for any BSDF.
+    #[inline(never)]
+    fn pdf_general(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> f32 {
+        let [p_ggx, _, p_glass] = at.p;
         let glass_rough = p_glass > 0.0 && !self.glass_smooth;
         if wi.z > 0.0 {
-            let mut pdf = p_diff * (1.0 - self.p_dt) * wi.z * FRAC_1_PI;
+            let mut pdf = self.diffuse_pdf(wi, at);
             if self.microfacet {
                 // Reflections reach `wi` directly, or folded from below the horizon.
                 let mut refl = 0.0;
@@ -658,7 +708,7 @@ impl Bsdf {
             }
             pdf
         } else {
-            let diffuse = p_diff * self.p_dt * -wi.z * FRAC_1_PI;
+            let diffuse = self.diffuse_pdf(wi, at);
             if !glass_rough {
                 return diffuse;
             }

@@ -48,7 +48,21 @@ fn the_lambertian_shortcut_comes_to_the_general_numbers() {
             for mu in [1.0f32, 0.5, 0.01] {
                 for inside in [false, true] {
                     let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
-                    assert_eq!(bsdf.at_wo(wo, inside), bsdf.at_wo_general(wo, inside));
+                    let at = bsdf.at_wo(wo, inside);
+                    assert_eq!(at, bsdf.at_wo_general(wo, inside));
+                    // Its f and pdf, inline, are the general functions' to the bit.
+                    assert!(bsdf.diffuse_only);
+                    for wi in [wo_at(10.0, false), wo_at(75.0, false), wo_at(40.0, true)] {
+                        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                        assert_eq!(
+                            bits(bsdf.eval_local(wo, wi, &at)),
+                            bits(bsdf.eval_general(wo, wi, &at))
+                        );
+                        assert_eq!(
+                            bsdf.pdf_local(wo, wi, &at).to_bits(),
+                            bsdf.pdf_general(wo, wi, &at).to_bits()
+                        );
+                    }
                 }
             }
         }
@@ -60,7 +74,19 @@ fn the_lambertian_shortcut_comes_to_the_general_numbers() {
             ..material(Vec3::ONE, metallic, 0.5, 1.5, transmission)
         };
         assert!(!Bsdf::new(params).is_lambertian());
+        assert!(!Bsdf::new(params).diffuse_only);
     }
+    // Nor is a diffuse surface that also lets light through.
+    let through = Bsdf::new(SurfaceParams {
+        specular: 0.0,
+        extensions: Some(ExtensionParams {
+            diffuse_transmission: 0.5,
+            diffuse_transmission_color: Vec3::ONE,
+            ..ExtensionParams::default()
+        }),
+        ..material(Vec3::ONE, 0.0, 0.5, 1.5, 0.0)
+    });
+    assert!(through.is_lambertian() && !through.diffuse_only);
 }
 
 /// The direction `deg` degrees from the normal in the xz-plane, mirrored below the
