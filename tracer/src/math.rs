@@ -12,10 +12,60 @@
 
 use glam::{DQuat, Quat};
 
-/// `(sin x, cos x)`.
-#[inline]
+/// `(sin x, cos x)`: `libm::sincosf`, the same bits, with its branches for `|x| ≤ 3π/4`
+/// (the angles a bounce's direction sampling draws) inline and no call. Those branches
+/// evaluate musl's polynomial kernels, copied below; past them the crate's own function
+/// reduces the argument. A test compares the two over the whole inline range.
+#[inline(always)]
 pub fn sin_cos(x: f32) -> (f32, f32) {
+    const FRAC_PI_2: f64 = 0.5 * 3.141_592_653_589_793_1;
+    let bits = x.to_bits() & 0x7fff_ffff;
+    if bits < 0x3980_0000 {
+        // |x| < 2^-12: sin x rounds to x and cos x to 1.
+        return (x, 1.0);
+    }
+    if bits <= 0x3f49_0fda {
+        // |x| ≤ π/4.
+        let x = f64::from(x);
+        return (sin_kernel(x), cos_kernel(x));
+    }
+    if bits <= 0x4016_cbe3 {
+        // |x| ≤ 3π/4: a quarter turn away.
+        let x = f64::from(x);
+        return if x < 0.0 {
+            (-cos_kernel(x + FRAC_PI_2), sin_kernel(x + FRAC_PI_2))
+        } else {
+            (cos_kernel(FRAC_PI_2 - x), sin_kernel(FRAC_PI_2 - x))
+        };
+    }
     libm::sincosf(x)
+}
+
+/// musl's `__sindf`: sin x for |x| ≤ π/4, in double precision, rounded once.
+#[inline(always)]
+fn sin_kernel(x: f64) -> f32 {
+    const S1: f64 = -0.166_666_666_416_265_235_595;
+    const S2: f64 = 0.008_333_329_385_889_463_175_6;
+    const S3: f64 = -0.000_198_393_348_360_966_317_347;
+    const S4: f64 = 0.000_002_718_311_493_989_821_906_4;
+    let z = x * x;
+    let w = z * z;
+    let r = S3 + z * S4;
+    let s = z * x;
+    ((x + s * (S1 + z * S2)) + s * w * r) as f32
+}
+
+/// musl's `__cosdf`: cos x for |x| ≤ π/4, in double precision, rounded once.
+#[inline(always)]
+fn cos_kernel(x: f64) -> f32 {
+    const C0: f64 = -0.499_999_997_251_031_003_120;
+    const C1: f64 = 0.041_666_623_323_739_063_189_4;
+    const C2: f64 = -0.001_388_676_377_460_992_946_92;
+    const C3: f64 = 0.000_024_390_448_796_277_409_065_4;
+    let z = x * x;
+    let w = z * z;
+    let r = C2 + z * C3;
+    (((1.0 + z * C0) + w * C1) + (w * z) * r) as f32
 }
 
 /// `sin x`.
@@ -235,6 +285,48 @@ mod tests {
             let d = f64::from(x);
             assert!((tan_f64(0.2 * d) - (0.2 * d).tan()).abs() <= 1e-15);
             assert!((atan_f64(d) - d.atan()).abs() <= 1e-15);
+        }
+    }
+
+    /// The inline branches of `sin_cos` are `libm::sincosf` to the bit: every float of
+    /// `[-2.5, 2.5]` at a stride, and every one near each branch's edge.
+    #[test]
+    fn sin_cos_is_libms_to_the_bit() {
+        let check = |x: f32| {
+            let (s, c) = sin_cos(x);
+            let (ls, lc) = libm::sincosf(x);
+            assert_eq!(
+                (s.to_bits(), c.to_bits()),
+                (ls.to_bits(), lc.to_bits()),
+                "{x:e}"
+            );
+        };
+        for bits in (0..=2.5f32.to_bits()).step_by(997) {
+            check(f32::from_bits(bits));
+            check(-f32::from_bits(bits));
+        }
+        for edge in [0x3980_0000u32, 0x3f49_0fda, 0x4016_cbe3] {
+            for bits in edge - 2000..edge + 2000 {
+                check(f32::from_bits(bits));
+                check(-f32::from_bits(bits));
+            }
+        }
+        for x in [
+            0.0,
+            -0.0,
+            f32::MIN_POSITIVE,
+            1e-40,
+            f32::INFINITY,
+            f32::NAN,
+            1e30,
+        ] {
+            let (s, c) = sin_cos(x);
+            let (ls, lc) = libm::sincosf(x);
+            assert_eq!(
+                (s.to_bits(), c.to_bits()),
+                (ls.to_bits(), lc.to_bits()),
+                "{x:e}"
+            );
         }
     }
 
