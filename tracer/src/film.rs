@@ -105,6 +105,75 @@ pub struct SampleValue {
     pub rays: u32,
 }
 
+/// The sums of [`TileBuffer`] for one pixel, over a run of its samples: what a thread
+/// adds up while it traces them, in registers and without the buffer's bounds checks,
+/// then adds to the buffer once ([`TileBuffer::add_pixel`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PixelSum {
+    beauty: Vec4,
+    albedo: Vec3,
+    normal: Vec3,
+    depth: f32,
+    hits: u32,
+    motion: Vec2,
+    square: Vec3,
+    samples: u32,
+    half: Vec3,
+    half_samples: u32,
+    dropped: u64,
+    rays: u64,
+}
+
+impl PixelSum {
+    /// Adds sample number `sample`; a sample with any non-finite value is dropped whole
+    /// and counted.
+    #[inline(always)]
+    pub fn add(&mut self, sample: u32, s: &SampleValue) {
+        self.rays += u64::from(s.rays);
+        let finite = s.radiance.is_finite()
+            && s.alpha.is_finite()
+            && s.albedo.is_finite()
+            && s.normal.is_finite()
+            && s.depth.is_none_or(f32::is_finite)
+            && s.motion.is_finite();
+        if !finite {
+            self.dropped += 1;
+            return;
+        }
+        self.beauty += s.radiance.extend(s.alpha);
+        self.albedo += s.albedo;
+        self.normal += s.normal;
+        self.motion += s.motion;
+        self.square += s.radiance * s.radiance;
+        if let Some(d) = s.depth {
+            self.depth += d;
+            self.hits += 1;
+        }
+        self.samples += 1;
+        if sample % 2 == 1 {
+            self.half += s.radiance;
+            self.half_samples += 1;
+        }
+    }
+
+    /// The estimated error of the pixel so far (see [`noise_estimate`]).
+    pub fn noise(&self) -> f32 {
+        pixel_noise(self.beauty, self.samples, self.half, self.half_samples)
+    }
+}
+
+/// [`noise_estimate`] from a pixel's sums; [`NO_NOISE_ESTIMATE`] where its samples cannot
+/// tell (fewer than two, or all of one parity).
+fn pixel_noise(beauty: Vec4, samples: u32, half: Vec3, half_samples: u32) -> f32 {
+    if half_samples == 0 || half_samples == samples {
+        return NO_NOISE_ESTIMATE;
+    }
+    noise_estimate(
+        beauty.truncate() / samples as f32,
+        half / half_samples as f32,
+    )
+}
+
 /// Depth written for pixels where no sample hit anything: large and finite, as
 /// compositors expect (Cycles uses the same value), never infinity.
 pub const NO_HIT_DEPTH: f32 = 1.0e10;
@@ -164,42 +233,35 @@ impl TileBuffer {
     /// Adds sample number `sample` to the pixel at `index` (row-major within the tile); a
     /// sample with any non-finite value is dropped whole and counted.
     pub fn add(&mut self, index: usize, sample: u32, s: &SampleValue) {
-        self.rays += s.rays as u64;
-        let finite = s.radiance.is_finite()
-            && s.alpha.is_finite()
-            && s.albedo.is_finite()
-            && s.normal.is_finite()
-            && s.depth.is_none_or(f32::is_finite)
-            && s.motion.is_finite();
-        if !finite {
-            self.dropped += 1;
-            return;
-        }
-        self.beauty[index] += s.radiance.extend(s.alpha);
-        self.albedo[index] += s.albedo;
-        self.normal[index] += s.normal;
-        self.motion[index] += s.motion;
-        self.square[index] += s.radiance * s.radiance;
-        if let Some(d) = s.depth {
-            self.depth[index] += d;
-            self.hits[index] += 1;
-        }
-        self.samples[index] += 1;
-        if sample % 2 == 1 {
-            self.half[index] += s.radiance;
-            self.half_samples[index] += 1;
-        }
+        let mut sum = PixelSum::default();
+        sum.add(sample, s);
+        self.add_pixel(index, &sum);
+    }
+
+    /// Adds the sums of one pixel's samples to the pixel at `index`. (Added to a pixel
+    /// that had none, they are its sums to the bit.)
+    pub fn add_pixel(&mut self, index: usize, sum: &PixelSum) {
+        self.rays += sum.rays;
+        self.dropped += sum.dropped;
+        self.beauty[index] += sum.beauty;
+        self.albedo[index] += sum.albedo;
+        self.normal[index] += sum.normal;
+        self.motion[index] += sum.motion;
+        self.square[index] += sum.square;
+        self.depth[index] += sum.depth;
+        self.hits[index] += sum.hits;
+        self.samples[index] += sum.samples;
+        self.half[index] += sum.half;
+        self.half_samples[index] += sum.half_samples;
     }
 
     /// The estimated error of pixel `index` (see [`noise_estimate`]).
     pub fn noise(&self, index: usize) -> f32 {
-        let (n, h) = (self.samples[index], self.half_samples[index]);
-        if h == 0 || h == n {
-            return NO_NOISE_ESTIMATE;
-        }
-        noise_estimate(
-            self.beauty[index].truncate() / n as f32,
-            self.half[index] / h as f32,
+        pixel_noise(
+            self.beauty[index],
+            self.samples[index],
+            self.half[index],
+            self.half_samples[index],
         )
     }
 
@@ -534,6 +596,34 @@ mod tests {
         assert_eq!(b.dropped, 2);
         assert_eq!(b.resolve().beauty[0], Vec4::ONE);
         assert_eq!(b.resolve().depth[0], NO_HIT_DEPTH);
+    }
+
+    #[test]
+    fn a_pixels_sums_added_at_once_are_its_samples_added_one_by_one() {
+        let mut samples: Vec<SampleValue> = (0..7)
+            .map(|i| SampleValue {
+                radiance: Vec3::new(0.1 * i as f32, 1.0 / (i as f32 + 3.0), 0.7),
+                alpha: 1.0,
+                albedo: Vec3::splat(0.3 + 0.01 * i as f32),
+                normal: Vec3::Z,
+                depth: (i % 3 != 0).then_some(2.0 + 0.37 * i as f32),
+                motion: Vec2::new(0.5, -0.25 * i as f32),
+                rays: 3 + i,
+            })
+            .collect();
+        // One of them NaN, dropped by both.
+        samples[4].radiance.x = f32::NAN;
+        let rect = TileRect::new(0, 0, 2, 1);
+        let (mut one_by_one, mut at_once) = (TileBuffer::new(rect), TileBuffer::new(rect));
+        let mut sum = PixelSum::default();
+        for (i, s) in samples.iter().enumerate() {
+            one_by_one.add(1, i as u32, s);
+            sum.add(i as u32, s);
+            assert_eq!(sum.noise().to_bits(), one_by_one.noise(1).to_bits());
+        }
+        at_once.add_pixel(1, &sum);
+        assert_eq!(at_once, one_by_one);
+        assert_eq!((at_once.dropped, at_once.samples[1]), (1, 6));
     }
 
     #[test]

@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 
-use crate::film::{SampleRange, TileBuffer, TileRect};
+use crate::film::{PixelSum, SampleRange, TileBuffer, TileRect};
 use crate::integrator;
 
 pub use crate::frame::PreparedFrame;
@@ -53,13 +53,15 @@ pub fn render_tile_cancellable(
                 let (pixel, mut streak) = (col as usize, 0);
                 let (x, y) = (rect.x + col, rect.y + row);
                 let run = samples.start..samples.end;
+                let mut sum = PixelSum::default();
                 integrator::trace_samples(frame, settings, x, y, run, &mut |index, s| {
-                    buf.add(pixel, index, s);
+                    sum.add(index, s);
                     settings.noise.as_ref().is_none_or(|target| {
                         let taken = index + 1 - samples.start;
-                        !target.reached(taken, buf.noise(pixel), &mut streak)
+                        !target.reached(taken, sum.noise(), &mut streak)
                     })
                 });
+                buf.add_pixel(pixel, &sum);
             }
             Some(buf)
         })
