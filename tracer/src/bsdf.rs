@@ -260,6 +260,9 @@ pub struct Bsdf {
     /// Whether any microfacet lobe is present (metal, specular layer, rough interface): a
     /// Lambertian surface (specular 0) skips their tables and evaluation.
     microfacet: bool,
+    /// The lobe probabilities of a Lambertian BSDF ([`Bsdf::is_lambertian`]), which no
+    /// `wo` changes; `None` for any other.
+    lambertian: Option<[f32; 3]>,
     /// Whether the base (what lies under any layers) is a diffuse reflector alone
     /// ([`Bsdf::is_lambertian`] without diffuse transmission): its f and pdf are the
     /// diffuse lobe's.
@@ -437,6 +440,7 @@ impl Bsdf {
             glass_smooth,
             thin,
             microfacet,
+            lambertian: None,
             diffuse_only: false,
             // Table positions only where a lobe looks them up: a Lambertian surface, the
             // commonest, needs none.
@@ -455,6 +459,7 @@ impl Bsdf {
             film,
             meta,
         };
+        bsdf.lambertian = bsdf.lambertian_lobes();
         bsdf.diffuse_only = bsdf.is_lambertian() && bsdf.p_dt == 0.0;
         bsdf
     }

@@ -150,15 +150,9 @@ impl Bsdf {
     /// The `wo`-dependent factors: compensation, albedo scaling, lobe probabilities.
     #[inline(always)]
     pub(super) fn at_wo(&self, wo: Vec3, inside: bool) -> AtWo {
-        if self.is_lambertian() {
+        if let Some(p) = self.lambertian {
             // The commonest surface: nothing depends on `wo`, and the general case
             // (`at_wo_general`) comes to the same numbers (a test checks).
-            let diffuse = self.w_plastic
-                * self
-                    .diffuse_r
-                    .max_element()
-                    .max(self.diffuse_t.max_element())
-                > 0.0;
             return AtWo {
                 eta_rel: if inside { 1.0 / self.eta } else { self.eta },
                 thin_comp: 1.0,
@@ -169,7 +163,7 @@ impl Bsdf {
                 diffuse_w: 1.0,
                 glass_ms: 0.0,
                 glass_ms_r: 0.0,
-                p: [0.0, if diffuse { 1.0 } else { 0.0 }, 0.0],
+                p,
             };
         }
         self.at_wo_general(wo, inside)
@@ -177,7 +171,22 @@ impl Bsdf {
 
     /// Whether the BSDF is a diffuse lobe alone: no metal, no specular layer, no glass.
     pub(super) fn is_lambertian(&self) -> bool {
-        self.w_metal == 0.0 && self.w_plastic * self.spec == 0.0 && self.w_glass == 0.0
+        self.lambertian.is_some()
+    }
+
+    /// A Lambertian BSDF's lobe probabilities (see [`AtWo::p`]), the same from every
+    /// `wo`; `None` for any other BSDF. Set once, when the BSDF is made.
+    pub(super) fn lambertian_lobes(&self) -> Option<[f32; 3]> {
+        if self.w_metal != 0.0 || self.w_plastic * self.spec != 0.0 || self.w_glass != 0.0 {
+            return None;
+        }
+        let diffuse = self.w_plastic
+            * self
+                .diffuse_r
+                .max_element()
+                .max(self.diffuse_t.max_element())
+            > 0.0;
+        Some([0.0, if diffuse { 1.0 } else { 0.0 }, 0.0])
     }
 
     /// [`Bsdf::at_wo`] for any BSDF.
