@@ -540,10 +540,7 @@ fn trace_path<W: Carrier, const AVX: bool>(
         }
         let u = next_bounce::<AVX>(sampler, CAMERA_DIMENSIONS + depth * BOUNCE_DIMENSIONS);
         let wo_local = sp.frame.to_local(wo);
-        let scatter = match sp.coat_normal {
-            None => bsdf.at(wo_local),
-            Some(n) => bsdf.at_coated(wo_local, Some(sp.frame.to_local(n))),
-        };
+        let scatter = bsdf.at_coated(wo_local, sp.coat_normal.map(|n| sp.frame.to_local(n)));
 
         // Next-event estimation.
         if !bsdf.is_delta() {

@@ -98,10 +98,10 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     let mut ns = match tri.normals() {
         None => ng,
         Some([n0, n1, n2]) => {
-            let n = (*tri.normal_to_world() * barycentric(n0, n1, n2, b1, b2)).normalize_or_zero();
-            if n == Vec3::ZERO || !n.is_finite() {
-                ng
-            } else if n.dot(ng) < 0.0 {
+            // A zero or non-finite normal falls back to the face's (what `normalize_or`
+            // gives is always finite).
+            let n = (*tri.normal_to_world() * barycentric(n0, n1, n2, b1, b2)).normalize_or(ng);
+            if n.dot(ng) < 0.0 {
                 -n
             } else {
                 n
