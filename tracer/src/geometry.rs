@@ -215,6 +215,13 @@ pub fn offset_ray_origin(p: Vec3, ng: Vec3) -> Vec3 {
 /// triangle's size: barycentric interpolation, in contrast, is off by the rounding of the
 /// vertices' magnitudes, which on a triangle 1e5 across is centimetres.
 pub fn plane_hit_point(ray: &Ray, v: [Vec3; 3]) -> Option<(Vec3, Vec3)> {
+    // The largest magnitude, taken before widening (which is exact and keeps the order).
+    let magnitudes = v[0]
+        .abs()
+        .max(v[1].abs())
+        .max(v[2].abs())
+        .max(ray.origin.abs())
+        .max_element();
     let [a, b, c] = v.map(|p| p.as_dvec3());
     let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
     let n = (b - a).cross(c - a);
@@ -225,8 +232,8 @@ pub fn plane_hit_point(ray: &Ray, v: [Vec3; 3]) -> Option<(Vec3, Vec3)> {
     }
     // Rounding to single precision, and double precision's own error relative to the
     // magnitudes it worked with (far above 2^-53 of them, to cover every operation).
-    let magnitudes = a.abs().max(b.abs()).max(c.abs()).max(o.abs()).max_element();
-    let error = p.abs() * crate::triangle::gamma(1) + Vec3::splat((magnitudes * 1e-14) as f32);
+    let error =
+        p.abs() * crate::triangle::gamma(1) + Vec3::splat((f64::from(magnitudes) * 1e-14) as f32);
     Some((p, error))
 }
 
