@@ -18,7 +18,7 @@ use glam::{DQuat, Quat};
 /// reduces the argument. A test compares the two over the whole inline range.
 #[inline(always)]
 pub fn sin_cos(x: f32) -> (f32, f32) {
-    const FRAC_PI_2: f64 = 0.5 * 3.141_592_653_589_793_1;
+    use std::f64::consts::FRAC_PI_2;
     let bits = x.to_bits() & 0x7fff_ffff;
     if bits < 0x3980_0000 {
         // |x| < 2^-12: sin x rounds to x and cos x to 1.
@@ -43,6 +43,7 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
 
 /// musl's `__sindf`: sin x for |x| ≤ π/4, in double precision, rounded once.
 #[inline(always)]
+#[allow(clippy::excessive_precision)] // musl's constants as written there
 fn sin_kernel(x: f64) -> f32 {
     const S1: f64 = -0.166_666_666_416_265_235_595;
     const S2: f64 = 0.008_333_329_385_889_463_175_6;
@@ -57,6 +58,7 @@ fn sin_kernel(x: f64) -> f32 {
 
 /// musl's `__cosdf`: cos x for |x| ≤ π/4, in double precision, rounded once.
 #[inline(always)]
+#[allow(clippy::excessive_precision)] // musl's constants as written there
 fn cos_kernel(x: f64) -> f32 {
     const C0: f64 = -0.499_999_997_251_031_003_120;
     const C1: f64 = 0.041_666_623_323_739_063_189_4;
