@@ -313,22 +313,9 @@ mod tests {
                 check(-f32::from_bits(bits));
             }
         }
-        for x in [
-            0.0,
-            -0.0,
-            f32::MIN_POSITIVE,
-            1e-40,
-            f32::INFINITY,
-            f32::NAN,
-            1e30,
-        ] {
-            let (s, c) = sin_cos(x);
-            let (ls, lc) = libm::sincosf(x);
-            assert_eq!(
-                (s.to_bits(), c.to_bits()),
-                (ls.to_bits(), lc.to_bits()),
-                "{x:e}"
-            );
+        for x in [0.0, f32::MIN_POSITIVE, 1e-40, f32::INFINITY, f32::NAN, 1e30] {
+            check(x);
+            check(-x);
         }
     }
 
