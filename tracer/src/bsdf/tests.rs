@@ -3,7 +3,7 @@
 
 use super::chi2::{self, Rng};
 use super::*;
-use std::f32::consts::PI;
+use std::f32::consts::{FRAC_1_PI, PI};
 
 /// Incident angles (degrees from the normal) of the chi-square tests.
 const ANGLES: [f32; 4] = [0.0, 45.0, 80.0, 89.9];
