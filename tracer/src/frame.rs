@@ -242,7 +242,9 @@ impl PreparedFrame {
         let deformed = self.deformed_mesh(inst.mesh);
         let positions = match deformed {
             Some(d) => d.positions(prim_index, v, time),
-            None => v.map(|i| prim.positions[i]),
+            // Not `v.map`: its array was built on the stack and copied in wider loads than
+            // its stores, which the CPU cannot forward.
+            None => [prim.positions[v[0]], prim.positions[v[1]], prim.positions[v[2]]],
         };
         TriangleAt {
             prim,
