@@ -85,8 +85,8 @@ pub(crate) struct PreparedMaterial {
     pub fluorescence: Option<u32>,
 }
 
-/// One triangle of an instance at a ray's time: where its data lives, its vertex
-/// positions in object space (world space for deformed meshes), and the instance's
+/// One triangle of an instance at a ray's time: where its data lives (its vertex
+/// positions are in object space, world space for deformed meshes), and the instance's
 /// transforms at that time.
 pub(crate) struct TriangleAt<'a> {
     /// The primitive holding it (texture coordinates, colours, material).
@@ -97,8 +97,6 @@ pub(crate) struct TriangleAt<'a> {
     pub t: usize,
     /// Its vertex indices.
     pub v: [usize; 3],
-    /// Vertex positions (object space).
-    pub positions: [Vec3; 3],
     /// The deformed mesh it belongs to, if any.
     pub deformed: Option<&'a DeformedMesh>,
     /// The instance.
@@ -153,10 +151,29 @@ impl TriangleAt<'_> {
         (m.transform_point3(p), hit_point_error(m, p, error))
     }
 
+    /// Vertex positions (object space), read where they are each time: held here, they
+    /// were written to the stack and copied in wider loads than their stores, which the
+    /// CPU cannot forward (a stall of a dozen cycles at every hit).
+    #[inline(always)]
+    pub fn positions(&self) -> [Vec3; 3] {
+        match self.deformed {
+            Some(d) => d.positions(self.prim_index, self.v, self.time),
+            None => self.v_at(&self.prim.positions),
+        }
+    }
+
+    /// The triangle's three entries of a per-vertex array (not `v.map`, whose array was
+    /// built on the stack and copied, as above).
+    #[inline(always)]
+    fn v_at<T: Copy>(&self, of: &[T]) -> [T; 3] {
+        [of[self.v[0]], of[self.v[1]], of[self.v[2]]]
+    }
+
     /// Object-space geometric normal by the winding (not normalised), turned for the baked
     /// vertices of a mirrored node (a still instance's mirror is in its normal matrix).
+    #[inline(always)]
     pub fn face_normal(&self) -> Vec3 {
-        let [a, b, c] = self.positions;
+        let [a, b, c] = self.positions();
         let n = (b - a).cross(c - a);
         if self.deformed.is_some_and(|d| d.mirrored) {
             -n
@@ -168,6 +185,7 @@ impl TriangleAt<'_> {
     /// World-space unit normal of the front face. The inverse transpose keeps the front
     /// face right for mirrored instances too (glTF flips the winding when the determinant
     /// is negative). Zero for a degenerate triangle.
+    #[inline(always)]
     pub fn front_normal(&self) -> Vec3 {
         if self.inst.translated {
             // The identity's product, but for the sign of a zero component.
@@ -180,7 +198,7 @@ impl TriangleAt<'_> {
     pub fn normals(&self) -> Option<[Vec3; 3]> {
         match self.deformed {
             Some(d) => d.normals(self.prim_index, self.v, self.time),
-            None => (!self.prim.normals.is_empty()).then(|| self.v.map(|i| self.prim.normals[i])),
+            None => (!self.prim.normals.is_empty()).then(|| self.v_at(&self.prim.normals)),
         }
     }
 
@@ -188,7 +206,7 @@ impl TriangleAt<'_> {
     pub fn tangents(&self) -> Option<[Vec4; 3]> {
         match self.deformed {
             Some(d) => d.tangents(self.prim_index, self.v, self.time),
-            None => (!self.prim.tangents.is_empty()).then(|| self.v.map(|i| self.prim.tangents[i])),
+            None => (!self.prim.tangents.is_empty()).then(|| self.v_at(&self.prim.tangents)),
         }
     }
 }
@@ -239,20 +257,12 @@ impl PreparedFrame {
         let (prim_index, t) = mesh.locate(triangle);
         let prim = &mesh.primitives[prim_index];
         let v = prim.triangle(t);
-        let deformed = self.deformed_mesh(inst.mesh);
-        let positions = match deformed {
-            Some(d) => d.positions(prim_index, v, time),
-            // Not `v.map`: its array was built on the stack and copied in wider loads than
-            // its stores, which the CPU cannot forward.
-            None => [prim.positions[v[0]], prim.positions[v[1]], prim.positions[v[2]]],
-        };
         TriangleAt {
             prim,
             prim_index,
             t,
             v,
-            positions,
-            deformed,
+            deformed: self.deformed_mesh(inst.mesh),
             inst,
             moved: match inst.motion {
                 Some(_) => Some(moved.insert(inst.placement(time))),

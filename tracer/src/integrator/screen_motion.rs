@@ -21,7 +21,7 @@ pub(crate) fn screen_motion(frame: &PreparedFrame, ray: &Ray, hit: Option<&Hit>)
         Some(hit) => {
             let mut moved = None;
             let tri = frame.triangle_at(hit.instance, hit.triangle, time, &mut moved);
-            let [a, b, c] = tri.positions;
+            let [a, b, c] = tri.positions();
             let p = barycentric(a, b, c, hit.b1, hit.b2);
             camera.film_position(tri.to_world().transform_point3(p), time)
         }

@@ -61,9 +61,9 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     // vertices, which on a triangle 1e5 across is centimetres. Then to world.
     let object_ray = tri.object_ray(ray);
     let (p_object, object_error) =
-        plane_hit_point(&object_ray, tri.positions).unwrap_or_else(|| {
+        plane_hit_point(&object_ray, tri.positions()).unwrap_or_else(|| {
             // Interpolated instead: off by the vertices' rounding (pbrt-v4's bound).
-            let [a, b, c] = tri.positions;
+            let [a, b, c] = tri.positions();
             let weights = a.abs() * (1.0 - b1 - b2).abs() + b.abs() * b1.abs() + c.abs() * b2.abs();
             (
                 barycentric(a, b, c, b1, b2),
