@@ -8,7 +8,7 @@ use glam::{Affine3A, DVec3, Mat3A, Vec3, Vec4};
 
 use crate::bvh::{Instance, MeshBvh, Placement, SceneBvh};
 use crate::camera::Camera;
-use crate::geometry::{hit_point_error, translated_hit_point_error, Ray};
+use crate::geometry::{barycentric, hit_point_error, translated_hit_point_error, Ray};
 use crate::light::LightSet;
 use crate::material::{AlphaMode, Material};
 use crate::motion::DeformedMesh;
@@ -194,20 +194,29 @@ impl TriangleAt<'_> {
         (*self.normal_to_world() * self.face_normal()).normalize_or_zero()
     }
 
-    /// Object-space vertex normals, or `None` when the primitive has none.
-    pub fn normals(&self) -> Option<[Vec3; 3]> {
-        match self.deformed {
-            Some(d) => d.normals(self.prim_index, self.v, self.time),
-            None => (!self.prim.normals.is_empty()).then(|| self.v_at(&self.prim.normals)),
-        }
+    /// The object-space vertex normals interpolated at barycentrics `b1`, `b2` (not
+    /// renormalised), or `None` when the primitive has none. Interpolated here, not
+    /// returned as an array: an optional array was built on the stack and copied.
+    #[inline(always)]
+    pub fn normal_at(&self, b1: f32, b2: f32) -> Option<Vec3> {
+        let [n0, n1, n2] = match self.deformed {
+            Some(d) => d.normals(self.prim_index, self.v, self.time)?,
+            None if self.prim.normals.is_empty() => return None,
+            None => self.v_at(&self.prim.normals),
+        };
+        Some(barycentric(n0, n1, n2, b1, b2))
     }
 
-    /// Object-space vertex tangents, or `None` when the primitive has none.
-    pub fn tangents(&self) -> Option<[Vec4; 3]> {
-        match self.deformed {
-            Some(d) => d.tangents(self.prim_index, self.v, self.time),
-            None => (!self.prim.tangents.is_empty()).then(|| self.v_at(&self.prim.tangents)),
-        }
+    /// The object-space vertex tangents interpolated at barycentrics `b1`, `b2`, or
+    /// `None` when the primitive has none (as [`Self::normal_at`]).
+    #[inline(always)]
+    pub fn tangent_at(&self, b1: f32, b2: f32) -> Option<Vec4> {
+        let [t0, t1, t2] = match self.deformed {
+            Some(d) => d.tangents(self.prim_index, self.v, self.time)?,
+            None if self.prim.tangents.is_empty() => return None,
+            None => self.v_at(&self.prim.tangents),
+        };
+        Some(barycentric(t0, t1, t2, b1, b2))
     }
 }
 

@@ -95,12 +95,12 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     // Interpolated shading normal; missing or degenerate normals fall back to the face. One
     // facing away from the front face is that normal written reversed (normals flipped
     // against the winding): it is turned to the front, which the winding defines in glTF.
-    let mut ns = match tri.normals() {
+    let mut ns = match tri.normal_at(b1, b2) {
         None => ng,
-        Some([n0, n1, n2]) => {
+        Some(n) => {
             // A zero or non-finite normal falls back to the face's (what `normalize_or`
             // gives is always finite).
-            let n = (*tri.normal_to_world() * barycentric(n0, n1, n2, b1, b2)).normalize_or(ng);
+            let n = (*tri.normal_to_world() * n).normalize_or(ng);
             if n.dot(ng) < 0.0 {
                 -n
             } else {
@@ -114,8 +114,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     // is cross(normal, tangent) · w in the mesh's space; a mirroring placement (negative
     // determinant) reverses cross products, so w turns with it.
     let tangent_frame = |n: Vec3| -> Option<Frame> {
-        let [t0, t1, t2] = tri.tangents()?;
-        let t4 = barycentric(t0, t1, t2, b1, b2);
+        let t4 = tri.tangent_at(b1, b2)?;
         let tf = Frame::from_normal_tangent(n, tri.to_world().transform_vector3(t4.truncate()));
         let mirrored = tri.to_world().matrix3.determinant() < 0.0;
         let sign = if (t4.w < 0.0) != mirrored { -1.0 } else { 1.0 };
