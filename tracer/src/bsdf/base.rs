@@ -3,7 +3,7 @@
 //! frame where `wo.z > 0`. A diffuse reflector's f and pdf inline where they are asked
 //! for; every other BSDF's out of line.
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec3A};
 use std::f32::consts::FRAC_1_PI;
 
 use super::{flip, fresnel, microfacet, thin, AtWo, Bsdf, BsdfSample, COS_EPS};
@@ -65,12 +65,21 @@ impl Bsdf {
         if self.diffuse_only {
             return self.diffuse_f(wi, at);
         }
-        self.eval_general(wo, wi, at)
+        self.eval_general(wo, wi, at).into()
     }
 
-    /// [`Bsdf::eval_local`] for any BSDF.
+    /// [`Bsdf::eval_local`] for any BSDF, out of line. Returned in memory as a `Vec3A`:
+    /// one store that the caller's loads are forwarded from. (A `Vec3` is three stores,
+    /// which made the inline diffuse value sharing its slot three stores too, and every
+    /// wider load copying it wait for them to reach the cache.)
     #[inline(never)]
-    pub(super) fn eval_general(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3 {
+    pub(super) fn eval_general(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3A {
+        self.eval_any(wo, wi, at).into()
+    }
+
+    /// The body of [`Bsdf::eval_general`].
+    #[inline(always)]
+    fn eval_any(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3 {
         let (mu_o, mu_i) = (wo.z, wi.z);
         if mu_i > 0.0 {
             let mut f = self.diffuse_f(wi, at);

@@ -21,7 +21,7 @@
 //! returns at `wo`; a continuous sample then carries the value and density of the whole
 //! mixture, as the base's lobes do among themselves.
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec3A};
 
 use super::coat::{Coat, CoatAt};
 use super::{mean, sheen, Bsdf, BsdfSample, COS_EPS, LOBE_FLOOR};
@@ -106,7 +106,7 @@ impl Bsdf {
         &self,
         wo: Vec3,
         coat_normal: Option<Vec3>,
-        base_p: &[f32; 3],
+        base_p: [f32; 3],
     ) -> Option<LayersAt> {
         let layers = self.layers.as_ref()?;
         let coat_frame = coat_normal
@@ -160,10 +160,11 @@ impl Bsdf {
         (1.0 - l.coat.map_or(0.0, |c| c.albedo)) * (1.0 - l.sheen_taken)
     }
 
-    /// f of the layered BSDF (`wo.z > 0`; `wi` off the tangent plane).
+    /// f of the layered BSDF (`wo.z > 0`; `wi` off the tangent plane), as a `Vec3A` for
+    /// the reason [`Bsdf::eval_general`] gives.
     // Out of line: the hot path of materials without layers stays as small as before.
     #[inline(never)]
-    pub(super) fn layered_eval(&self, wo: Vec3, wi: Vec3, at: &super::AtWo, l: &LayersAt) -> Vec3 {
+    pub(super) fn layered_eval(&self, wo: Vec3, wi: Vec3, at: &super::AtWo, l: &LayersAt) -> Vec3A {
         let layers = self.layers.as_ref().expect("layered");
         let mut f = self.eval_local(wo, wi, at) * self.base_scale(l);
         if wi.z > 0.0 {
@@ -175,7 +176,7 @@ impl Bsdf {
         if let (Some(coat), Some(coat_at)) = (&layers.coat, &l.coat) {
             f += Vec3::splat(self.coat_eval(coat, coat_at, wi, l));
         }
-        f
+        f.into()
     }
 
     /// The coat's value at `wi`, reflecting into the upper side only. On its own normal
@@ -234,7 +235,7 @@ impl Bsdf {
             let pdf = self.layered_pdf(wo, wi, at, l);
             (pdf > 0.0 && pdf.is_finite()).then(|| BsdfSample {
                 wi,
-                f: self.layered_eval(wo, wi, at, l),
+                f: self.layered_eval(wo, wi, at, l).into(),
                 pdf,
                 delta: false,
             })

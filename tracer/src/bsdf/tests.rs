@@ -56,7 +56,7 @@ fn the_lambertian_shortcut_comes_to_the_general_numbers() {
                         let bits = |v: Vec3| v.to_array().map(f32::to_bits);
                         assert_eq!(
                             bits(bsdf.eval_local(wo, wi, &at)),
-                            bits(bsdf.eval_general(wo, wi, &at))
+                            bits(bsdf.eval_general(wo, wi, &at).into())
                         );
                         assert_eq!(
                             bsdf.pdf_local(wo, wi, &at).to_bits(),

@@ -82,7 +82,7 @@ impl BsdfAt<'_> {
     fn eval_local(&self, wi: Vec3) -> Vec3 {
         match &self.layers {
             None => self.bsdf.eval_local(self.wo, wi, &self.at),
-            Some(l) => self.bsdf.layered_eval(self.wo, wi, &self.at, l),
+            Some(l) => self.bsdf.layered_eval(self.wo, wi, &self.at, l).into(),
         }
     }
 
@@ -136,7 +136,9 @@ impl Bsdf {
             None
         } else {
             let coat_normal = coat_normal.map(|n| if inside { flip(n) } else { n });
-            self.layers_at(wo, coat_normal, &at.p)
+            // `at.p` by value: `at` whose address had escaped into this call was built on
+            // the stack and then copied into the view (store forwarding failed on that).
+            self.layers_at(wo, coat_normal, at.p)
         };
         Some(BsdfAt {
             bsdf: self,
