@@ -106,7 +106,7 @@ impl Bsdf {
         &self,
         wo: Vec3,
         coat_normal: Option<Vec3>,
-        base_p: [f32; 3],
+        base_p: &[f32; 3],
     ) -> Option<LayersAt> {
         let layers = self.layers.as_ref()?;
         let coat_frame = coat_normal

@@ -136,9 +136,7 @@ impl Bsdf {
             None
         } else {
             let coat_normal = coat_normal.map(|n| if inside { flip(n) } else { n });
-            // `at.p` by value: `at` whose address had escaped into this call was built on
-            // the stack and then copied into the view (store forwarding failed on that).
-            self.layers_at(wo, coat_normal, at.p)
+            self.layers_at(wo, coat_normal, &at.p)
         };
         Some(BsdfAt {
             bsdf: self,
