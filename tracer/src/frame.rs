@@ -195,28 +195,42 @@ impl TriangleAt<'_> {
     }
 
     /// The object-space vertex normals interpolated at barycentrics `b1`, `b2` (not
-    /// renormalised), or `None` when the primitive has none. Interpolated here, not
-    /// returned as an array: an optional array was built on the stack and copied.
+    /// renormalised), or `None` when the primitive has none.
     #[inline(always)]
     pub fn normal_at(&self, b1: f32, b2: f32) -> Option<Vec3> {
-        let [n0, n1, n2] = match self.deformed {
-            Some(d) => d.normals(self.prim_index, self.v, self.time)?,
-            None if self.prim.normals.is_empty() => return None,
-            None => self.v_at(&self.prim.normals),
-        };
-        Some(barycentric(n0, n1, n2, b1, b2))
+        let deformed = |d: &DeformedMesh| d.normals(self.prim_index, self.v, self.time);
+        self.interpolated(&self.prim.normals, deformed, b1, b2)
     }
 
     /// The object-space vertex tangents interpolated at barycentrics `b1`, `b2`, or
-    /// `None` when the primitive has none (as [`Self::normal_at`]).
+    /// `None` when the primitive has none.
     #[inline(always)]
     pub fn tangent_at(&self, b1: f32, b2: f32) -> Option<Vec4> {
-        let [t0, t1, t2] = match self.deformed {
-            Some(d) => d.tangents(self.prim_index, self.v, self.time)?,
-            None if self.prim.tangents.is_empty() => return None,
-            None => self.v_at(&self.prim.tangents),
+        let deformed = |d: &DeformedMesh| d.tangents(self.prim_index, self.v, self.time);
+        self.interpolated(&self.prim.tangents, deformed, b1, b2)
+    }
+
+    /// A per-vertex attribute (`of` in a still mesh, `deformed`'s in a deformed one)
+    /// interpolated at barycentrics `b1`, `b2`; `None` when the primitive has none.
+    /// Interpolated here, not returned as an array: an optional array was built on the
+    /// stack and copied in wider loads than its stores.
+    #[inline(always)]
+    fn interpolated<T>(
+        &self,
+        of: &[T],
+        deformed: impl FnOnce(&DeformedMesh) -> Option<[T; 3]>,
+        b1: f32,
+        b2: f32,
+    ) -> Option<T>
+    where
+        T: Copy + core::ops::Mul<f32, Output = T> + core::ops::Add<Output = T>,
+    {
+        let [a, b, c] = match self.deformed {
+            Some(d) => deformed(d)?,
+            None if of.is_empty() => return None,
+            None => self.v_at(of),
         };
-        Some(barycentric(t0, t1, t2, b1, b2))
+        Some(barycentric(a, b, c, b1, b2))
     }
 }
 
