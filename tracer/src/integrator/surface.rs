@@ -10,7 +10,7 @@ use crate::geometry::{barycentric, plane_hit_point, Frame, Hit, Ray};
 
 /// Shading and geometric normals closer than this (in cosine: 0.08°) count as one: the
 /// wedge between their tangent planes holds a fraction of order 1e-6 of any lobe, where
-/// folding (see [`fold`]) would cost every bounce on a transformed flat mesh, whose
+/// folding (see [`fold`](super::folding::fold)) would cost every bounce on a transformed flat mesh, whose
 /// normals differ from its facets' by rounding alone.
 const FLAT_COS: f32 = 1.0 - 1e-6;
 
@@ -29,7 +29,7 @@ pub(crate) struct SurfacePoint {
     /// its own normal map, or the base's is not the coat's).
     pub coat_normal: Option<Vec3>,
     /// Whether the shading normal differs from the geometric one, so that some directions
-    /// lie between the two tangent planes (see [`fold`]).
+    /// lie between the two tangent planes (see [`fold`](super::folding::fold)).
     pub curved: bool,
     /// Whether the ray arrived on the front face.
     pub front: bool,
