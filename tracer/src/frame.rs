@@ -171,9 +171,10 @@ impl TriangleAt<'_> {
 
     /// Object-space geometric normal by the winding (not normalised), turned for the baked
     /// vertices of a mirrored node (a still instance's mirror is in its normal matrix).
+    /// `positions` are [`Self::positions`], taken from a caller that needs them too: a
+    /// deformed mesh's are interpolated over the shutter at each call.
     #[inline(always)]
-    pub fn face_normal(&self) -> Vec3 {
-        let [a, b, c] = self.positions();
+    pub fn face_normal(&self, [a, b, c]: [Vec3; 3]) -> Vec3 {
         let n = (b - a).cross(c - a);
         if self.deformed.is_some_and(|d| d.mirrored) {
             -n
@@ -184,14 +185,16 @@ impl TriangleAt<'_> {
 
     /// World-space unit normal of the front face. The inverse transpose keeps the front
     /// face right for mirrored instances too (glTF flips the winding when the determinant
-    /// is negative). Zero for a degenerate triangle.
+    /// is negative). Zero for a degenerate triangle. `positions` as for
+    /// [`Self::face_normal`].
     #[inline(always)]
-    pub fn front_normal(&self) -> Vec3 {
+    pub fn front_normal(&self, positions: [Vec3; 3]) -> Vec3 {
+        let n = self.face_normal(positions);
         if self.inst.translated {
             // The identity's product, but for the sign of a zero component.
-            return self.face_normal().normalize_or_zero();
+            return n.normalize_or_zero();
         }
-        (*self.normal_to_world() * self.face_normal()).normalize_or_zero()
+        (*self.normal_to_world() * n).normalize_or_zero()
     }
 
     /// The object-space vertex normals interpolated at barycentrics `b1`, `b2` (not
@@ -322,7 +325,7 @@ impl PreparedFrame {
             let mut moved = None;
             let tri = self.triangle_at(instance, triangle, ray.time, &mut moved);
             let facing = tri
-                .face_normal()
+                .face_normal(tri.positions())
                 .dot(tri.to_object().transform_vector3(ray.dir));
             if facing > 0.0 {
                 return false;

@@ -686,7 +686,7 @@ fn emitted_toward(
     let mut moved = None;
     let tri = frame.triangle_at(instance, triangle, time, &mut moved);
     let material = frame.material(tri.prim.material);
-    if !material.double_sided && tri.front_normal().dot(wi) >= 0.0 {
+    if !material.double_sided && tri.front_normal(tri.positions()).dot(wi) >= 0.0 {
         return Vec3::ZERO;
     }
     let uvs = tri.prim.uvs_at(tri.t, b1, b2);

@@ -60,18 +60,19 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
     // exactly on the plane, and not off along it by the rounding of barycentrics times
     // vertices, which on a triangle 1e5 across is centimetres. Then to world.
     let object_ray = tri.object_ray(ray);
-    let (p_object, object_error) =
-        plane_hit_point(&object_ray, tri.positions()).unwrap_or_else(|| {
-            // Interpolated instead: off by the vertices' rounding (pbrt-v4's bound).
-            let [a, b, c] = tri.positions();
-            let weights = a.abs() * (1.0 - b1 - b2).abs() + b.abs() * b1.abs() + c.abs() * b2.abs();
-            (
-                barycentric(a, b, c, b1, b2),
-                weights * crate::triangle::gamma(7),
-            )
-        });
+    // Read once: a deformed mesh's are interpolated over the shutter at each read.
+    let positions = tri.positions();
+    let (p_object, object_error) = plane_hit_point(&object_ray, positions).unwrap_or_else(|| {
+        // Interpolated instead: off by the vertices' rounding (pbrt-v4's bound).
+        let [a, b, c] = positions;
+        let weights = a.abs() * (1.0 - b1 - b2).abs() + b.abs() * b1.abs() + c.abs() * b2.abs();
+        (
+            barycentric(a, b, c, b1, b2),
+            weights * crate::triangle::gamma(7),
+        )
+    });
     let (p, p_error) = tri.world_point(p_object, object_error);
-    let ng_raw = tri.front_normal();
+    let ng_raw = tri.front_normal(positions);
     let ng = if ng_raw == Vec3::ZERO {
         -ray.dir.normalize()
     } else {
