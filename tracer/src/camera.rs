@@ -51,6 +51,28 @@ pub struct Camera {
     motion: Option<Arc<[RigidStep]>>,
     /// The arc from each motion step's rotation to the next's (empty for a still camera).
     arcs: Arc<[SlerpArc]>,
+    /// The prepared frame to camera space at shutter open and close, for the motion
+    /// vectors: two inverses per camera, not two per camera sample of a moving frame.
+    to_camera_at_ends: [Affine3A; 2],
+}
+
+/// An end of the shutter, where the motion vectors measure the image's motion between.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShutterEnd {
+    /// Shutter time 0.
+    Open,
+    /// Shutter time 1.
+    Close,
+}
+
+impl ShutterEnd {
+    /// Its shutter time, in [0, 1].
+    pub fn time(self) -> f32 {
+        match self {
+            ShutterEnd::Open => 0.0,
+            ShutterEnd::Close => 1.0,
+        }
+    }
 }
 
 /// A camera placement at one motion step: position and orientation, no scale.
@@ -87,14 +109,18 @@ impl Camera {
             .windows(2)
             .map(|w| SlerpArc::between(w[0].rotation, w[1].rotation))
             .collect();
-        Camera {
+        let mut camera = Camera {
             projection,
             half_height,
             to_world,
             aspect,
             motion,
             arcs,
-        }
+            to_camera_at_ends: [Affine3A::IDENTITY; 2],
+        };
+        camera.to_camera_at_ends = [ShutterEnd::Open, ShutterEnd::Close]
+            .map(|end| camera.to_world_at(end.time()).inverse());
+        camera
     }
 
     /// Whether the camera moves within the shutter.
@@ -150,19 +176,19 @@ impl Camera {
         (Ray { origin, dir, time }, axis)
     }
 
-    /// Where the camera at shutter time `time` sees the point `p` of the prepared frame,
-    /// as a film position (the inverse of [`Camera::generate_ray`]); `None` behind a
+    /// Where the camera at shutter end `end` sees the point `p` of the prepared frame, as
+    /// a film position (the inverse of [`Camera::generate_ray`]); `None` behind a
     /// perspective camera.
-    pub fn film_position(&self, p: Vec3, time: f32) -> Option<Vec2> {
-        let local = self.to_world_at(time).inverse().transform_point3(p);
+    pub fn film_position(&self, p: Vec3, end: ShutterEnd) -> Option<Vec2> {
+        let local = self.to_camera_at_ends[end as usize].transform_point3(p);
         self.film_of(local, false)
     }
 
-    /// Where a perspective camera at shutter time `time` sees the direction `dir` (a point
+    /// Where a perspective camera at shutter end `end` sees the direction `dir` (a point
     /// at infinity, as the environment is); `None` behind it, and for an orthographic
     /// camera, whose film holds no directions.
-    pub fn film_direction(&self, dir: Vec3, time: f32) -> Option<Vec2> {
-        let local = self.to_world_at(time).inverse().transform_vector3(dir);
+    pub fn film_direction(&self, dir: Vec3, end: ShutterEnd) -> Option<Vec2> {
+        let local = self.to_camera_at_ends[end as usize].transform_vector3(dir);
         self.film_of(local, true)
     }
 
@@ -253,14 +279,17 @@ mod tests {
             for film in [Vec2::new(0.25, 0.75), Vec2::new(0.9, 0.1)] {
                 let ray = cam.generate_ray(film, 0.0);
                 let p = ray.origin + ray.dir * 7.0;
-                let back = cam.film_position(p, 0.0).unwrap();
+                let back = cam.film_position(p, ShutterEnd::Open).unwrap();
                 assert!((back - film).abs().max_element() < 1e-5, "{back} {film}");
                 if matches!(projection, Projection::Perspective { .. }) {
-                    let back = cam.film_direction(ray.dir, 0.0).unwrap();
+                    let back = cam.film_direction(ray.dir, ShutterEnd::Open).unwrap();
                     assert!((back - film).abs().max_element() < 1e-5, "{back} {film}");
-                    assert_eq!(cam.film_position(ray.origin - ray.dir, 0.0), None);
+                    assert_eq!(
+                        cam.film_position(ray.origin - ray.dir, ShutterEnd::Open),
+                        None
+                    );
                 } else {
-                    assert_eq!(cam.film_direction(ray.dir, 0.0), None);
+                    assert_eq!(cam.film_direction(ray.dir, ShutterEnd::Open), None);
                 }
             }
         }

@@ -3,6 +3,7 @@
 
 use glam::Vec2;
 
+use crate::camera::ShutterEnd;
 use crate::frame::PreparedFrame;
 use crate::geometry::{barycentric, Hit, Ray};
 
@@ -17,17 +18,17 @@ use crate::geometry::{barycentric, Hit, Ray};
 #[inline(never)]
 pub(crate) fn screen_motion(frame: &PreparedFrame, ray: &Ray, hit: Option<&Hit>) -> Vec2 {
     let camera = &frame.camera;
-    let film_at = |time: f32| match hit {
+    let film_at = |end: ShutterEnd| match hit {
         Some(hit) => {
             let mut moved = None;
-            let tri = frame.triangle_at(hit.instance, hit.triangle, time, &mut moved);
+            let tri = frame.triangle_at(hit.instance, hit.triangle, end.time(), &mut moved);
             let [a, b, c] = tri.positions();
             let p = barycentric(a, b, c, hit.b1, hit.b2);
-            camera.film_position(tri.to_world().transform_point3(p), time)
+            camera.film_position(tri.to_world().transform_point3(p), end)
         }
-        None => camera.film_direction(ray.dir, time),
+        None => camera.film_direction(ray.dir, end),
     };
-    match (film_at(0.0), film_at(1.0)) {
+    match (film_at(ShutterEnd::Open), film_at(ShutterEnd::Close)) {
         (Some(open), Some(close)) => {
             (close - open) * Vec2::new(frame.width as f32, frame.height as f32)
         }
