@@ -57,12 +57,13 @@ pub struct Camera {
 }
 
 /// An end of the shutter, where the motion vectors measure the image's motion between.
+/// Its value indexes `Camera::to_camera_at_ends`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ShutterEnd {
     /// Shutter time 0.
-    Open,
+    Open = 0,
     /// Shutter time 1.
-    Close,
+    Close = 1,
 }
 
 impl ShutterEnd {

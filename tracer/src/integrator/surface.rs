@@ -10,8 +10,8 @@ use crate::geometry::{barycentric, plane_hit_point, Frame, Hit, Ray};
 
 /// Shading and geometric normals closer than this (in cosine: 0.08°) count as one: the
 /// wedge between their tangent planes holds a fraction of order 1e-6 of any lobe, where
-/// folding (see [`fold`](super::folding::fold)) would cost every bounce on a transformed flat mesh, whose
-/// normals differ from its facets' by rounding alone.
+/// folding (see [`fold`](super::folding::fold)) would cost every bounce on a transformed
+/// flat mesh, whose normals differ from its facets' by rounding alone.
 const FLAT_COS: f32 = 1.0 - 1e-6;
 
 /// Everything the integrator needs at a surface point.
