@@ -7,8 +7,8 @@ use std::sync::Arc;
 use glam::{Affine3A, DVec3, Mat3A, Vec3, Vec4};
 
 use crate::bvh::{Instance, MeshBvh, Placement, SceneBvh};
-use crate::camera::Camera;
-use crate::geometry::{barycentric, hit_point_error, translated_hit_point_error, Ray};
+use crate::camera::{Camera, ShutterEnd};
+use crate::geometry::{barycentric, hit_point_error, translated_hit_point_error, Hit, Ray};
 use crate::light::LightSet;
 use crate::material::{AlphaMode, Material};
 use crate::motion::DeformedMesh;
@@ -278,6 +278,18 @@ impl PreparedFrame {
         time: f32,
         moved: &'a mut Option<Placement>,
     ) -> TriangleAt<'a> {
+        let mut tri = self.unplaced_triangle(instance, triangle, time);
+        if tri.inst.motion.is_some() {
+            tri.moved = Some(moved.insert(tri.inst.placement(time)));
+        }
+        tri
+    }
+
+    /// [`Self::triangle_at`] without a moving instance's placement at `time`, whose
+    /// transforms it then reads as the stored ones: only for the triangle's data (its
+    /// positions are at `time`).
+    #[inline(always)]
+    fn unplaced_triangle(&self, instance: u32, triangle: u32, time: f32) -> TriangleAt<'_> {
         let inst = &self.bvh.instances()[instance as usize];
         let mesh = self.source_mesh(inst.mesh);
         let (prim_index, t) = mesh.locate(triangle);
@@ -290,12 +302,29 @@ impl PreparedFrame {
             v,
             deformed: self.deformed_mesh(inst.mesh),
             inst,
-            moved: match inst.motion {
-                Some(_) => Some(moved.insert(inst.placement(time))),
-                None => None,
-            },
+            moved: None,
             time,
         }
+    }
+
+    /// Where the point `hit` landed on is, in world space, at the shutter's open and close
+    /// (indexed by [`ShutterEnd`]): its barycentric place on its triangle, deformed and
+    /// moved as the frame says at each end. A point on an instance that neither moves nor
+    /// deforms is placed once, and only forward matrices are made (not the inverses of
+    /// [`Self::triangle_at`], which shading needs and this does not).
+    pub(crate) fn hit_points_at_ends(&self, hit: &Hit) -> [Vec3; 2] {
+        let at = |end: ShutterEnd| {
+            let tri = self.unplaced_triangle(hit.instance, hit.triangle, end.time());
+            let [a, b, c] = tri.positions();
+            let p = barycentric(a, b, c, hit.b1, hit.b2);
+            tri.inst.to_world_at(end.time()).transform_point3(p)
+        };
+        let open = at(ShutterEnd::Open);
+        let inst = &self.bvh.instances()[hit.instance as usize];
+        if inst.motion.is_none() && self.deformed_mesh(inst.mesh).is_none() {
+            return [open; 2];
+        }
+        [open, at(ShutterEnd::Close)]
     }
 
     /// Whether a candidate hit counts: alpha-masked or blended surfaces cut away where
@@ -357,7 +386,7 @@ impl PreparedFrame {
     }
 
     /// The closest accepted hit along `ray` before `t_max`.
-    pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<crate::geometry::Hit> {
+    pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
         // SAFETY: without `AVX`, nothing is asked of the CPU.
         unsafe { self.query::<false, false>(ray, t_max) }
     }
@@ -380,7 +409,7 @@ impl PreparedFrame {
         &self,
         ray: &Ray,
         t_max: f32,
-    ) -> Option<crate::geometry::Hit> {
+    ) -> Option<Hit> {
         // SAFETY: the caller's CPU has AVX.
         unsafe { self.query::<ANY_HIT, true>(ray, t_max) }
     }
@@ -394,7 +423,7 @@ impl PreparedFrame {
         &self,
         ray: &Ray,
         t_max: f32,
-    ) -> Option<crate::geometry::Hit> {
+    ) -> Option<Hit> {
         let meshes = |m| self.mesh_bvh(m);
         // SAFETY: passed on from the caller.
         unsafe {

@@ -196,6 +196,17 @@ impl Instance {
         }
     }
 
+    /// Object space to world space at normalised shutter time `time`: the stored matrix
+    /// for a static instance, the interpolated one for a moving instance. The part of
+    /// [`Self::placement`] that makes no inverse, for what only places points.
+    #[inline]
+    pub fn to_world_at(&self, time: f32) -> Affine3A {
+        match &self.motion {
+            None => self.to_world,
+            Some(motion) => motion.at(time),
+        }
+    }
+
     /// The world ray in the mesh's object space, by the stored `to_object` (time 0 for a
     /// moving instance). The direction is transformed but not renormalised, so ray
     /// parameters agree between the two spaces.

@@ -67,6 +67,9 @@ struct Step {
     /// The stretch: symmetric (it keeps scale and shear) except at singular steps, where it
     /// is `Rᵀ·M` for a rotation borrowed from a neighbour.
     stretch: Mat3A,
+    /// `T · R · S` composed, as [`MotionTransform::at`] gives it at the step's own time
+    /// (the shutter's ends, where motion vectors place every hit twice a camera sample).
+    affine: Affine3A,
 }
 
 /// A transform known at evenly spaced motion steps and interpolated in between as
@@ -177,10 +180,15 @@ impl MotionTransform {
             };
             let rotation =
                 crate::math::same_hemisphere(out.last().map(|p| p.rotation), rotation.as_quat());
+            let (translation, stretch) = (
+                m.w_axis.truncate().as_vec3().into(),
+                stretch.as_mat3().into(),
+            );
             out.push(Step {
-                translation: m.w_axis.truncate().as_vec3().into(),
+                translation,
                 rotation,
-                stretch: stretch.as_mat3().into(),
+                stretch,
+                affine: compose(translation, rotation, stretch),
             });
         }
         let arcs = out
@@ -198,7 +206,7 @@ impl MotionTransform {
     /// The transform at normalised shutter time `time` (clamped to [0, 1]).
     pub fn at(&self, time: f32) -> Affine3A {
         if self.steps.len() == 1 {
-            return self.steps[0].affine();
+            return self.steps[0].affine;
         }
         self.interpolate(Segment::new(time, self.steps.len()))
     }
@@ -208,10 +216,10 @@ impl MotionTransform {
     fn interpolate(&self, seg: Segment) -> Affine3A {
         let (a, b) = (&self.steps[seg.index], &self.steps[seg.index + 1]);
         if seg.w1 == 0.0 {
-            return a.affine();
+            return a.affine;
         }
         if seg.w0 == 0.0 {
-            return b.affine();
+            return b.affine;
         }
         compose(
             a.translation * seg.w0 + b.translation * seg.w1,
@@ -264,7 +272,7 @@ impl MotionTransform {
         };
         if self.steps.len() == 1 {
             let s = &self.steps[0];
-            return padded(&s.affine(), reach(s, s) * AT_ROUNDING);
+            return padded(&s.affine, reach(s, s) * AT_ROUNDING);
         }
         let mut out = Aabb::EMPTY;
         for k in 0..self.steps.len() - 1 {
@@ -322,13 +330,6 @@ fn compose(translation: Vec3A, rotation: Quat, stretch: Mat3A) -> Affine3A {
     Affine3A {
         matrix3: Mat3A::from_quat(rotation) * stretch,
         translation,
-    }
-}
-
-impl Step {
-    /// The step's transform, `T · R · S`.
-    fn affine(&self) -> Affine3A {
-        compose(self.translation, self.rotation, self.stretch)
     }
 }
 

@@ -5,7 +5,7 @@ use glam::Vec2;
 
 use crate::camera::ShutterEnd;
 use crate::frame::PreparedFrame;
-use crate::geometry::{barycentric, Hit, Ray};
+use crate::geometry::{Hit, Ray};
 
 /// The screen-space motion, in pixels (x to the right, y down: the image's rows), from
 /// shutter open to shutter close of the point the camera ray `ray` hit (`hit`), or of the
@@ -18,18 +18,16 @@ use crate::geometry::{barycentric, Hit, Ray};
 #[inline(never)]
 pub(crate) fn screen_motion(frame: &PreparedFrame, ray: &Ray, hit: Option<&Hit>) -> Vec2 {
     let camera = &frame.camera;
-    let film_at = |end: ShutterEnd| match hit {
+    let ends = [ShutterEnd::Open, ShutterEnd::Close];
+    let film = match hit {
         Some(hit) => {
-            let mut moved = None;
-            let tri = frame.triangle_at(hit.instance, hit.triangle, end.time(), &mut moved);
-            let [a, b, c] = tri.positions();
-            let p = barycentric(a, b, c, hit.b1, hit.b2);
-            camera.film_position(tri.to_world().transform_point3(p), end)
+            let points = frame.hit_points_at_ends(hit);
+            ends.map(|end| camera.film_position(points[end as usize], end))
         }
-        None => camera.film_direction(ray.dir, end),
+        None => ends.map(|end| camera.film_direction(ray.dir, end)),
     };
-    match (film_at(ShutterEnd::Open), film_at(ShutterEnd::Close)) {
-        (Some(open), Some(close)) => {
+    match film {
+        [Some(open), Some(close)] => {
             (close - open) * Vec2::new(frame.width as f32, frame.height as f32)
         }
         _ => Vec2::ZERO,
