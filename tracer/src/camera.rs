@@ -147,7 +147,7 @@ impl Camera {
         }
     }
 
-    /// The primary ray through film position `film` in [0,1]² (x right, y down) at
+    /// The primary ray through film position `film` in `[0, 1]²` (x right, y down) at
     /// shutter time `time` in [0, 1] (ignored by a still camera).
     pub fn generate_ray(&self, film: Vec2, time: f32) -> Ray {
         self.primary(film, time).0

@@ -408,7 +408,7 @@ fn clamped(l: ExtensionParams) -> ExtensionParams {
 pub struct MaterialSample {
     /// Parameters for the BSDF.
     pub surface: SurfaceParams,
-    /// Coverage in [0,1] (base colour alpha × vertex colour alpha).
+    /// Coverage in `[0, 1]` (base colour alpha × vertex colour alpha).
     pub alpha: f32,
     /// Emitted radiance in nits.
     pub emission: Vec3,

@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec4};
 
-/// How texture coordinates outside [0,1] are mapped (glTF sampler `wrapS`/`wrapT`).
+/// How texture coordinates outside `[0, 1]` are mapped (glTF sampler `wrapS`/`wrapT`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Wrap {
     /// Tile the image (glTF's default).
