@@ -255,7 +255,7 @@ pub fn assembly_bytes(spec: &JobSpec, rows: u32) -> u64 {
 }
 
 /// Rows of a frame of `spec` assembled at a time within `budget` bytes: up to
-/// [`BAND_PIXELS`], in whole ZIP blocks, fewer where the budget is tight; `None` when
+/// `BAND_PIXELS`, in whole ZIP blocks, fewer where the budget is tight; `None` when
 /// even one block of rows does not fit.
 pub fn band_rows(spec: &JobSpec, budget: u64) -> Option<u32> {
     let block = output::BLOCK_ROWS;

@@ -65,7 +65,7 @@ impl RayShear {
 }
 
 /// What the whole test ([`intersect_triangle`]) needs from a ray, computed once per ray:
-/// its [`RayShear`], and the permutation and shear as one matrix.
+/// its `RayShear`, and the permutation and shear as one matrix.
 #[derive(Clone, Copy, Debug)]
 pub struct RayPrecomputed {
     origin: Vec3,

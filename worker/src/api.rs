@@ -1,6 +1,6 @@
 //! The farm's worker routes as typed calls. Each call makes one attempt and answers with
 //! an outcome enum for what the protocol table in [`proto::worker`] says can happen, or an
-//! [`ApiError`]; [`Api::retry`] repeats a call through network errors and 5xx answers.
+//! [`ApiError`]; `Api::retry` repeats a call through network errors and 5xx answers.
 //!
 //! Answers every call shares: 401 is [`ApiError::Unauthorized`] (the token is wrong: no
 //! retry helps), 404 on a worker route is [`ApiError::UnknownWorker`] (the server forgot
@@ -36,7 +36,7 @@ const TRANSFER_TIMEOUT: Duration = Duration::from_secs(600);
 /// How long a call that is allowed to finish after shutdown began may still take.
 pub const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
 
-/// What [`Api::retry`] does with a try in flight when shutdown begins.
+/// What `Api::retry` does with a try in flight when shutdown begins.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InFlight {
     /// Drop it at once.

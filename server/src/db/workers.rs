@@ -216,7 +216,7 @@ impl Step {
     }
 }
 
-/// Whether a live worker that may work on `job` can do `step` (see [`Step::can_take`]).
+/// Whether a live worker that may work on `job` can do `step` (see `Step::can_take`).
 pub fn step_live_for_job(conn: &Connection, job: u64, step: Step, live_since: i64) -> Result<bool> {
     Ok(conn.row(
         &format!(
@@ -233,7 +233,7 @@ const STEP_WINDOW: u32 = 8;
 
 /// What `step` takes per megapixel (milliseconds) on each live worker that could do it
 /// for `job`: from lease to upload over the megapixels (an encode task's are all its
-/// job's frames) of its last [`STEP_WINDOW`] such tasks of any job, and where it has done
+/// job's frames) of its last `STEP_WINDOW` such tasks of any job, and where it has done
 /// none, the figure it timed when it started; workers with neither are left out.
 pub fn step_ms_per_mp(
     conn: &Connection,

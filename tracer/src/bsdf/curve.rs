@@ -44,7 +44,7 @@ const REFINE_DEPTH: u32 = 4;
 const MAX_CURVES: usize = 4096;
 
 /// The albedos of one (α, η): the conductor table's `[E1, Ew]` and the dielectric table's
-/// `[A, B, C]` for each side, at [`NODES`] μ nodes.
+/// `[A, B, C]` for each side, at `NODES` μ nodes.
 #[derive(Debug)]
 pub struct AlbedoCurve {
     alpha: f32,

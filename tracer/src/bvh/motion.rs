@@ -68,7 +68,7 @@ struct Step {
     /// is `Rᵀ·M` for a rotation borrowed from a neighbour.
     stretch: Mat3A,
     /// `T · R · S` composed, as [`MotionTransform::at`] gives it at the step's own time
-    /// (the shutter's ends, where motion vectors place every hit twice a camera sample).
+    /// (the shutter's ends are steps, and the motion vectors place hits there).
     affine: Affine3A,
 }
 

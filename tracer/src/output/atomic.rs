@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::OutputError;
 
-/// Writes `bytes` to `path` atomically (see [`AtomicFile`]).
+/// Writes `bytes` to `path` atomically (see `AtomicFile`).
 pub fn write(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
     let mut file = AtomicFile::create(path)?;
     file.write_all(bytes).map_err(|e| file.error(e))?;
