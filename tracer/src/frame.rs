@@ -279,7 +279,7 @@ impl PreparedFrame {
         moved: &'a mut Option<Placement>,
     ) -> TriangleAt<'a> {
         let mut tri = self.unplaced_triangle(instance, triangle, time);
-        if tri.inst.motion.is_some() {
+        if tri.inst.has_motion() {
             tri.moved = Some(moved.insert(tri.inst.placement(time)));
         }
         tri
@@ -321,7 +321,7 @@ impl PreparedFrame {
         };
         let open = at(ShutterEnd::Open);
         let inst = &self.bvh.instances()[hit.instance as usize];
-        if inst.motion.is_none() && self.deformed_mesh(inst.mesh).is_none() {
+        if !inst.has_motion() && self.deformed_mesh(inst.mesh).is_none() {
             return [open; 2];
         }
         [open, at(ShutterEnd::Close)]
