@@ -20,14 +20,9 @@ use glam::{DQuat, Quat};
 pub fn sin_cos(x: f32) -> (f32, f32) {
     use std::f64::consts::FRAC_PI_2;
     let bits = x.to_bits() & 0x7fff_ffff;
-    if bits < 0x3980_0000 {
-        // |x| < 2^-12: sin x rounds to x and cos x to 1.
-        return (x, 1.0);
-    }
     if bits <= 0x3f49_0fda {
         // |x| ≤ π/4.
-        let x = f64::from(x);
-        return (sin_kernel(x), cos_kernel(x));
+        return sin_cos_quarter(x);
     }
     if bits <= 0x4016_cbe3 {
         // |x| ≤ 3π/4: a quarter turn away.
@@ -39,6 +34,22 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
         };
     }
     libm::sincosf(x)
+}
+
+/// [`sin_cos`] of an `x` known to lie within `±FRAC_PI_4` (the f32 nearest π/4, just above
+/// it): musl's kernels without the branches on the argument's range, which mispredict
+/// where the range varies from call to call (a cosine-weighted direction's angle, half the
+/// time past π/4 when drawn whole). The same bits as [`sin_cos`] but at `±FRAC_PI_4`
+/// itself, where `sin_cos` takes its next branch and the two agree to an ulp.
+#[inline(always)]
+pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
+    debug_assert!(x.is_nan() || x.abs() <= std::f32::consts::FRAC_PI_4, "{x}");
+    if x.to_bits() & 0x7fff_ffff < 0x3980_0000 {
+        // |x| < 2^-12: sin x rounds to x and cos x to 1.
+        return (x, 1.0);
+    }
+    let x = f64::from(x);
+    (sin_kernel(x), cos_kernel(x))
 }
 
 /// musl's `__sindf`: sin x for |x| ≤ π/4, in double precision, rounded once.
@@ -306,6 +317,19 @@ mod tests {
         for bits in (0..=2.5f32.to_bits()).step_by(997) {
             check(f32::from_bits(bits));
             check(-f32::from_bits(bits));
+        }
+        for bits in (0..0x3f49_0fdb)
+            .step_by(101)
+            .chain(0x3f49_0fda..0x3f49_0fdb)
+        {
+            for x in [f32::from_bits(bits), -f32::from_bits(bits)] {
+                assert_eq!(sin_cos_quarter(x), sin_cos(x), "{x:e}");
+            }
+        }
+        let ulps = |a: f32, b: f32| (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs();
+        for x in [std::f32::consts::FRAC_PI_4, -std::f32::consts::FRAC_PI_4] {
+            let ((s, c), (ls, lc)) = (sin_cos_quarter(x), sin_cos(x));
+            assert!(ulps(s, ls) <= 1 && ulps(c, lc) <= 1, "{x:e}");
         }
         for edge in [0x3980_0000u32, 0x3f49_0fda, 0x4016_cbe3] {
             for bits in edge - 2000..edge + 2000 {

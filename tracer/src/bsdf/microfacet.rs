@@ -125,18 +125,24 @@ pub(crate) fn refract(wo: Vec3, wm: Vec3, eta: f32) -> Option<Vec3> {
 /// Cosine-weighted hemisphere sample (Malley's method on a concentric disk).
 pub(crate) fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
     let o = 2.0 * u - Vec2::ONE;
-    let (r, theta) = if o.x == 0.0 && o.y == 0.0 {
-        (0.0, 0.0)
-    } else if o.x.abs() > o.y.abs() {
-        (o.x, std::f32::consts::FRAC_PI_4 * (o.y / o.x))
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec3::Z;
+    }
+    // The disk point at radius `r` (the larger coordinate), at angle `a` within π/4 of that
+    // coordinate's axis: θ = a from the x axis, or π/2 - a from it where y is larger, whose
+    // cosine and sine are a's sine and cosine. Taken so rather than as one angle up to
+    // 3π/4, no branch on the angle's range, and no rounding of π/2 - a.
+    let along_x = o.x.abs() > o.y.abs();
+    let (r, ratio) = if along_x {
+        (o.x, o.y / o.x)
     } else {
-        (
-            o.y,
-            std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (o.x / o.y),
-        )
+        (o.y, o.x / o.y)
     };
-    let (s, c) = crate::math::sin_cos(theta);
-    let x = r * c;
-    let y = r * s;
+    let (s, c) = crate::math::sin_cos_quarter(std::f32::consts::FRAC_PI_4 * ratio);
+    let (x, y) = if along_x {
+        (r * c, r * s)
+    } else {
+        (r * s, r * c)
+    };
     Vec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt())
 }
