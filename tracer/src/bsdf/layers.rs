@@ -98,15 +98,15 @@ impl LayersAt {
 
 impl Bsdf {
     /// The layers' terms at `wo` (`wo.z > 0`), with the coat's normal `coat_normal` in
-    /// the same frame (`None`: the base's), given the base's lobe probabilities
-    /// `base_p`; `None` without layers.
+    /// the same frame (`None`: the base's), given whether the base has a lobe to sample
+    /// (`base_present`: its lobe probabilities sum above 0); `None` without layers.
     // Out of line: the hot path of materials without layers stays as small as before.
     #[inline(never)]
     pub(super) fn layers_at(
         &self,
         wo: Vec3,
         coat_normal: Option<Vec3>,
-        base_p: &[f32; 3],
+        base_present: bool,
     ) -> Option<LayersAt> {
         let layers = self.layers.as_ref()?;
         let coat_frame = coat_normal
@@ -123,7 +123,6 @@ impl Bsdf {
         });
         // Energy each returns at wo, with a floor for the present ones, as among the
         // base's own lobes.
-        let base_present = base_p.iter().sum::<f32>() > 0.0;
         let mut e = [
             coat_e,
             (1.0 - coat_e) * sheen_taken,

@@ -48,7 +48,7 @@ fn the_lambertian_shortcut_comes_to_the_general_numbers() {
             for mu in [1.0f32, 0.5, 0.01] {
                 for inside in [false, true] {
                     let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
-                    let at = bsdf.at_wo(wo, inside);
+                    let at = bsdf.lambertian_at(bsdf.lambertian.unwrap(), inside);
                     assert_eq!(at, bsdf.at_wo_general(wo, inside));
                     // Its f and pdf, inline, are the general functions' to the bit.
                     assert!(bsdf.diffuse_only);

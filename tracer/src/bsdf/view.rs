@@ -129,44 +129,49 @@ impl Bsdf {
         }
         let inside = wo.z < 0.0;
         let wo = if inside { flip(wo) } else { wo };
-        let at = self.at_wo(wo, inside);
-        // Light inside a refracting object meets the bare interface; an opaque surface or
-        // a thin wall is two-sided, its layers mirrored with it.
-        let layers = if self.layers.is_none() || (inside && self.w_glass > 0.0 && !self.thin) {
-            None
-        } else {
-            let coat_normal = coat_normal.map(|n| if inside { flip(n) } else { n });
-            self.layers_at(wo, coat_normal, &at.p)
+        let view = |at: AtWo| {
+            // Light inside a refracting object meets the bare interface; an opaque surface
+            // or a thin wall is two-sided, its layers mirrored with it.
+            let layers = if self.layers.is_none() || (inside && self.w_glass > 0.0 && !self.thin) {
+                None
+            } else {
+                let coat_normal = coat_normal.map(|n| if inside { flip(n) } else { n });
+                self.layers_at(wo, coat_normal, at.p.iter().sum::<f32>() > 0.0)
+            };
+            Some(BsdfAt {
+                bsdf: self,
+                wo,
+                inside,
+                at,
+                layers,
+            })
         };
-        Some(BsdfAt {
-            bsdf: self,
-            wo,
-            inside,
-            at,
-            layers,
-        })
+        // The view made in each branch, not `at_wo`'s answer made into one: that merged
+        // answer was written to memory field by field and copied into the view in wide
+        // loads, which the CPU cannot forward from those stores (a stall at every bounce).
+        match self.lambertian {
+            Some(p) => view(self.lambertian_at(p, inside)),
+            None => view(self.at_wo_general(wo, inside)),
+        }
     }
 
-    /// The `wo`-dependent factors: compensation, albedo scaling, lobe probabilities.
+    /// The `wo`-dependent factors of the commonest surface, a Lambertian one with lobe
+    /// probabilities `p`: nothing depends on `wo`, and the general case
+    /// ([`Bsdf::at_wo_general`]) comes to the same numbers (a test checks).
     #[inline(always)]
-    pub(super) fn at_wo(&self, wo: Vec3, inside: bool) -> AtWo {
-        if let Some(p) = self.lambertian {
-            // The commonest surface: nothing depends on `wo`, and the general case
-            // (`at_wo_general`) comes to the same numbers (a test checks).
-            return AtWo {
-                eta_rel: if inside { 1.0 / self.eta } else { self.eta },
-                thin_comp: 1.0,
-                film_glass: false,
-                inside,
-                metal_comp: Vec3::ONE,
-                spec_comp: Vec3::ONE,
-                diffuse_w: 1.0,
-                glass_ms: 0.0,
-                glass_ms_r: 0.0,
-                p,
-            };
+    pub(super) fn lambertian_at(&self, p: [f32; 3], inside: bool) -> AtWo {
+        AtWo {
+            eta_rel: if inside { 1.0 / self.eta } else { self.eta },
+            thin_comp: 1.0,
+            film_glass: false,
+            inside,
+            metal_comp: Vec3::ONE,
+            spec_comp: Vec3::ONE,
+            diffuse_w: 1.0,
+            glass_ms: 0.0,
+            glass_ms_r: 0.0,
+            p,
         }
-        self.at_wo_general(wo, inside)
     }
 
     /// Whether the BSDF is a diffuse lobe alone: no metal, no specular layer, no glass.
@@ -189,7 +194,8 @@ impl Bsdf {
         Some([0.0, if diffuse { 1.0 } else { 0.0 }, 0.0])
     }
 
-    /// [`Bsdf::at_wo`] for any BSDF.
+    /// The `wo`-dependent factors (compensation, albedo scaling, lobe probabilities) of
+    /// any BSDF.
     pub(super) fn at_wo_general(&self, wo: Vec3, inside: bool) -> AtWo {
         let mu_o = wo.z;
         // The tables hold isotropic lobes: an anisotropic one has its own albedos, and
