@@ -105,6 +105,22 @@ pub struct SampleValue {
     pub rays: u32,
 }
 
+impl SampleValue {
+    /// Nothing found yet: what a camera sample starts from. `default()` as a constant,
+    /// which the path loop copies from read-only memory: built on the stack, it was zeroed
+    /// in stores that its copy's wider loads could not be forwarded from (1% of the loop's
+    /// `perf` samples sat on that copy).
+    pub const EMPTY: SampleValue = SampleValue {
+        radiance: Vec3::ZERO,
+        alpha: 0.0,
+        albedo: Vec3::ZERO,
+        normal: Vec3::ZERO,
+        depth: None,
+        motion: Vec2::ZERO,
+        rays: 0,
+    };
+}
+
 /// The sums of [`TileBuffer`] for one pixel, over a run of its samples: what a thread
 /// adds up while it traces them, in registers and without the buffer's bounds checks,
 /// then adds to the buffer once ([`TileBuffer::add_pixel`]).

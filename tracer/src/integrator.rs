@@ -323,7 +323,7 @@ fn trace_sample_with<W: Carrier, const AVX: bool>(
     let mut walk = SampleWalk {
         carrier,
         radiance: W::Colour::ZERO,
-        out: SampleValue::default(),
+        out: SampleValue::EMPTY,
         albedo_done: false,
         pending: Vec::new(),
         branches: 0,
