@@ -146,9 +146,9 @@ impl Bsdf {
                 layers,
             })
         };
-        // The view made in each branch, not `at_wo`'s answer made into one: that merged
-        // answer was written to memory field by field and copied into the view in wide
-        // loads, which the CPU cannot forward from those stores (a stall at every bounce).
+        // The view made in each branch, not from one `AtWo` merged from both: that was
+        // written to memory field by field and copied into the view in wide loads, which
+        // the CPU cannot forward from those stores (a stall at every bounce).
         match self.lambertian {
             Some(p) => view(self.lambertian_at(p, inside)),
             None => view(self.at_wo_general(wo, inside)),
