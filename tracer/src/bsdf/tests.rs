@@ -541,54 +541,6 @@ pub(super) fn directional_albedo(bsdf: &Bsdf, wo: Vec3, n: usize, seed: u64) -> 
     sum / n as f32
 }
 
-/// Shirley and Chiu's concentric map lifted to the hemisphere, against its closed form in
-/// double precision: the square's point `o` goes to radius max(|o.x|, |o.y|) at angle
-/// π/4 · o.y/o.x from the x axis where x is larger, π/2 - π/4 · o.x/o.y where y is, on the
-/// axes, the diagonals and a grid (every sample a unit vector, upwards).
-#[test]
-fn cosine_samples_are_the_concentric_map_lifted() {
-    let expected = |u: Vec2| {
-        let (x, y) = (2.0 * f64::from(u.x) - 1.0, 2.0 * f64::from(u.y) - 1.0);
-        let (r, theta) = if x == 0.0 && y == 0.0 {
-            (0.0, 0.0)
-        } else if x.abs() > y.abs() {
-            (x, std::f64::consts::FRAC_PI_4 * (y / x))
-        } else {
-            (
-                y,
-                std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (x / y),
-            )
-        };
-        let (px, py) = (r * theta.cos(), r * theta.sin());
-        [px, py, (1.0 - px * px - py * py).max(0.0).sqrt()]
-    };
-    let corners = [0.0, 0.25, 0.5, 0.75, 1.0];
-    let grid = (0..=40).flat_map(|i| (0..=40).map(move |j| (i as f32 / 40.0, j as f32 / 40.0)));
-    let points = corners
-        .iter()
-        .flat_map(|&a| corners.iter().map(move |&b| (a, b)))
-        .chain(grid);
-    for (a, b) in points {
-        let u = Vec2::new(a, b);
-        let got = microfacet::sample_cosine_hemisphere(u);
-        let want = expected(u);
-        // (z from 1 - x² - y² in f32: at the rim its square root magnifies the rounding.)
-        let close = [
-            f64::from(got.x) - want[0],
-            f64::from(got.y) - want[1],
-            f64::from(got.z * got.z) - want[2] * want[2],
-        ];
-        assert!(
-            got.z >= 0.0 && close.iter().all(|d| d.abs() < 1e-6),
-            "{u}: {got} against {want:?}"
-        );
-    }
-    assert_eq!(
-        microfacet::sample_cosine_hemisphere(Vec2::splat(0.5)),
-        Vec3::Z
-    );
-}
-
 #[test]
 fn furnace_lambertian() {
     let bsdf = Bsdf::new(SurfaceParams {
