@@ -10,6 +10,7 @@ against a 1024-spp reference of its own.
 Run by scripts/mitsuba-compare.sh, which installs Mitsuba; not part of the test suite.
 """
 
+import math
 import sys
 import time
 
@@ -26,22 +27,22 @@ RR_DEPTH = 3
 def scene_dict(spp):
     T = mi.ScalarTransform4f
 
+    def diffuse(colour):
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": colour}}
+
     def wall(to_world, colour):
-        return {
-            "type": "rectangle",
-            "to_world": to_world,
-            "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse",
-                                                  "reflectance": {"type": "rgb", "value": colour}}},
-        }
+        # Double-sided, as Tessera's walls are.
+        return {"type": "rectangle", "to_world": to_world,
+                "bsdf": {"type": "twosided", "bsdf": diffuse(colour)}}
+
+    def block(scale, angle, at):
+        # Tessera's cube spans [-0.5, 0.5], Mitsuba's [-1, 1].
+        to_world = (T().translate(at).rotate([0, 1, 0], math.degrees(angle))
+                    @ T().scale([s / 2 for s in scale]))
+        return {"type": "cube", "to_world": to_world,
+                "bsdf": {"type": "twosided", "bsdf": diffuse(white)}}
 
     white, red, green = [0.73, 0.73, 0.73], [0.63, 0.065, 0.05], [0.14, 0.45, 0.091]
-    block = lambda scale, angle, at: {
-        "type": "cube",
-        "to_world": T().translate(at).rotate([0, 1, 0], angle * 180 / 3.141592653589793)
-        @ T().scale([s / 2 for s in scale]),
-        "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse",
-                                              "reflectance": {"type": "rgb", "value": white}}},
-    }
     return {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": MAX_DEPTH, "rr_depth": RR_DEPTH},
@@ -63,7 +64,7 @@ def scene_dict(spp):
             "type": "rectangle",
             "to_world": T().translate([0, 1.998, 0]) @ T().rotate([1, 0, 0], 90)
             @ T().scale([0.235, 0.19, 1]),
-            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.78] * 3}},
+            "bsdf": diffuse([0.78] * 3),
             "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [17, 12, 4]}},
         },
         "tall": block([0.6, 1.2, 0.6], 0.29, [-0.33, 0.6, -0.3]),
