@@ -275,10 +275,14 @@ pub fn rotation_z(angle: f32) -> Quat {
 mod tests {
     use super::*;
 
+    /// How many floats apart `a` and `b` are (for values of one sign).
+    fn ulps(a: f32, b: f32) -> u64 {
+        (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs()
+    }
+
     /// Within a couple of ulps of the platform's over the ranges the tracer uses.
     #[test]
     fn agrees_with_the_platform_library() {
-        let ulps = |a: f32, b: f32| (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs();
         for i in 0..=10_000 {
             let x = -7.0 + 14.0 * i as f32 / 10_000.0;
             let (s, c) = sin_cos(x);
@@ -326,7 +330,6 @@ mod tests {
                 assert_eq!(sin_cos_quarter(x), sin_cos(x), "{x:e}");
             }
         }
-        let ulps = |a: f32, b: f32| (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs();
         for x in [std::f32::consts::FRAC_PI_4, -std::f32::consts::FRAC_PI_4] {
             let ((s, c), (ls, lc)) = (sin_cos_quarter(x), sin_cos(x));
             assert!(ulps(s, ls) <= 1 && ulps(c, lc) <= 1, "{x:e}");
