@@ -11,6 +11,7 @@ use crate::camera::{Camera, ShutterEnd};
 use crate::geometry::{barycentric, hit_point_error, translated_hit_point_error, Hit, Ray};
 use crate::light::LightSet;
 use crate::material::{AlphaMode, Material};
+use crate::math;
 use crate::motion::DeformedMesh;
 use crate::sampler::hash_combine;
 use crate::scene::{Features, Mesh, Primitive, Scene};
@@ -192,9 +193,9 @@ impl TriangleAt<'_> {
         let n = self.face_normal(positions);
         if self.inst.translated {
             // The identity's product, but for the sign of a zero component.
-            return n.normalize_or_zero();
+            return math::normalize_or(n, Vec3::ZERO);
         }
-        (*self.normal_to_world() * n).normalize_or_zero()
+        math::normalize_or(*self.normal_to_world() * n, Vec3::ZERO)
     }
 
     /// The object-space vertex normals interpolated at barycentrics `b1`, `b2` (not

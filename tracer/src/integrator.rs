@@ -22,6 +22,7 @@ use crate::frame::PreparedFrame;
 use crate::geometry::{offset_ray_origin_bounded, Hit, Ray};
 use crate::light::Emitter;
 use crate::material::dispersive_ior;
+use crate::math;
 use crate::sampler::{BounceDimensions, PixelSampler, BOUNCE_DIMENSIONS};
 use crate::settings::RenderSettings;
 use crate::spectrum::{DenseSpectrum, SampledWavelengths, SigmoidPolynomial};
@@ -516,7 +517,7 @@ fn trace_path<W: Carrier, const AVX: bool>(
                         // carries the ray past the light) and stop just short of it, so
                         // that the light does not occlude itself.
                         let to_light = sp.p + ls.wi * ls.distance - shadow.origin;
-                        let t_max = match to_light.try_normalize() {
+                        let t_max = match math::try_normalize(to_light) {
                             Some(dir) if ls.distance.is_finite() => {
                                 shadow.dir = dir;
                                 to_light.length() * (1.0 - 1e-4)

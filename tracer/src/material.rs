@@ -591,7 +591,7 @@ impl Material {
                 (2.0 * t.y - 1.0) * scale,
                 2.0 * t.z - 1.0,
             );
-            n.try_normalize().unwrap_or(Vec3::Z)
+            math::normalize_or(n, Vec3::Z)
         };
         let normal_map =
             read(&self.normal_texture, false).map(|t| tangent_normal(t, self.normal_scale));

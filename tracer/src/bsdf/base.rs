@@ -7,6 +7,7 @@ use glam::{Vec2, Vec3, Vec3A};
 use std::f32::consts::FRAC_1_PI;
 
 use super::{flip, fresnel, microfacet, thin, AtWo, Bsdf, BsdfSample, COS_EPS};
+use crate::math;
 
 impl Bsdf {
     /// A sample of the base's lobes in the frame where `wo.z > 0` (the layers aside).
@@ -85,7 +86,7 @@ impl Bsdf {
             let mut f = self.diffuse_f(wi, at);
             // (`smooth` implies `glass_smooth`: all microfacet lobes are delta together.)
             if self.microfacet {
-                let wm = (wo + wi).normalize_or(Vec3::Z);
+                let wm = math::normalize_or(wo + wi, Vec3::Z);
                 let cos_om = wo.dot(wm).clamp(0.0, 1.0);
                 let lobe = self.ggx.d(wm) * self.ggx.g2(wo, wi) / (4.0 * mu_o * mu_i);
                 let mut fresnel = self.reflection_fresnel(cos_om, at);
@@ -140,7 +141,7 @@ impl Bsdf {
     /// Density of reaching `w` (either side) by reflecting `wo` about a sampled visible
     /// normal, D_wo(wm) / (4 wo·wm), with `wo·wm`; `None` where no visible normal does.
     pub(super) fn reflection_pdf(&self, wo: Vec3, w: Vec3) -> Option<(f32, f32)> {
-        let wm = (wo + w).try_normalize()?;
+        let wm = math::try_normalize(wo + w)?;
         let cos_om = wo.dot(wm);
         if wm.z <= 0.0 || cos_om <= 0.0 {
             return None;
@@ -224,7 +225,7 @@ impl Bsdf {
             return None;
         }
         let pdf = self.pdf_local(wo, wi, at);
-        if !(pdf > 0.0) || !pdf.is_finite() {
+        if !math::positive_finite(pdf) {
             return None;
         }
         Some(BsdfSample {

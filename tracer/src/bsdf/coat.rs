@@ -6,6 +6,7 @@
 use glam::{Vec2, Vec3};
 
 use super::{compensated_albedo, fresnel, microfacet, tables, ALPHA_MIN};
+use crate::math;
 
 /// F0 of the coat: an IOR 1.5 dielectric, ((1.5 − 1)/(1.5 + 1))².
 pub(crate) const F0: f32 = 0.04;
@@ -73,7 +74,7 @@ impl Coat {
         if self.smooth || wi.z <= 0.0 || wo.z <= 0.0 {
             return 0.0;
         }
-        let wm = (wo + wi).normalize_or(Vec3::Z);
+        let wm = math::normalize_or(wo + wi, Vec3::Z);
         let cos_om = wo.dot(wm).clamp(0.0, 1.0);
         self.weight
             * self.ggx.d(wm)
@@ -88,7 +89,7 @@ impl Coat {
         if self.smooth || wi.z <= 0.0 || wo.z <= 0.0 {
             return 0.0;
         }
-        let Some(wm) = (wo + wi).try_normalize() else {
+        let Some(wm) = math::try_normalize(wo + wi) else {
             return 0.0;
         };
         if wo.dot(wm) <= 0.0 {

@@ -26,6 +26,7 @@ use glam::{Vec2, Vec3, Vec3A};
 use super::coat::{Coat, CoatAt};
 use super::{mean, sheen, Bsdf, BsdfSample, COS_EPS, LOBE_FLOOR};
 use crate::geometry::Frame;
+use crate::math;
 
 /// The sheen layer at one shading point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -232,7 +233,7 @@ impl Bsdf {
                 return None;
             }
             let pdf = self.layered_pdf(wo, wi, at, l);
-            (pdf > 0.0 && pdf.is_finite()).then(|| BsdfSample {
+            math::positive_finite(pdf).then(|| BsdfSample {
                 wi,
                 f: self.layered_eval(wo, wi, at, l).into(),
                 pdf,

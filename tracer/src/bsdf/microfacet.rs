@@ -6,6 +6,7 @@
 //! direction `wo` in the upper hemisphere (`wo.z > 0`); the BSDF mirrors directions into
 //! that hemisphere before it calls in here.
 
+use crate::math;
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, TAU};
 
@@ -85,7 +86,7 @@ impl Ggx {
     /// direction; sample the cap uniformly, offset, and unstretch.
     pub(crate) fn sample_visible_normal(&self, wo: Vec3, u: Vec2) -> Vec3 {
         // Stretch the view direction into the α = 1 configuration.
-        let wo_std = Vec3::new(wo.x * self.ax, wo.y * self.ay, wo.z).normalize_or(Vec3::Z);
+        let wo_std = math::normalize_or(Vec3::new(wo.x * self.ax, wo.y * self.ay, wo.z), Vec3::Z);
         // Sample the spherical cap z ∈ (-wo_std.z, 1] uniformly.
         let phi = TAU * u.x;
         let z = (1.0 - u.y) * (1.0 + wo_std.z) - wo_std.z;
@@ -96,7 +97,7 @@ impl Ggx {
         let h = c + wo_std;
         let wm = Vec3::new(h.x * self.ax, h.y * self.ay, h.z.max(0.0));
         // `h` vanishes only for u.y = 1 exactly at wo.z = 0, a set of measure zero.
-        wm.normalize_or(Vec3::Z)
+        math::normalize_or(wm, Vec3::Z)
     }
 }
 
@@ -119,7 +120,10 @@ pub(crate) fn refract(wo: Vec3, wm: Vec3, eta: f32) -> Option<Vec3> {
         return None;
     }
     let cos_t = (1.0 - sin2_t).sqrt();
-    Some((-wo / eta + (cos_i / eta - cos_t) * wm).normalize_or(-wm))
+    Some(math::normalize_or(
+        -wo / eta + (cos_i / eta - cos_t) * wm,
+        -wm,
+    ))
 }
 
 /// Cosine-weighted hemisphere sample (Malley's method on a concentric disk).

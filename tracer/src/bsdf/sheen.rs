@@ -11,6 +11,7 @@ use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, TAU};
 use std::sync::OnceLock;
 
+use crate::math;
 use crate::math::{exp, powf};
 
 /// Smallest sheen roughness: below it the fibres' lobe is narrower than the f32 powers of
@@ -57,7 +58,7 @@ fn lambda(mu: f32, alpha: f32) -> f32 {
 /// The lobe `D · V` with `V = 1 / ((1 + Λ(μo) + Λ(μi)) · 4 μo μi)`, for `wo`, `wi` above
 /// the surface (colour not included).
 pub(crate) fn eval(wo: Vec3, wi: Vec3, alpha: f32) -> f32 {
-    let h = (wo + wi).normalize_or(Vec3::Z);
+    let h = math::normalize_or(wo + wi, Vec3::Z);
     let v = 1.0 / ((1.0 + lambda(wo.z, alpha) + lambda(wi.z, alpha)) * (4.0 * wo.z * wi.z));
     d(h.z, alpha) * v
 }
@@ -67,7 +68,7 @@ pub(crate) fn pdf(wo: Vec3, wi: Vec3, alpha: f32) -> f32 {
     if wi.z <= 0.0 {
         return 0.0;
     }
-    let Some(h) = (wo + wi).try_normalize() else {
+    let Some(h) = math::try_normalize(wo + wi) else {
         return 0.0;
     };
     let cos_oh = wo.dot(h);
@@ -159,7 +160,7 @@ pub(crate) fn albedo_by_quadrature(mu: f32, alpha: f32, q_mu: usize, q_phi: usiz
             let phi = std::f64::consts::PI * (b as f64 + 0.5) / q_phi as f64;
             let (s, c) = crate::math::sin_cos_f64(phi);
             let wi = Vec3::new(sin_i * c as f32, sin_i * s as f32, mu_i);
-            row += d((wo + wi).normalize_or(Vec3::Z).z, alpha) as f64;
+            row += d(math::normalize_or(wo + wi, Vec3::Z).z, alpha) as f64;
         }
         // Both halves of the φ circle: 2π / q_phi per cell over [0, π).
         sum += row * (vis * mu_i) as f64 * d_mu * (std::f64::consts::TAU / q_phi as f64);

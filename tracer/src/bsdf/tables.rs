@@ -26,6 +26,7 @@
 use super::fresnel;
 use super::microfacet;
 use super::ALPHA_MIN;
+use crate::math;
 use glam::Vec3;
 use std::sync::OnceLock;
 
@@ -152,13 +153,13 @@ pub(super) fn visible_normal(wo_std: Vec3, alpha: f32, q: &QuadPoint) -> Vec3 {
     let z = (1.0 - q.uy) * (1.0 + wo_std.z) - wo_std.z;
     let sin_theta = (1.0 - z * z).max(0.0).sqrt();
     let h = Vec3::new(sin_theta * q.cos_phi, sin_theta * q.sin_phi, z) + wo_std;
-    Vec3::new(h.x * alpha, h.y * alpha, h.z.max(0.0)).normalize_or(Vec3::Z)
+    math::normalize_or(Vec3::new(h.x * alpha, h.y * alpha, h.z.max(0.0)), Vec3::Z)
 }
 
 /// `wo` with cosine `mu` in the xz-plane, and its stretched (α = 1) counterpart.
 pub(super) fn wo_at(mu: f32, alpha: f32) -> (Vec3, Vec3) {
     let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
-    let wo_std = Vec3::new(wo.x * alpha, 0.0, wo.z).normalize_or(Vec3::Z);
+    let wo_std = math::normalize_or(Vec3::new(wo.x * alpha, 0.0, wo.z), Vec3::Z);
     (wo, wo_std)
 }
 

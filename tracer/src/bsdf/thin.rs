@@ -22,11 +22,12 @@
 use glam::{Vec2, Vec3};
 
 use super::{flip, fresnel, microfacet, AtWo, Bsdf, BsdfSample};
+use crate::math;
 
 /// f for `wo.z > 0 > wi.z` of a rough wall (the transmitted lobe).
 pub(super) fn eval_transmission(b: &Bsdf, wo: Vec3, wi: Vec3, at: &AtWo) -> Vec3 {
     let mirrored = flip(wi);
-    let Some(wm) = (wo + mirrored).try_normalize() else {
+    let Some(wm) = math::try_normalize(wo + mirrored) else {
         return Vec3::ZERO;
     };
     let cos_om = wo.dot(wm);

@@ -7,6 +7,7 @@ use glam::Vec3;
 use crate::bsdf::SurfaceParams;
 use crate::frame::PreparedFrame;
 use crate::geometry::{barycentric, plane_hit_point, Frame, Hit, Ray};
+use crate::math;
 
 /// Shading and geometric normals closer than this (in cosine: 0.08°) count as one: the
 /// wedge between their tangent planes holds a fraction of order 1e-6 of any lobe, where
@@ -101,7 +102,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
         Some(n) => {
             // A zero or non-finite normal falls back to the face's (what `normalize_or`
             // gives is always finite).
-            let n = (*tri.normal_to_world() * n).normalize_or(ng);
+            let n = math::normalize_or(*tri.normal_to_world() * n, ng);
             if n.dot(ng) < 0.0 {
                 -n
             } else {
@@ -129,7 +130,7 @@ pub(crate) fn surface_point(frame: &PreparedFrame, ray: &Ray, hit: &Hit) -> Surf
         let tf = tangent_frame(unmapped)?;
         let mapped = tf.to_world(nm);
         // A map that bends the normal below the surface is broken there: it is ignored.
-        let m = mapped.try_normalize().filter(|m| m.dot(ng) > 0.0)?;
+        let m = math::try_normalize(mapped).filter(|m| m.dot(ng) > 0.0)?;
         Some((m, tf.x))
     };
     if let Some((m, tangent)) = sample.normal_map.and_then(map_normal) {

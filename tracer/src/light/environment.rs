@@ -169,7 +169,7 @@ impl EnvironmentMap {
     /// Equirectangular coordinates (u, v) ∈ [0, 1]² of the world direction `dir` (need not
     /// be unit; zero gives (0.5, 0.5)).
     pub fn direction_to_uv(&self, dir: Vec3) -> Vec2 {
-        let d = (self.rotation.inverse() * dir).normalize_or_zero();
+        let d = math::normalize_or(self.rotation.inverse() * dir, Vec3::ZERO);
         let theta = math::acos(d.y.clamp(-1.0, 1.0));
         let phi = math::atan2(d.z, d.x);
         Vec2::new(
@@ -217,7 +217,7 @@ impl EnvironmentMap {
         if self.data.distribution.integral() <= 0.0 {
             return 0.0;
         }
-        let d = (self.rotation.inverse() * dir).normalize_or_zero();
+        let d = math::normalize_or(self.rotation.inverse() * dir, Vec3::ZERO);
         // Not sqrt(1 − y²): that cancels catastrophically near the poles.
         let sin_theta = Vec2::new(d.x, d.z).length();
         if sin_theta <= 0.0 {

@@ -44,6 +44,7 @@ use super::punctual::WorldPunctual;
 use super::triangle::TriangleLight;
 use super::{EmissiveTriangle, Environment, PunctualLight};
 use crate::geometry::Aabb;
+use crate::math;
 
 /// A light sampled from a reference point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -281,7 +282,7 @@ impl LightSet {
                 }
                 let s = t.sample(p, u)?;
                 let pdf = s.pdf * selection;
-                if !(pdf > 0.0 && pdf.is_finite()) {
+                if !math::positive_finite(pdf) {
                     return None;
                 }
                 let emitter = match t.radiance {
@@ -307,7 +308,7 @@ impl LightSet {
             Light::Environment => {
                 let (wi, radiance, pdf) = self.environment.sample(u)?;
                 let pdf = pdf * selection;
-                (pdf > 0.0 && pdf.is_finite()).then_some(LightSample {
+                math::positive_finite(pdf).then_some(LightSample {
                     wi,
                     distance: f32::INFINITY,
                     pdf,

@@ -19,6 +19,7 @@
 use glam::{Vec2, Vec3};
 
 use super::EmissiveTriangle;
+use crate::math;
 
 /// Below this solid angle (sr), sample by area (pbrt-v4's `MinSphericalSampleArea`).
 const MIN_SPHERICAL_SOLID_ANGLE: f32 = 3e-4;
@@ -141,7 +142,7 @@ impl TriangleLight {
 
     /// Unit directions from `p` to the vertices (zero where `p` is a vertex).
     fn directions(&self, p: Vec3) -> [Vec3; 3] {
-        self.p.map(|v| (v - p).normalize_or_zero())
+        self.p.map(|v| math::normalize_or(v - p, Vec3::ZERO))
     }
 
     /// Solid angle of the triangle seen along the vertex directions `[a, b, c]` (Van
@@ -251,8 +252,8 @@ impl TriangleLight {
         u: Vec2,
     ) -> Option<(f32, f32)> {
         // Normals of the great-circle arcs from a.
-        let n_ab = a.cross(b).try_normalize()?;
-        let n_ca = c.cross(a).try_normalize()?;
+        let n_ab = math::try_normalize(a.cross(b))?;
+        let n_ca = math::try_normalize(c.cross(a))?;
         // The angle at a, as its cosine and sine (pbrt-v4 takes the angles at all three
         // vertices for the area α + β + γ − π, which is the solid angle already known).
         let cos_alpha = -n_ab.dot(n_ca);
@@ -273,11 +274,11 @@ impl TriangleLight {
         let cos_bp = cos_bp.clamp(-1.0, 1.0);
         // c' on the arc from a to c.
         let sin_bp = (1.0 - cos_bp * cos_bp).max(0.0).sqrt();
-        let cp = cos_bp * a + sin_bp * gram_schmidt(c, a).try_normalize()?;
+        let cp = cos_bp * a + sin_bp * math::try_normalize(gram_schmidt(c, a))?;
         // Direction on the arc from b to c', uniform in the sub-triangle's area.
         let cos_theta = 1.0 - u.y * (1.0 - cp.dot(b));
         let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-        let w = cos_theta * b + sin_theta * gram_schmidt(cp, b).try_normalize()?;
+        let w = cos_theta * b + sin_theta * math::try_normalize(gram_schmidt(cp, b))?;
 
         // Barycentrics where the ray p + t·w meets the triangle's plane (Möller–Trumbore).
         let e1 = self.p[1] - self.p[0];
