@@ -303,6 +303,41 @@ mod tests {
         (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs()
     }
 
+    /// `positive_finite` is `x > 0 && x.is_finite()`, and the normalisations are glam's bit
+    /// for bit, on the edges (zeros, subnormals, the largest float, infinities, NaNs) and on
+    /// vectors whose lengths underflow, overflow or are ordinary.
+    #[test]
+    fn float_tests_are_the_class_tests() {
+        let edges = [
+            0.0,
+            -0.0,
+            f32::from_bits(1),
+            f32::MIN_POSITIVE,
+            1.0,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NAN,
+            -f32::NAN,
+        ];
+        for x in edges.into_iter().flat_map(|x| [x, -x]) {
+            assert_eq!(positive_finite(x), x > 0.0 && x.is_finite(), "{x:e}");
+        }
+        let mut rng = crate::test_rng::Rng(11);
+        let scales = [0.0, 1e-30, 1e-20, 1.0, 1e20, 1e30, f32::INFINITY];
+        for i in 0..10_000 {
+            let v = (rng.vec3() - 0.5) * scales[i % scales.len()];
+            let v = if i % 97 == 0 { v.with_y(f32::NAN) } else { v };
+            let bits = |v: Option<Vec3>| v.map(|v| v.to_array().map(f32::to_bits));
+            assert_eq!(bits(try_normalize(v)), bits(v.try_normalize()), "{v}");
+            let fallback = Vec3::new(0.0, 0.0, -1.0);
+            assert_eq!(
+                bits(Some(normalize_or(v, fallback))),
+                bits(Some(v.normalize_or(fallback))),
+                "{v}"
+            );
+        }
+    }
+
     /// Within a couple of ulps of the platform's over the ranges the tracer uses.
     #[test]
     fn agrees_with_the_platform_library() {

@@ -514,7 +514,8 @@ impl SceneBvh {
     ) -> Option<Hit> {
         #[cfg(target_arch = "x86_64")]
         if AVX || simd::avx() {
-            // SAFETY: the CPU has AVX (`AVX` is true only where it does).
+            // SAFETY: the CPU has AVX: `simd::avx` says so, and `AVX` is true only where it
+            // does.
             return unsafe {
                 self.search_avx::<ANY_HIT, MOTION, OPENED, M>(mesh, ray, t_max, accept)
             };
