@@ -227,7 +227,9 @@ pub fn plane_hit_point(ray: &Ray, v: [Vec3; 3]) -> Option<(Vec3, Vec3)> {
     let n = (b - a).cross(c - a);
     let t = n.dot(a - o) / n.dot(d);
     let p = (o + d * t).as_vec3();
-    if !(t.is_finite() && p.is_finite()) {
+    // (A `t` that is not finite makes every coordinate of `d · t` infinite or NaN, so `p`
+    // tells for both.)
+    if !crate::math::finite(p) {
         return None;
     }
     // Rounding to single precision, and double precision's own error relative to the

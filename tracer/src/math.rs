@@ -9,9 +9,10 @@
 //!
 //! The square root, `mul_add`, `abs`, `min` and `max` are exactly rounded IEEE operations
 //! and need no wrapper. Last, the tests of a float that the path loop makes at every bounce
-//! ([`positive_finite`], [`try_normalize`]), in the comparisons that x86 runs fastest.
+//! ([`positive_finite`], [`finite`], [`try_normalize`]), in the comparisons that x86 runs
+//! fastest.
 
-use glam::{DQuat, Quat, Vec3};
+use glam::{DQuat, Quat, Vec3, Vec3A};
 
 /// `(sin x, cos x)`: `libm::sincosf`, the same bits, with its branches for `|x| ≤ 3π/4`
 /// (the angles a bounce's direction sampling draws) inline and no call. Those branches
@@ -280,6 +281,14 @@ pub fn positive_finite(x: f32) -> bool {
     x > 0.0 && x <= f32::MAX
 }
 
+/// Whether every component of `v` is finite, in SIMD lanes: `x · 0` is ±0 for a finite `x`
+/// and NaN for an infinity or a NaN. (glam's `is_finite` makes a class test of each
+/// component, in integer instructions.)
+#[inline(always)]
+pub fn finite(v: Vec3) -> bool {
+    (Vec3A::from(v) * 0.0).cmpeq(Vec3A::ZERO).all()
+}
+
 /// `v` at unit length, or `None` where its length is zero or not finite: glam's
 /// `try_normalize`, the same bits, with its test by [`positive_finite`].
 #[inline(always)]
@@ -303,8 +312,8 @@ mod tests {
         (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs()
     }
 
-    /// `positive_finite` is `x > 0 && x.is_finite()`, and the normalisations are glam's bit
-    /// for bit, on the edges (zeros, subnormals, the largest float, infinities, NaNs) and on
+    /// `positive_finite` is `x > 0 && x.is_finite()`, `finite` glam's `is_finite`, and the
+    /// normalisations are glam's bit for bit, on the edges (zeros, subnormals, the largest float, infinities, NaNs) and on
     /// vectors whose lengths underflow, overflow or are ordinary.
     #[test]
     fn float_tests_are_the_class_tests() {
@@ -321,6 +330,13 @@ mod tests {
         ];
         for x in edges.into_iter().flat_map(|x| [x, -x]) {
             assert_eq!(positive_finite(x), x > 0.0 && x.is_finite(), "{x:e}");
+            for v in [
+                Vec3::new(x, 1.0, -2.0),
+                Vec3::new(0.5, x, 3.0),
+                Vec3::new(-1.0, 0.0, x),
+            ] {
+                assert_eq!(finite(v), v.is_finite(), "{v}");
+            }
         }
         let mut rng = crate::test_rng::Rng(11);
         let scales = [0.0, 1e-30, 1e-20, 1.0, 1e20, 1e30, f32::INFINITY];

@@ -221,7 +221,7 @@ impl Bsdf {
 
     /// A sample of a non-delta lobe: its value and pdf are those of the whole mixture.
     pub(super) fn continuous_sample(&self, wo: Vec3, wi: Vec3, at: &AtWo) -> Option<BsdfSample> {
-        if !wi.is_finite() || wi.z.abs() < COS_EPS {
+        if !math::finite(wi) || wi.z.abs() < COS_EPS {
             return None;
         }
         let pdf = self.pdf_local(wo, wi, at);

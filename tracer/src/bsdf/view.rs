@@ -6,6 +6,7 @@ use glam::{Vec2, Vec3};
 
 use super::{anisotropy, flip, fresnel, sane, tables, Bsdf, BsdfSample, COS_EPS, LOBE_FLOOR};
 use super::{compensated_albedo, layers, mean};
+use crate::math;
 
 /// Everything about the BSDF that depends on `wo` alone, in the frame where `wo.z > 0`.
 #[derive(Debug, PartialEq)]
@@ -51,7 +52,7 @@ impl BsdfAt<'_> {
     /// `wi` in the frame where `wo.z > 0`; `None` for a non-finite or grazing `wi`.
     #[inline(always)]
     fn incident(&self, wi: Vec3) -> Option<Vec3> {
-        if !wi.is_finite() || wi.z.abs() < COS_EPS {
+        if !math::finite(wi) || wi.z.abs() < COS_EPS {
             return None;
         }
         Some(if self.inside { flip(wi) } else { wi })
@@ -124,7 +125,7 @@ impl Bsdf {
     /// the base's normal is mapped); `None` puts the coat on the base's normal.
     #[inline(always)]
     pub fn at_coated(&self, wo: Vec3, coat_normal: Option<Vec3>) -> Option<BsdfAt<'_>> {
-        if !wo.is_finite() || wo.z.abs() < COS_EPS {
+        if !math::finite(wo) || wo.z.abs() < COS_EPS {
             return None;
         }
         let inside = wo.z < 0.0;

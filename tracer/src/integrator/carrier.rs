@@ -13,6 +13,7 @@ use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign};
 
 use glam::{Vec3, Vec4};
 
+use crate::math;
 use crate::spectrum::{
     self, DenseSpectrum, IlluminantSpectrum, SampledWavelengths, UnboundedSpectrum,
 };
@@ -44,7 +45,7 @@ impl Colour for Vec3 {
     }
     #[inline(always)]
     fn is_finite(self) -> bool {
-        Vec3::is_finite(self)
+        math::finite(self)
     }
 }
 

@@ -189,7 +189,7 @@ impl TriangleLight {
     fn area_pdf_to_solid_angle(&self, p: Vec3, q: Vec3) -> f32 {
         let d = q - p;
         let dist2 = d.length_squared();
-        if dist2 <= 0.0 || !dist2.is_finite() {
+        if !math::positive_finite(dist2) {
             return 0.0;
         }
         let cos = self.normal.dot(d).abs() / dist2.sqrt();
@@ -215,7 +215,7 @@ impl TriangleLight {
         let q = self.point(b1, b2);
         let d = q - p;
         let distance = d.length();
-        if !(pdf > 0.0 && pdf.is_finite() && distance > 0.0 && distance.is_finite()) {
+        if !(math::positive_finite(pdf) && math::positive_finite(distance)) {
             return None;
         }
         Some(TriangleSample {
@@ -285,7 +285,7 @@ impl TriangleLight {
         let e2 = self.p[2] - self.p[0];
         let s1 = w.cross(e2);
         let divisor = s1.dot(e1);
-        if divisor == 0.0 || !divisor.is_finite() {
+        if !math::positive_finite(divisor.abs()) {
             return None;
         }
         let s = p - self.p[0];
