@@ -6,9 +6,10 @@
 //! direction `wo` in the upper hemisphere (`wo.z > 0`); the BSDF mirrors directions into
 //! that hemisphere before it calls in here.
 
-use crate::math;
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, TAU};
+
+use crate::math;
 
 /// Smith's Λ for a direction with cosine `mu` (> 0) to the normal, on an isotropic
 /// surface of roughness `alpha` (the tables' form of [`Ggx::lambda`]).

@@ -11,8 +11,7 @@ use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, TAU};
 use std::sync::OnceLock;
 
-use crate::math;
-use crate::math::{exp, powf};
+use crate::math::{self, exp, powf};
 
 /// Smallest sheen roughness: below it the fibres' lobe is narrower than the f32 powers of
 /// `sin θh` resolve (glTF's sample viewer clamps at the same value).
